@@ -1,0 +1,53 @@
+//! `hullcut`: six synchronized cameras → visual hull of hand and scalpel → blade pose → cuts in a
+//! simulated organ. This binary wires the stages together; see `hullcut --help`.
+//!
+//! Exit codes: 0 success, 1 failure (the error is printed), 2 bad usage.
+
+mod commands;
+mod progress;
+mod report;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Markerless scalpel tracking from six cameras and real-time virtual cutting of soft tissue.
+///
+/// Every command that measures something can write a JSON report (--report FILE) and log to rerun
+/// (--rrd FILE). Logs go to stderr; set RUST_LOG (e.g. RUST_LOG=debug) for more detail.
+/// Exit codes: 0 success, 1 failure, 2 bad usage.
+#[derive(Debug, Parser)]
+#[command(name = "hullcut", version, about, long_about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    Calibrate(commands::calibrate::Args),
+    Rig(commands::rig::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    let result = match cli.command {
+        Command::Calibrate(args) => commands::calibrate::run(&args),
+        Command::Rig(args) => commands::rig::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,142 @@
+//! End-to-end tests of the `hullcut` binary: calibration of real photos, reports, rig files, exit
+//! codes and bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use hullcut_rig::Rig;
+
+const SAMPLES: &str = "/usr/share/doc/opencv-doc/examples/data";
+
+fn hullcut(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hullcut")).args(args).output().expect("hullcut runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `tools/stereo-sample.sh` lays out OpenCV's stereo photos as a calibration tree.
+fn stereo_tree(dir: &Path) -> PathBuf {
+    assert!(Path::new(SAMPLES).join("left01.jpg").exists(), "opencv-doc photos missing: run tools/setup.sh");
+    let out = dir.join("stereo");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../../tools/stereo-sample.sh");
+    let status = Command::new("bash").arg(script).arg(&out).status().expect("bash");
+    assert!(status.success());
+    out
+}
+
+#[test]
+fn calibrate_sample_photos_end_to_end() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let images = stereo_tree(dir.path());
+    let (rig, report, rrd) = (dir.path().join("rig.yaml"), dir.path().join("report.json"), dir.path().join("cal.rrd"));
+    let o = hullcut(&[
+        "calibrate",
+        "--images",
+        images.to_str().expect("utf-8"),
+        "--pattern",
+        "9x6",
+        "--square",
+        "0.025",
+        "--out",
+        rig.to_str().expect("utf-8"),
+        "--report",
+        report.to_str().expect("utf-8"),
+        "--rrd",
+        rrd.to_str().expect("utf-8"),
+        "--world-board",
+        "01.jpg",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("pair left-right"), "{stdout}");
+
+    let rig = Rig::load(&rig).expect("rig.yaml loads");
+    assert_eq!(rig.len(), 2);
+    assert_eq!(rig.world_frame.to_key(), "board:01.jpg");
+    // World frame from the board: both cameras look down at it from positive z.
+    for c in &rig.cameras {
+        assert!(c.centre().z > 0.1, "{} at {:?}", c.name, c.centre());
+        assert!(c.viewing_direction().z < 0.0);
+    }
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    assert_eq!(json["schema_version"], 1);
+    assert_eq!(json["kind"], "calibration");
+    assert!(json["git_hash"].is_string() && json["hullcut_version"].is_string());
+    assert_eq!(json["cameras"].as_array().expect("cameras").len(), 2);
+    assert_eq!(json["images"].as_array().expect("images").len(), 26);
+    for key in ["count", "mean_ms", "p50_ms", "p95_ms", "max_ms"] {
+        assert!(json["timings"]["detect"][key].is_number(), "timings.detect.{key}");
+    }
+    let rms = json["rms_px"].as_f64().expect("rms");
+    assert!(rms > 0.05 && rms < 1.0, "RMS {rms} px");
+    assert!(json["pairs"][0]["baseline_m"].as_f64().expect("baseline") > 0.0);
+
+    // The recording exists and holds data (the viewer's own check is `rerun rrd verify`).
+    assert!(std::fs::metadata(&rrd).expect("rrd").len() > 100_000);
+
+    // `rig show` prints a table of the same rig.
+    let o = hullcut(&["rig", "show", dir.path().join("rig.yaml").to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(table.contains("left") && table.contains("right") && table.contains("board:01.jpg"), "{table}");
+}
+
+#[test]
+fn usage_errors_exit_2_and_failures_exit_1() {
+    let o = hullcut(&["calibrate", "--images", "x"]);
+    assert_eq!(o.status.code(), Some(2), "missing required flags is bad usage");
+    let o = hullcut(&["no-such-command"]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = hullcut(&[
+        "calibrate",
+        "--images",
+        "/nonexistent/dir",
+        "--pattern",
+        "9x6",
+        "--square",
+        "0.02",
+        "--out",
+        "/tmp/x.yaml",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("/nonexistent/dir"), "{}", stderr(&o));
+    let o =
+        hullcut(&["calibrate", "--images", "/tmp", "--pattern", "9by6", "--square", "0.02", "--out", "/tmp/x.yaml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--pattern"), "{}", stderr(&o));
+}
+
+#[test]
+fn broken_rig_file_is_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("rig.yaml");
+    let o = hullcut(&["rig", "default", "--out", path.to_str().expect("utf-8")]);
+    assert!(o.status.success());
+    let text = std::fs::read_to_string(&path).expect("read");
+    // Break camera 3's rotation matrix: drop one value.
+    let broken = text.replacen(
+        "rotation_matrix: !!opencv-matrix\n      rows: 3\n      cols: 3",
+        "rotation_matrix: !!opencv-matrix\n      rows: 3\n      cols: 2",
+        4,
+    );
+    std::fs::write(&path, broken).expect("write");
+    let o = hullcut(&["rig", "show", path.to_str().expect("utf-8")]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("rig.yaml") && e.contains("camera_0.rotation_matrix") && e.contains("3x2"), "{e}");
+}
+
+#[test]
+fn help_names_every_output_file() {
+    let o = hullcut(&["calibrate", "--help"]);
+    assert!(o.status.success());
+    let help = String::from_utf8_lossy(&o.stdout);
+    for flag in ["--images", "--pattern", "--square", "--out", "--report", "--rrd", "--world-board"] {
+        assert!(help.contains(flag), "calibrate --help lacks {flag}");
+    }
+    assert!(help.contains("Writes:"), "{help}");
+}

@@ -1,0 +1,167 @@
+//! A calibrated pinhole camera with OpenCV's distortion and world→camera extrinsics.
+
+use nalgebra::{Matrix3, Point2, Point3, Rotation3, Unit, Vector2, Vector3};
+
+use crate::Distortion;
+
+/// A calibrated camera: intrinsics, distortion, image size and world→camera pose.
+///
+/// Extrinsics follow OpenCV: `x_cam = R · x_world + t`, camera axes x right, y down, z forward.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    /// Camera name (the folder name in datasets and calibration image trees).
+    pub name: String,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// Lens distortion.
+    pub distortion: Distortion,
+    /// World→camera rotation `R`.
+    pub rotation: Rotation3<f64>,
+    /// World→camera translation `t`, metres.
+    pub translation: Vector3<f64>,
+    /// RMS reprojection error of the calibration that produced this camera, pixels.
+    pub rms_reprojection_error: Option<f64>,
+}
+
+/// Where a world point lands in a camera image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Projection {
+    /// Pixel coordinates (u, v); pixel (col i, row j) has its centre at (i, j).
+    pub pixel: Point2<f64>,
+    /// Depth along the optical axis, metres (negative behind the camera).
+    pub depth: f64,
+    /// True when the point is in front of the camera, within the distortion's invertible range and
+    /// inside the image (`-0.5 <= u < width - 0.5`, likewise v).
+    pub visible: bool,
+}
+
+/// A ray in world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Start of the ray (the camera centre), world metres.
+    pub origin: Point3<f64>,
+    /// Unit direction, world frame.
+    pub direction: Unit<Vector3<f64>>,
+}
+
+impl Ray {
+    /// The point at distance `s` along the ray.
+    pub fn at(&self, s: f64) -> Point3<f64> {
+        self.origin + self.direction.into_inner() * s
+    }
+}
+
+impl Camera {
+    /// A distortion-free camera at the world origin looking along +z.
+    pub fn new(name: impl Into<String>, width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
+        Self {
+            name: name.into(),
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            distortion: Distortion::NONE,
+            rotation: Rotation3::identity(),
+            translation: Vector3::zeros(),
+            rms_reprojection_error: None,
+        }
+    }
+
+    /// The intrinsic matrix `K`.
+    pub fn k_matrix(&self) -> Matrix3<f64> {
+        Matrix3::new(self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0)
+    }
+
+    /// Sets the pose so that the camera sits at `eye` and looks at `target`, with image "up" (−y)
+    /// as close to `up` as possible. Returns `None` if `eye == target` or the view is parallel to `up`.
+    pub fn looking_at(mut self, eye: Point3<f64>, target: Point3<f64>, up: Vector3<f64>) -> Option<Self> {
+        let z = (target - eye).try_normalize(1e-12)?;
+        let x = z.cross(&up).try_normalize(1e-12)?;
+        let y = z.cross(&x);
+        // Rows of R are the camera axes expressed in world coordinates.
+        let r = Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);
+        self.rotation = Rotation3::from_matrix_unchecked(r);
+        self.translation = -(self.rotation * eye.coords);
+        Some(self)
+    }
+
+    /// The camera centre in world coordinates, `-Rᵀ t`.
+    pub fn centre(&self) -> Point3<f64> {
+        Point3::from(-(self.rotation.inverse() * self.translation))
+    }
+
+    /// The optical axis (camera +z) in world coordinates.
+    pub fn viewing_direction(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(self.rotation.inverse() * Vector3::z())
+    }
+
+    /// World point → camera frame.
+    pub fn world_to_camera(&self, p: &Point3<f64>) -> Point3<f64> {
+        Point3::from(self.rotation * p.coords + self.translation)
+    }
+
+    /// Normalized image coordinates (after distortion) → pixel.
+    pub fn normalized_to_pixel(&self, xd: Vector2<f64>) -> Point2<f64> {
+        Point2::new(self.fx * xd.x + self.cx, self.fy * xd.y + self.cy)
+    }
+
+    /// Pixel → distorted normalized image coordinates.
+    pub fn pixel_to_normalized(&self, uv: Point2<f64>) -> Vector2<f64> {
+        Vector2::new((uv.x - self.cx) / self.fx, (uv.y - self.cy) / self.fy)
+    }
+
+    /// Whether a pixel position lies inside the image (`-0.5 <= u < width - 0.5`, likewise v).
+    pub fn contains_pixel(&self, uv: Point2<f64>) -> bool {
+        uv.x >= -0.5 && uv.y >= -0.5 && uv.x < self.width as f64 - 0.5 && uv.y < self.height as f64 - 0.5
+    }
+
+    /// A point in the camera frame → pixel, with distortion (no visibility test).
+    pub fn project_camera_point(&self, pc: &Point3<f64>) -> Point2<f64> {
+        let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
+        self.normalized_to_pixel(self.distortion.distort(xn))
+    }
+
+    /// World point → pixel, with a visibility flag (see [`Projection::visible`]).
+    pub fn project(&self, p: &Point3<f64>) -> Projection {
+        let pc = self.world_to_camera(p);
+        let depth = pc.z;
+        if depth <= 0.0 {
+            return Projection { pixel: Point2::new(f64::NAN, f64::NAN), depth, visible: false };
+        }
+        let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
+        let pixel = self.normalized_to_pixel(self.distortion.distort(xn));
+        let visible = xn.norm() < self.distortion.monotonic_radius() && self.contains_pixel(pixel);
+        Projection { pixel, depth, visible }
+    }
+
+    /// Pixel → undistorted normalized image coordinates `(x/z, y/z)`.
+    ///
+    /// Returns `None` when the inversion does not converge (see [`Distortion::undistort`]).
+    pub fn undistort(&self, uv: Point2<f64>) -> Option<Vector2<f64>> {
+        self.distortion.undistort(self.pixel_to_normalized(uv))
+    }
+
+    /// Pixel → undistorted pixel (the pixel an ideal camera with the same `K` would see).
+    pub fn undistort_pixel(&self, uv: Point2<f64>) -> Option<Point2<f64>> {
+        self.undistort(uv).map(|xn| self.normalized_to_pixel(xn))
+    }
+
+    /// Pixel → the world ray through it, starting at the camera centre.
+    pub fn pixel_ray(&self, uv: Point2<f64>) -> Option<Ray> {
+        let xn = self.undistort(uv)?;
+        let dir_cam = Vector3::new(xn.x, xn.y, 1.0);
+        Some(Ray { origin: self.centre(), direction: Unit::new_normalize(self.rotation.inverse() * dir_cam) })
+    }
+}

@@ -1,0 +1,34 @@
+//! rerun logging of hullcut's domain types, at the entity paths of DESIGN.md's "rerun entity tree".
+//! This is the only library crate that knows rerun; stages pass their results here (or the binary
+//! does), together with a [`RecordingStream`] it opened.
+//!
+//! Entry points:
+//! - [`open_recording`] opens a recording on a [`Sink`] (an `.rrd` file, a spawned viewer, or a
+//!   viewer at a `rerun+http://…/proxy` URL); [`flush`] waits until the sink has the data.
+//! - [`log_world`] (z-up view coordinates of `world`) and [`log_rig`] (each camera's world→camera
+//!   transform and pinhole at `world/cams/<name>`), both static, once per recording.
+//! - [`set_frame`] and [`set_capture_time_ns`] set the `frame` and `capture_time` timelines.
+//! - Per frame: [`log_image_rgb`] / [`log_image_jpeg`] (`world/cams/<name>/image`),
+//!   [`log_labels`] with [`log_label_classes`] (`world/cams/<name>/labels`), [`log_image_points`]
+//!   (2-D overlays), [`log_points3d`] (world points), [`log_scalar`] (`metrics/…`).
+//!
+//! Pixel coordinates follow hullcut's convention (pixel centres at integers) in every API; the
+//! half-pixel shift to rerun's convention happens here ([`RERUN_PIXEL_OFFSET`]).
+//!
+//! No feature flags.
+#![warn(missing_docs)]
+
+mod error;
+mod log;
+mod recording;
+
+pub use error::VizError;
+pub use log::{
+    RERUN_PIXEL_OFFSET, WORLD, camera_entity_path, image_entity_path, log_camera, log_image_jpeg, log_image_points,
+    log_image_rgb, log_label_classes, log_labels, log_points3d, log_rig, log_scalar, log_world,
+};
+pub use recording::{
+    CAPTURE_TIME_TIMELINE, FLUSH_TIMEOUT, FRAME_TIMELINE, Sink, flush, open_recording, set_capture_time_ns, set_frame,
+};
+// Re-exported so that callers need not depend on rerun themselves.
+pub use rerun::{EntityPath, RecordingStream};
