@@ -27,6 +27,7 @@ struct Cli {
 enum Command {
     Calibrate(commands::calibrate::Args),
     Rig(commands::rig::Args),
+    Sim(commands::sim::Args),
 }
 
 fn main() -> ExitCode {
@@ -42,6 +43,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Calibrate(args) => commands::calibrate::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
+        Command::Sim(args) => commands::sim::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -140,3 +140,52 @@ fn help_names_every_output_file() {
     }
     assert!(help.contains("Writes:"), "{help}");
 }
+
+fn scenario(name: &str) -> String {
+    format!("{}/../../examples/scenarios/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn sim_single_hexahedron_report_matches_closed_form() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (report, rrd) = (dir.path().join("sim.json"), dir.path().join("sim.rrd"));
+    let o = hullcut(&[
+        "sim",
+        "--scenario",
+        &scenario("hex-stretch.toml"),
+        "--report",
+        report.to_str().expect("utf-8"),
+        "--rrd",
+        rrd.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    assert_eq!(json["kind"], "simulation");
+    assert_eq!(json["stable"], true);
+    // P_xx * area for F = diag(1.3, 1, 1), λ = μ = 20 kPa (see the scenario's header).
+    let expected = 1.3 * (20_000.0 * (1.0 - 1.0 / 1.69) + 20_000.0 * 1.3 * 0.3 / 1.69) * 0.01;
+    let rx = json["reactions"][0]["force_n"][0].as_f64().expect("reaction");
+    assert!((rx - expected).abs() < 1e-4 * expected, "{rx} vs {expected}");
+    assert!(json["stability"]["dt_critical_s"].as_f64().expect("dt") > 0.0);
+    assert!(json["timings"]["step"]["p95_ms"].is_number());
+    assert!(std::fs::metadata(&rrd).expect("rrd").len() > 1000);
+}
+
+#[test]
+fn sim_bad_scenarios_name_the_key() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("bad.toml");
+    let base = std::fs::read_to_string(scenario("hex-stretch.toml")).expect("read");
+    for (text, needle) in [
+        (base.replace("density = 1000.0", "density = 1000.0\nyoung = 5.0"), "young"),
+        (base.replace("mu = 20000.0", "mu = -20000.0"), "material.mu"),
+        (base.replace("displace = [0.03, 0.0, 0.0]", "displace = [0.03, 0.0, 0.0]\nfix = [\"x\"]"), "boundary[1]"),
+        (format!("{base}\n[[boundary]]\nfaces = [\"x+\"]\nfix = [\"x\"]\n"), "contradicts boundary[1]"),
+    ] {
+        std::fs::write(&path, text).expect("write");
+        let o = hullcut(&["sim", "--scenario", path.to_str().expect("utf-8")]);
+        assert_eq!(o.status.code(), Some(1), "{needle}");
+        assert!(stderr(&o).contains(needle), "expected `{needle}` in: {}", stderr(&o));
+    }
+}

@@ -1,0 +1,307 @@
+//! `hullcut sim`: a simulation-only scenario (no cameras), with a report and a rerun recording.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use hullcut_sim::dynamics::Divergence;
+use hullcut_sim::{NodeRole, Scenario, Simulation};
+use serde::Serialize;
+
+use crate::progress::bar;
+use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+
+/// Run a simulation-only scenario (TOML; see docs/scenario.md and examples/scenarios/).
+///
+/// The body is discretised on a hexahedral lattice and simulated by TLED (nonlinear FEM) where the
+/// scenario's hybrid split says, FLSM elsewhere. The time step is computed from the highest
+/// eigenfrequency of the lattice (power iteration) unless the scenario gives one. A run that
+/// diverges stops, is reported as unstable with the step it failed at, and exits with status 1.
+///
+/// Writes: REPORT (JSON, docs/reports.md: reactions, probe displacements, kinetic energy, dt and
+/// critical dt, stability, timings) with --report; an .rrd recording (lattice nodes coloured by
+/// role, energies and timings) with --rrd.
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// The scenario file (TOML).
+    #[arg(long, value_name = "FILE.toml")]
+    scenario: PathBuf,
+    /// Compute backend. Only `cpu` exists so far (the wgpu backend is a later issue).
+    #[arg(long, value_name = "cpu|gpu", default_value = "cpu")]
+    backend: String,
+    /// Write a JSON report.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Log the simulation to this rerun recording (.rrd).
+    #[arg(long, value_name = "FILE")]
+    rrd: Option<PathBuf>,
+}
+
+#[derive(Debug, Serialize)]
+struct Reaction {
+    face: String,
+    force_n: [f64; 3],
+}
+
+#[derive(Debug, Serialize)]
+struct Probe {
+    at_m: [f64; 3],
+    displacement_m: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Serialize)]
+struct LatticeInfo {
+    cell_m: f64,
+    nodes: usize,
+    cells: usize,
+    tled_cells: usize,
+    tled_nodes: usize,
+    flsm_nodes: usize,
+    interface_nodes: usize,
+}
+
+#[derive(Debug, Serialize)]
+struct Stability {
+    dt_s: f64,
+    dt_critical_s: f64,
+    omega_max_rad_s: f64,
+    power_iterations: usize,
+    l_over_c_s: f64,
+    dt_critical_over_l_over_c: f64,
+    dt_above_critical: bool,
+}
+
+#[derive(Debug, Serialize)]
+struct Timings {
+    /// Per call of advance (one TLED step, or one FLSM step with its TLED sub-steps).
+    step: StageTiming,
+    setup: StageTiming,
+    total: StageTiming,
+}
+
+#[derive(Debug, Serialize)]
+struct Throughput {
+    element_steps_per_s: f64,
+    node_steps_per_s: f64,
+    realtime_factor: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    schema_version: u32,
+    kind: &'static str,
+    #[serde(flatten)]
+    provenance: Provenance,
+    scenario: &'a Path,
+    backend: &'a str,
+    lattice: LatticeInfo,
+    stability: Stability,
+    steps: u64,
+    simulated_time_s: f64,
+    stable: bool,
+    failure: Option<Divergence>,
+    kinetic_energy_j: f64,
+    inverted_cells_max: usize,
+    reactions: Vec<Reaction>,
+    probes: Vec<Probe>,
+    warnings: &'a [String],
+    timings: Timings,
+    throughput: Throughput,
+}
+
+/// Runs the command.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let t0 = Instant::now();
+    if args.backend != "cpu" {
+        bail!("--backend {}: only the cpu backend exists so far", args.backend);
+    }
+    let scenario = Scenario::load(&args.scenario)?;
+    let mut sim =
+        Simulation::from_scenario(&scenario).with_context(|| format!("setting up {}", args.scenario.display()))?;
+    let setup = t0.elapsed();
+    for w in &sim.warnings {
+        tracing::warn!("{}: {w}", args.scenario.display());
+    }
+    let roles = &sim.roles;
+    let count = |r: NodeRole| roles.iter().filter(|&&x| x == r).count();
+    let lattice = LatticeInfo {
+        cell_m: sim.lattice.cell,
+        nodes: sim.lattice.node_count(),
+        cells: sim.lattice.cells.len(),
+        tled_cells: sim.tled_cells(),
+        tled_nodes: count(NodeRole::Tled) + count(NodeRole::Interface),
+        flsm_nodes: count(NodeRole::Flsm),
+        interface_nodes: count(NodeRole::Interface),
+    };
+    tracing::info!(
+        nodes = lattice.nodes,
+        cells = lattice.cells,
+        tled_cells = lattice.tled_cells,
+        dt_s = sim.dt(),
+        dt_critical_s = sim.stability.dt_critical,
+        "simulation set up"
+    );
+    let rec = match &args.rrd {
+        Some(path) => {
+            let rec = hullcut_viz::open_recording("hullcut-sim", &hullcut_viz::Sink::File(path.clone()))?;
+            hullcut_viz::log_world(&rec)?;
+            Some(rec)
+        }
+        None => None,
+    };
+    let duration = scenario.run.duration;
+    let per_advance = sim.dt() * sim.steps_per_advance() as f64;
+    let advances = (duration / per_advance).ceil() as u64;
+    // Log at ~60 Hz of simulated time (or the scenario's interval).
+    let log_every = if scenario.report.interval > 0.0 { scenario.report.interval } else { 1.0 / 60.0 };
+    let log_stride = ((log_every / per_advance).round() as u64).max(1);
+    let pb = bar(advances, "simulating");
+    let mut step_times = Vec::with_capacity(advances as usize);
+    let mut failure = None;
+    let t_run = Instant::now();
+    for k in 0..advances {
+        let t = Instant::now();
+        let r = sim.advance();
+        step_times.push(t.elapsed());
+        if let Err(d) = r {
+            failure = Some(d);
+            break;
+        }
+        if let Some(rec) = &rec
+            && (k % log_stride == 0 || k + 1 == advances)
+        {
+            log_state(rec, &sim, k, step_times.last().copied().unwrap_or_default())?;
+        }
+        if k % 64 == 0 {
+            pb.set_position(k);
+        }
+    }
+    let run_time = t_run.elapsed();
+    pb.finish_and_clear();
+    if let Some(rec) = &rec {
+        hullcut_viz::flush(rec)?;
+    }
+    let steps = sim.integrator.step;
+    let simulated = sim.time();
+    let reactions = sim
+        .reaction_names
+        .iter()
+        .zip(&sim.integrator.reactions)
+        .map(|(face, f)| Reaction { face: face.clone(), force_n: [f.x, f.y, f.z] })
+        .collect::<Vec<_>>();
+    let probes =
+        sim.probe_displacements().into_iter().map(|(at, d)| Probe { at_m: at, displacement_m: d }).collect::<Vec<_>>();
+    let secs = run_time.as_secs_f64().max(1e-9);
+    let report = Report {
+        schema_version: SCHEMA_VERSION,
+        kind: "simulation",
+        provenance: Provenance::current(),
+        scenario: &args.scenario,
+        backend: &args.backend,
+        stability: Stability {
+            dt_s: sim.dt(),
+            dt_critical_s: sim.stability.dt_critical,
+            omega_max_rad_s: sim.stability.omega_max,
+            power_iterations: sim.stability.iterations,
+            l_over_c_s: sim.dt_wave,
+            dt_critical_over_l_over_c: sim.stability.dt_critical / sim.dt_wave,
+            dt_above_critical: sim.dt_above_critical,
+        },
+        throughput: Throughput {
+            element_steps_per_s: lattice.tled_cells as f64 * steps as f64 / secs,
+            node_steps_per_s: lattice.nodes as f64 * steps as f64 / secs,
+            realtime_factor: simulated / secs,
+        },
+        lattice,
+        steps,
+        simulated_time_s: simulated,
+        stable: failure.is_none(),
+        kinetic_energy_j: sim.integrator.kinetic_energy(),
+        inverted_cells_max: sim.inverted_cells_max(),
+        failure,
+        reactions,
+        probes,
+        warnings: &sim.warnings,
+        timings: Timings {
+            step: StageTiming::from_durations(&step_times),
+            setup: StageTiming::from_durations(&[setup]),
+            total: StageTiming::from_durations(&[t0.elapsed()]),
+        },
+    };
+    print_summary(&report);
+    if let Some(path) = &args.report {
+        write_json(path, &report)?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.rrd {
+        println!("wrote {}", path.display());
+    }
+    if let Some(f) = &report.failure {
+        tracing::debug!(role = ?sim.roles[f.node], rest = ?sim.lattice.rest[f.node], "diverged node");
+        bail!("the simulation became unstable at step {} (t = {:.6} s): {}", f.step, f.time, f.reason);
+    }
+    Ok(())
+}
+
+fn print_summary(r: &Report) {
+    let l = &r.lattice;
+    println!(
+        "{} nodes, {} cells ({} TLED, {} FLSM nodes, {} interface), cell {} mm",
+        l.nodes,
+        l.cells,
+        l.tled_cells,
+        l.flsm_nodes,
+        l.interface_nodes,
+        l.cell_m * 1e3
+    );
+    let s = &r.stability;
+    println!(
+        "dt {:.4e} s (critical {:.4e} s = {:.3} L/c, omega_max {:.4e} rad/s)",
+        s.dt_s, s.dt_critical_s, s.dt_critical_over_l_over_c, s.omega_max_rad_s
+    );
+    println!(
+        "{} steps, {:.4} s simulated, {}, kinetic energy {:.3e} J, {:.2}x real time, {:.3e} element-steps/s",
+        r.steps,
+        r.simulated_time_s,
+        if r.stable { "stable" } else { "UNSTABLE" },
+        r.kinetic_energy_j,
+        r.throughput.realtime_factor,
+        r.throughput.element_steps_per_s
+    );
+    for x in &r.reactions {
+        println!("reaction {}: [{:.6}, {:.6}, {:.6}] N", x.face, x.force_n[0], x.force_n[1], x.force_n[2]);
+    }
+    for p in &r.probes {
+        match p.displacement_m {
+            Some(d) => println!("probe {:?}: displacement [{:.6e}, {:.6e}, {:.6e}] m", p.at_m, d[0], d[1], d[2]),
+            None => println!("probe {:?}: outside the body", p.at_m),
+        }
+    }
+}
+
+fn log_state(rec: &hullcut_viz::RecordingStream, sim: &Simulation, k: u64, step_time: Duration) -> anyhow::Result<()> {
+    hullcut_viz::set_frame(rec, k as i64);
+    hullcut_viz::set_capture_time_ns(rec, (sim.time() * 1e9) as i64);
+    let x = sim.positions();
+    for (role, name, color) in [
+        (NodeRole::Tled, "tled", [40, 200, 60, 255]),
+        (NodeRole::Flsm, "flsm", [240, 210, 40, 255]),
+        (NodeRole::Interface, "interface", [255, 255, 255, 255]),
+    ] {
+        let pts: Vec<[f32; 3]> =
+            x.iter().zip(&sim.roles).filter(|(_, r)| **r == role).map(|(p, _)| [p.x, p.y, p.z]).collect();
+        if !pts.is_empty() {
+            hullcut_viz::log_points3d(
+                rec,
+                &format!("world/tissue/nodes/{name}"),
+                &pts,
+                color,
+                (sim.lattice.cell * 0.1) as f32,
+            )?;
+        }
+    }
+    hullcut_viz::log_scalar(rec, "metrics/time/sim_step", step_time.as_secs_f64() * 1e3)?;
+    hullcut_viz::log_scalar(rec, "metrics/accuracy/kinetic_energy_j", sim.integrator.kinetic_energy())?;
+    Ok(())
+}

@@ -1,0 +1,32 @@
+//! Soft-tissue simulation for hullcut: lattice, TLED, FLSM and their hybrid.
+//!
+//! Entry points: [`Scenario`] (the TOML scenario) and [`Simulation::from_scenario`] /
+//! [`Simulation::advance`]; the building blocks [`Lattice`], [`body::voxelize`], [`Tled`],
+//! [`flsm::Flsm`], [`stability::estimate`], [`dynamics::Integrator`] and [`embed::Embedding`].
+//!
+//! No feature flags yet (the `gpu` feature comes with the wgpu backend).
+#![warn(missing_docs)]
+
+pub mod body;
+pub mod dynamics;
+pub mod embed;
+mod error;
+pub mod flsm;
+pub mod lattice;
+pub mod material;
+pub mod mesh;
+pub mod scenario;
+pub mod simulation;
+pub mod stability;
+pub mod tled;
+
+pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
+pub use embed::{EmbedError, Embedding};
+pub use error::SimError;
+pub use flsm::{Flsm, FlsmParams};
+pub use lattice::{CORNERS, Cell, Lattice};
+pub use material::Material;
+pub use mesh::{MeshError, TriMesh, WindingTree};
+pub use scenario::Scenario;
+pub use simulation::{NodeRole, Simulation};
+pub use tled::{Integration, Tled, TledParams};

@@ -1,0 +1,5 @@
+//! Integration tests of hullcut-sim.
+
+mod body;
+mod flsm;
+mod tled;
