@@ -4,6 +4,8 @@
 use nalgebra::{Point3, Vector3};
 
 use crate::dynamics::{Divergence, Integrator, Prescribed};
+use crate::embed::Embedding;
+use crate::mesh::TriMesh;
 use crate::flsm::{Flsm, FlsmParams};
 use crate::scenario::{BoxSpec, Scenario};
 use crate::stability::{self, StabilityLimit};
@@ -54,6 +56,9 @@ pub struct Simulation {
     f_ext: Vec<Vector3<f32>>,
     f_applied: Vec<Vector3<f32>>,
     probes: Vec<([f64; 3], Option<Located>)>,
+    surface: TriMesh,
+    embedding: Embedding,
+    surface_now: Vec<Point3<f32>>,
     inverted_max: usize,
 }
 
@@ -112,8 +117,8 @@ fn box_nodes(lattice: &Lattice, b: &BoxSpec) -> Vec<u32> {
         .collect()
 }
 
-/// The lattice of a scenario's body, with any warnings.
-pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>), SimError> {
+/// The lattice of a scenario's body, with any warnings, and the body's surface mesh.
+pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), SimError> {
     let b = &s.body;
     if !(b.cell.is_finite() && b.cell > 0.0) {
         return Err(invalid("body.cell", format!("must be a positive length in metres, got {}", b.cell)));
@@ -127,24 +132,21 @@ pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>), SimError> {
             let body = crate::body::Body::Box { size: Vector3::from(size) };
             let vox = crate::body::voxelize(&body, b.cell, &crate::body::VoxelizeParams::default())
                 .map_err(|e| invalid("body", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings))
+            Ok((vox.lattice, vox.warnings, body.surface()))
         }
         (Some("organ"), None) => {
             let vox = crate::body::voxelize(&crate::body::Body::Organ, b.cell, &crate::body::VoxelizeParams::default())
                 .map_err(|e| invalid("body", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings))
+            Ok((vox.lattice, vox.warnings, crate::body::Body::Organ.surface()))
         }
         (None, Some(path)) => {
-            let mut mesh = crate::mesh::TriMesh::load(path).map_err(|e| invalid("body.mesh", e.to_string()))?;
-            if b.scale != 1.0 {
-                for v in &mut mesh.vertices {
-                    *v = Point3::from(v.coords * b.scale);
-                }
+            if !(b.scale.is_finite() && b.scale > 0.0) {
+                return Err(invalid("body.scale", format!("must be a positive factor, got {}", b.scale)));
             }
-            let vox =
-                crate::body::voxelize(&crate::body::Body::Mesh(mesh), b.cell, &crate::body::VoxelizeParams::default())
-                    .map_err(|e| invalid("body.mesh", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings))
+            let body = crate::body::Body::load_mesh(path, b.scale).map_err(|e| invalid("body.mesh", e.to_string()))?;
+            let vox = crate::body::voxelize(&body, b.cell, &crate::body::VoxelizeParams::default())
+                .map_err(|e| invalid("body.mesh", e.to_string()))?;
+            Ok((vox.lattice, vox.warnings, body.surface()))
         }
         (Some(other), None) => Err(invalid(
             "body.shape",
@@ -206,7 +208,14 @@ fn tled_cells(lattice: &Lattice, s: &Scenario) -> Result<Vec<usize>, SimError> {
 impl Simulation {
     /// Builds the simulation a scenario describes.
     pub fn from_scenario(s: &Scenario) -> Result<Self, SimError> {
-        let (lattice, mut warnings) = build_lattice(s)?;
+        let (lattice, mut warnings, surface) = build_lattice(s)?;
+        let embedding = Embedding::new(&lattice, &surface.vertices).map_err(|e| invalid("body", e.to_string()))?;
+        if embedding.clamped > 0 {
+            warnings.push(format!(
+                "{} surface vertices lie more than a cell outside the lattice and were moved up to {:.2e} m",
+                embedding.clamped, embedding.max_shift
+            ));
+        }
         let material = Material { lambda: s.material.lambda, mu: s.material.mu, density: s.material.density };
         material.validate()?;
         let integration = match s.tled.integration.as_str() {
@@ -469,6 +478,9 @@ impl Simulation {
             f_ext: vec![Vector3::zeros(); n],
             f_applied,
             probes,
+            surface,
+            embedding,
+            surface_now: Vec::new(),
             inverted_max: 0,
             lattice,
         })
@@ -579,6 +591,13 @@ impl Simulation {
                 (*at, d)
             })
             .collect()
+    }
+
+    /// The embedded surface at the current state: vertex positions (metres) and triangles.
+    pub fn surface(&mut self) -> (&[Point3<f32>], &[[u32; 3]]) {
+        let x = self.positions();
+        self.embedding.positions_into(&self.lattice, &x, &mut self.surface_now);
+        (&self.surface_now, &self.surface.triangles)
     }
 
     /// Current node positions (rest + displacement), metres.

@@ -178,6 +178,41 @@ pub fn log_points3d(
     log_at(rec, EntityPath::from(path), &points, false)
 }
 
+/// Logs a triangle mesh in world coordinates at `path` (e.g. `world/tissue/surface`), one colour,
+/// with vertex normals computed here so it shades in the viewer.
+pub fn log_mesh3d(
+    rec: &RecordingStream,
+    path: &str,
+    vertices: &[[f32; 3]],
+    triangles: &[[u32; 3]],
+    color: [u8; 4],
+) -> Result<(), VizError> {
+    let mut normals = vec![[0.0f32; 3]; vertices.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| vertices.get(i as usize).copied().unwrap_or_default());
+        let (u, v) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
+        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        for &i in t {
+            if let Some(acc) = normals.get_mut(i as usize) {
+                for k in 0..3 {
+                    acc[k] += n[k];
+                }
+            }
+        }
+    }
+    for n in &mut normals {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if len > 0.0 {
+            *n = n.map(|x| x / len);
+        }
+    }
+    let mesh = rerun::Mesh3D::new(vertices.iter().copied())
+        .with_triangle_indices(triangles.iter().copied())
+        .with_vertex_normals(normals)
+        .with_albedo_factor(Rgba32::from_unmultiplied_rgba(color[0], color[1], color[2], color[3]));
+    log_at(rec, EntityPath::from(path), &mesh, false)
+}
+
 /// Logs one scalar at `path` (the full path, e.g. `metrics/time/carve`), at the current time.
 pub fn log_scalar(rec: &RecordingStream, path: &str, value: f64) -> Result<(), VizError> {
     log_at(rec, EntityPath::from(path), &Scalars::single(value), false)

@@ -20,7 +20,8 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 ///
 /// Writes: REPORT (JSON, docs/reports.md: reactions, probe displacements, kinetic energy, dt and
 /// critical dt, stability, timings) with --report; an .rrd recording (lattice nodes coloured by
-/// role, energies and timings) with --rrd.
+/// role under world/tissue/nodes, the embedded surface under world/tissue/surface, kinetic energy
+/// and step time as scalars, at about 60 Hz of simulated time) with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -171,7 +172,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some(rec) = &rec
             && (k % log_stride == 0 || k + 1 == advances)
         {
-            log_state(rec, &sim, k, step_times.last().copied().unwrap_or_default())?;
+            log_state(rec, &mut sim, k, step_times.last().copied().unwrap_or_default())?;
         }
         if k % 64 == 0 {
             pb.set_position(k);
@@ -280,7 +281,7 @@ fn print_summary(r: &Report) {
     }
 }
 
-fn log_state(rec: &hullcut_viz::RecordingStream, sim: &Simulation, k: u64, step_time: Duration) -> anyhow::Result<()> {
+fn log_state(rec: &hullcut_viz::RecordingStream, sim: &mut Simulation, k: u64, step_time: Duration) -> anyhow::Result<()> {
     hullcut_viz::set_frame(rec, k as i64);
     hullcut_viz::set_capture_time_ns(rec, (sim.time() * 1e9) as i64);
     let x = sim.positions();
@@ -301,6 +302,9 @@ fn log_state(rec: &hullcut_viz::RecordingStream, sim: &Simulation, k: u64, step_
             )?;
         }
     }
+    let (vertices, triangles) = sim.surface();
+    let vertices: Vec<[f32; 3]> = vertices.iter().map(|p| [p.x, p.y, p.z]).collect();
+    hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, triangles, [200, 90, 80, 255])?;
     hullcut_viz::log_scalar(rec, "metrics/time/sim_step", step_time.as_secs_f64() * 1e3)?;
     hullcut_viz::log_scalar(rec, "metrics/accuracy/kinetic_energy_j", sim.integrator.kinetic_energy())?;
     Ok(())

@@ -2,4 +2,5 @@
 
 mod body;
 mod flsm;
+mod mechanics;
 mod tled;
