@@ -10,6 +10,7 @@
 //! the step.
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 /// A prescribed displacement component.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,24 +120,34 @@ impl Integrator {
         let a = 1.0 / (1.0 + 0.5 * self.damping * dt);
         let b = 1.0 - 0.5 * self.damping * dt;
         let dt2 = dt * dt;
-        let mut max_speed2 = 0.0f32;
-        let mut fastest = 0;
-        for i in 0..self.u.len() {
-            let m = self.mass[i];
-            let next = if m > 0.0 {
-                let k = self.implicit_stiffness[i];
-                let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
-                ((f_ext[i] - f_int[i]) * (dt2 / m) + self.u[i] * 2.0 - self.u_prev[i] * b) * denom
-            } else {
-                self.u[i]
-            };
-            self.next[i] = next;
-            let v2 = ((next - self.u[i]) / dt).norm_squared();
-            if !max_speed2.is_nan() && (v2.is_nan() || v2 > max_speed2) {
-                max_speed2 = v2;
-                fastest = i;
-            }
-        }
+        // Per node in parallel slabs; each slab reports its fastest node (NaN counts as fastest).
+        let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
+        let (u, u_prev, mass, stiff) = (&self.u, &self.u_prev, &self.mass, &self.implicit_stiffness);
+        let (max_speed2, fastest) = self
+            .next
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .map(|(c, next)| {
+                let mut worst = (0.0f32, c * chunk);
+                for (j, out) in next.iter_mut().enumerate() {
+                    let i = c * chunk + j;
+                    let m = mass[i];
+                    let x = if m > 0.0 {
+                        let k = stiff[i];
+                        let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
+                        ((f_ext[i] - f_int[i]) * (dt2 / m) + u[i] * 2.0 - u_prev[i] * b) * denom
+                    } else {
+                        u[i]
+                    };
+                    *out = x;
+                    let v2 = ((x - u[i]) / dt).norm_squared();
+                    if !worst.0.is_nan() && (v2.is_nan() || v2 > worst.0) {
+                        worst = (v2, i);
+                    }
+                }
+                worst
+            })
+            .reduce(|| (0.0, 0), |p, q| if p.0.is_nan() || (!q.0.is_nan() && p.0 >= q.0) { p } else { q });
         // Prescribed components, and the reactions they exert: r = m (ü + α u̇) + f_int − f_ext.
         let t_next = (self.step + 1) as f32 * dt;
         for r in &mut self.reactions {

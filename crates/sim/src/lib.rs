@@ -19,6 +19,7 @@ pub mod scenario;
 pub mod simulation;
 pub mod stability;
 pub mod tled;
+mod tled_batch;
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
 pub use embed::{EmbedError, Embedding};

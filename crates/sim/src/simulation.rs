@@ -5,8 +5,8 @@ use nalgebra::{Point3, Vector3};
 
 use crate::dynamics::{Divergence, Integrator, Prescribed};
 use crate::embed::Embedding;
-use crate::mesh::TriMesh;
 use crate::flsm::{Flsm, FlsmParams};
+use crate::mesh::TriMesh;
 use crate::scenario::{BoxSpec, Scenario};
 use crate::stability::{self, StabilityLimit};
 use crate::tled::{Integration, Tled, TledParams};

@@ -281,7 +281,12 @@ fn print_summary(r: &Report) {
     }
 }
 
-fn log_state(rec: &hullcut_viz::RecordingStream, sim: &mut Simulation, k: u64, step_time: Duration) -> anyhow::Result<()> {
+fn log_state(
+    rec: &hullcut_viz::RecordingStream,
+    sim: &mut Simulation,
+    k: u64,
+    step_time: Duration,
+) -> anyhow::Result<()> {
     hullcut_viz::set_frame(rec, k as i64);
     hullcut_viz::set_capture_time_ns(rec, (sim.time() * 1e9) as i64);
     let x = sim.positions();

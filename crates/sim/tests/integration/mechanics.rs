@@ -43,7 +43,10 @@ fn slow_cantilever_converges_to_beam_theory_under_refinement() {
         .iter()
         .map(|&h| {
             let tip = cantilever_tip(h, e, nu, "one-point");
-            eprintln!("cell {h} m: tip {tip:.6e} m, reference {reference:.6e} m, error {:+.2}%", 100.0 * (tip / reference - 1.0));
+            eprintln!(
+                "cell {h} m: tip {tip:.6e} m, reference {reference:.6e} m, error {:+.2}%",
+                100.0 * (tip / reference - 1.0)
+            );
             (tip / reference - 1.0).abs()
         })
         .collect();
