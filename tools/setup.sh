@@ -5,11 +5,12 @@
 #   opencv-doc                        OpenCV's sample photos, used by tests (stereo chessboards)
 #   mesa-vulkan-drivers               software Vulkan (lavapipe) for GPU tests without a GPU
 #   pkg-config                        lets the opencv crate find the library
+#   fonts-dejavu-core                 the font of the benchmark charts (hullcut bench)
 #
 # Usage: tools/setup.sh [--with-viewer]   (--with-viewer also installs the rerun viewer from PyPI)
 set -euo pipefail
 
-packages=(libopencv-dev clang libclang-dev opencv-doc mesa-vulkan-drivers pkg-config)
+packages=(libopencv-dev clang libclang-dev opencv-doc mesa-vulkan-drivers pkg-config fonts-dejavu-core)
 missing=()
 for p in "${packages[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then

@@ -3,6 +3,7 @@
 //!
 //! Exit codes: 0 success, 1 failure (the error is printed), 2 bad usage.
 
+mod chart;
 mod commands;
 mod progress;
 mod report;
@@ -25,6 +26,7 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    Bench(commands::bench::Args),
     Calibrate(commands::calibrate::Args),
     Rig(commands::rig::Args),
     Sim(commands::sim::Args),
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         .with_target(false)
         .init();
     let result = match cli.command {
+        Command::Bench(args) => commands::bench::run(&args),
         Command::Calibrate(args) => commands::calibrate::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
         Command::Sim(args) => commands::sim::run(&args),

@@ -189,3 +189,20 @@ fn sim_bad_scenarios_name_the_key() {
         assert!(stderr(&o).contains(needle), "expected `{needle}` in: {}", stderr(&o));
     }
 }
+
+#[test]
+fn bench_sim_quick_writes_tables_and_charts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "sim", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for name in ["scaling", "ratio", "stability"] {
+        let csv = std::fs::read_to_string(dir.path().join(format!("{name}.csv"))).expect("csv");
+        assert!(csv.lines().count() >= 3, "{name}.csv: {csv}");
+        let png = std::fs::read(dir.path().join(format!("{name}.png"))).expect("png");
+        assert!(png.starts_with(b"\x89PNG"), "{name}.png is a PNG");
+    }
+    // The all-TLED reference has zero error against itself.
+    let ratio = std::fs::read_to_string(dir.path().join("ratio.csv")).expect("csv");
+    let first = ratio.lines().nth(1).expect("row");
+    assert!(first.starts_with("1,") && first.split(',').nth(3) == Some("0.000000"), "{first}");
+}

@@ -1,0 +1,240 @@
+//! `hullcut bench`: speed against accuracy, as CSV and PNG charts.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context as _;
+use hullcut_sim::dynamics::Integrator;
+use hullcut_sim::{Lattice, Material, Scenario, Simulation, Tled, TledParams, stability};
+use nalgebra::{Point3, Vector3};
+
+use crate::chart::{Scale, Series, line_chart};
+use crate::progress::bar;
+
+/// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
+///
+/// Targets: `sim` (the others arrive with their stages). `sim` measures
+///   scaling.csv/png   wall time per simulated second against lattice nodes, for all-TLED,
+///                     all-FLSM and hybrid (ratio 0.4) models of the seed's liver material;
+///   ratio.csv/png     the TLED ratio's accuracy (displacement error against an all-TLED run)
+///                     against milliseconds of compute per 60 Hz frame, on the built-in organ
+///                     (the seed paper's Table I setting);
+///   stability.csv/png the measured stability edge (bisection) against the power-iteration
+///                     estimate and L/c, for several Poisson ratios.
+/// Timings are wall clock on this machine: run on an idle machine, and compare ratios within one run.
+/// HULLCUT_BENCH_QUICK=1 (or --quick) shrinks every size so CI can smoke-run it.
+///
+/// Writes: DIR/*.csv and DIR/*.png as listed above.
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// What to benchmark.
+    target: Target,
+    /// Output folder (created).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Small sizes and short runs (also HULLCUT_BENCH_QUICK=1).
+    #[arg(long)]
+    quick: bool,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum Target {
+    /// The soft-tissue simulator.
+    Sim,
+}
+
+/// Runs the command.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let quick = args.quick || std::env::var("HULLCUT_BENCH_QUICK").is_ok_and(|v| v == "1");
+    match args.target {
+        Target::Sim => {
+            scaling(&args.out, quick)?;
+            ratio(&args.out, quick)?;
+            stability_edge(&args.out, quick)?;
+        }
+    }
+    Ok(())
+}
+
+fn write(path: &Path, text: &str) -> anyhow::Result<()> {
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+/// Wall seconds per simulated second of `sim`, over at least `min_wall` seconds of running.
+fn cost(sim: &mut Simulation, min_wall: f64, max_advances: usize) -> anyhow::Result<f64> {
+    sim.advance().map_err(|d| anyhow::anyhow!("unstable at step {}: {}", d.step, d.reason))?;
+    let t0 = Instant::now();
+    let s0 = sim.time();
+    let mut n = 0;
+    while n < max_advances && (n < 3 || t0.elapsed().as_secs_f64() < min_wall) {
+        sim.advance().map_err(|d| anyhow::anyhow!("unstable at step {}: {}", d.step, d.reason))?;
+        n += 1;
+    }
+    Ok(t0.elapsed().as_secs_f64() / (sim.time() - s0))
+}
+
+fn block(n: usize, ratio: f64) -> anyhow::Result<Scenario> {
+    let side = n as f64 * 0.005;
+    let text = format!(
+        "[body]\nshape = \"box\"\nsize = [{side}, {side}, {side}]\ncell = 0.005\n[hybrid]\nratio = {ratio}\n\
+         [[boundary]]\nfaces = [\"z-\"]\nfix = [\"x\", \"y\", \"z\"]\n[run]\ndamping = 20.0\ngravity = [0.0, 0.0, -9.81]\n"
+    );
+    Ok(Scenario::parse(&text, "bench block")?)
+}
+
+fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let sizes: &[usize] = if quick { &[4, 6] } else { &[8, 12, 16, 20, 25, 30] };
+    let models = [("TLED", 1.0), ("FLSM", 0.0), ("hybrid 0.4", 0.4)];
+    let mut csv = String::from("model,nodes,cells,dt_s,wall_s_per_simulated_s,realtime_factor\n");
+    let mut series: Vec<Series> =
+        models.iter().map(|(m, _)| Series { label: (*m).to_owned(), points: Vec::new() }).collect();
+    let pb = bar((sizes.len() * models.len()) as u64, "scaling");
+    for &n in sizes {
+        for (mi, (model, r)) in models.iter().enumerate() {
+            let mut sim = Simulation::from_scenario(&block(n, *r)?)?;
+            let c = cost(&mut sim, if quick { 0.05 } else { 0.5 }, if quick { 5 } else { 2000 })?;
+            let nodes = sim.lattice.node_count();
+            let _ =
+                writeln!(csv, "{model},{nodes},{},{:.6e},{c:.6e},{:.4}", sim.lattice.cells.len(), sim.dt(), 1.0 / c);
+            series[mi].points.push((nodes as f64, c));
+            pb.inc(1);
+        }
+    }
+    pb.finish_and_clear();
+    write(&out.join("scaling.csv"), &csv)?;
+    line_chart(
+        &out.join("scaling.png"),
+        "Simulation cost against lattice size (liver material, 5 mm cells; below 1 = real time)",
+        "lattice nodes",
+        "wall seconds per simulated second",
+        (Scale::Log, Scale::Log),
+        &series,
+    )?;
+    println!("wrote {}", out.join("scaling.png").display());
+    Ok(())
+}
+
+fn organ(cell: f64, ratio: f64, duration: f64) -> anyhow::Result<Scenario> {
+    let text = format!(
+        "[body]\nshape = \"organ\"\ncell = {cell}\n[hybrid]\nratio = {ratio}\n\
+         [[boundary]]\nbox = {{ min = [-1.0, -1.0, -0.001], max = [1.0, 1.0, 0.004] }}\nfix = [\"x\", \"y\", \"z\"]\n\
+         [[load]]\nbox = {{ min = [-0.02, -0.02, 0.03], max = [0.02, 0.02, 0.1] }}\nforce = [0.0, 0.0, -0.5]\n\
+         [run]\nduration = {duration}\ndamping = 30.0\ngravity = [0.0, 0.0, -9.81]\n"
+    );
+    Ok(Scenario::parse(&text, "bench organ")?)
+}
+
+fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let (cell, duration) = if quick { (0.01, 0.05) } else { (0.0062, 0.3) };
+    let ratios = [1.0, 0.8, 0.6, 0.4, 0.2, 0.0];
+    let mut reference: Option<Vec<Vector3<f32>>> = None;
+    let mut csv = String::from("ratio,nodes,tled_cells,rms_error_mm,max_error_mm,ms_per_60hz_frame\n");
+    let mut series = Vec::new();
+    let pb = bar(ratios.len() as u64, "ratio");
+    for &r in &ratios {
+        let scenario = organ(cell, r, duration)?;
+        let mut sim = Simulation::from_scenario(&scenario)?;
+        let t0 = Instant::now();
+        while sim.time() < duration {
+            sim.advance().map_err(|d| anyhow::anyhow!("ratio {r}: unstable at step {}: {}", d.step, d.reason))?;
+        }
+        let ms_per_frame = t0.elapsed().as_secs_f64() / sim.time() * 1e3 / 60.0;
+        let u = sim.integrator.u.clone();
+        let reference = reference.get_or_insert_with(|| u.clone());
+        let errors: Vec<f64> = u.iter().zip(reference.iter()).map(|(a, b)| f64::from((a - b).norm()) * 1e3).collect();
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        let _ =
+            writeln!(csv, "{r},{},{},{rms:.6},{max:.6},{ms_per_frame:.4}", sim.lattice.node_count(), sim.tled_cells());
+        series.push(Series { label: format!("ratio {r}"), points: vec![(ms_per_frame, rms.max(1e-6))] });
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    write(&out.join("ratio.csv"), &csv)?;
+    line_chart(
+        &out.join("ratio.png"),
+        "Hybrid TLED/FLSM: accuracy against compute per frame (built-in organ)",
+        "compute per 60 Hz frame (ms)",
+        "RMS displacement error vs all-TLED (mm)",
+        (Scale::Linear, Scale::Log),
+        &series,
+    )?;
+    println!("wrote {}", out.join("ratio.png").display());
+    Ok(())
+}
+
+/// Whether a free block perturbed by 1e-4 of a cell stays stable for `steps` at `dt`.
+fn stable_at(lattice: &Lattice, material: &Material, dt: f64, steps: usize) -> anyhow::Result<bool> {
+    let mut tled = Tled::new(lattice, None, material, TledParams::default())?;
+    let mass: Vec<f32> = lattice.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
+    let mut it = Integrator::new(mass, Vec::new(), 0, 0.0, dt as f32, 10.0 * material.wave_speed() as f32);
+    for (n, u) in it.u.iter_mut().enumerate() {
+        let s = ((n * 7919) % 13) as f32 / 13.0 - 0.5;
+        *u = Vector3::new(s, -0.5 * s, 0.25 * s) * (1e-4 * lattice.cell as f32);
+    }
+    it.u_prev.clone_from(&it.u);
+    let mut f = vec![Vector3::zeros(); lattice.node_count()];
+    let zero = vec![Vector3::zeros(); lattice.node_count()];
+    for _ in 0..steps {
+        tled.internal_forces(&it.u, &mut f);
+        if it.advance(&f, &zero).is_err() {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let nus = if quick { vec![0.3, 0.49] } else { vec![0.25, 0.3, 0.35, 0.4, 0.45, 0.48, 0.49] };
+    let (n, steps, iters) = if quick { (3, 400, 4) } else { (6, 3000, 10) };
+    let mut csv = String::from(
+        "nu,cells_per_side,l_over_c_s,estimate_s,measured_edge_s,estimate_over_l_over_c,measured_over_l_over_c\n",
+    );
+    let mut est_s = Series { label: "estimate 2/ω_max (power iteration)".into(), points: Vec::new() };
+    let mut meas_s = Series { label: "measured edge (bisection)".into(), points: Vec::new() };
+    let mut lc_s = Series { label: "L/c".into(), points: Vec::new() };
+    let pb = bar(nus.len() as u64, "stability");
+    for &nu in &nus {
+        let material = Material::from_young_poisson(30_000.0, nu, 1000.0);
+        let h = 0.005;
+        let lattice = Lattice::block(Point3::origin(), h, [n, n, n]);
+        let mut tled = Tled::new(&lattice, None, &material, TledParams::default())?;
+        let mass: Vec<f32> = lattice.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
+        let free = vec![[true; 3]; lattice.node_count()];
+        let zero = vec![Vector3::zeros(); lattice.node_count()];
+        let est = stability::estimate(&mut tled, &mass, &free, &zero, h, 500, 1e-8).dt_critical;
+        let (mut lo, mut hi) = (0.5 * est, 2.0 * est);
+        for _ in 0..iters {
+            let mid = 0.5 * (lo + hi);
+            if stable_at(&lattice, &material, mid, steps)? {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let edge = 0.5 * (lo + hi);
+        let lc = h / material.wave_speed();
+        let _ = writeln!(csv, "{nu},{n},{lc:.6e},{est:.6e},{edge:.6e},{:.4},{:.4}", est / lc, edge / lc);
+        est_s.points.push((nu, est / lc));
+        meas_s.points.push((nu, edge / lc));
+        lc_s.points.push((nu, 1.0));
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    write(&out.join("stability.csv"), &csv)?;
+    line_chart(
+        &out.join("stability.png"),
+        "Explicit stability limit of the TLED lattice (free block)",
+        "Poisson ratio ν",
+        "time step / (L/c)",
+        (Scale::Linear, Scale::Linear),
+        &[est_s, meas_s, lc_s],
+    )?;
+    println!("wrote {}", out.join("stability.png").display());
+    Ok(())
+}
