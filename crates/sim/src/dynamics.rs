@@ -75,6 +75,8 @@ pub struct Integrator {
     pub reactions: Vec<Vector3<f64>>,
     /// Per-node spring stiffness integrated implicitly (N/m); zero for most nodes.
     pub implicit_stiffness: Vec<f32>,
+    /// Nodes that keep their displacement through a step (moved by another model, e.g. FLSM).
+    pub frozen: Vec<bool>,
     next: Vec<Vector3<f32>>,
 }
 
@@ -105,6 +107,7 @@ impl Integrator {
             speed_limit,
             reactions: vec![Vector3::zeros(); groups],
             implicit_stiffness: vec![0.0; n],
+            frozen: vec![false; n],
             next: vec![Vector3::zeros(); n],
         }
     }
@@ -122,7 +125,8 @@ impl Integrator {
         let dt2 = dt * dt;
         // Per node in parallel slabs; each slab reports its fastest node (NaN counts as fastest).
         let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
-        let (u, u_prev, mass, stiff) = (&self.u, &self.u_prev, &self.mass, &self.implicit_stiffness);
+        let (u, u_prev, mass, stiff, frozen) =
+            (&self.u, &self.u_prev, &self.mass, &self.implicit_stiffness, &self.frozen);
         let (max_speed2, fastest) = self
             .next
             .par_chunks_mut(chunk)
@@ -132,7 +136,7 @@ impl Integrator {
                 for (j, out) in next.iter_mut().enumerate() {
                     let i = c * chunk + j;
                     let m = mass[i];
-                    let x = if m > 0.0 {
+                    let x = if m > 0.0 && !frozen[i] {
                         let k = stiff[i];
                         let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
                         ((f_ext[i] - f_int[i]) * (dt2 / m) + u[i] * 2.0 - u_prev[i] * b) * denom

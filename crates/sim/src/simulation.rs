@@ -459,6 +459,7 @@ impl Simulation {
             for &i in &part.interface {
                 integrator.implicit_stiffness[i as usize] = part.beta;
             }
+            integrator.frozen.clone_from(&part.active);
         }
         let probes = s.report.probes.iter().map(|p| (*p, lattice.locate(&Point3::from(*p)))).collect();
         let rest = lattice.rest.iter().map(|p| p.coords.cast::<f32>()).collect();
@@ -550,28 +551,15 @@ impl Simulation {
         self.tled.internal_forces(&self.integrator.u, &mut self.f_int);
         self.inverted_max = self.inverted_max.max(self.tled.inverted_cells());
         self.f_ext.copy_from_slice(&self.f_applied);
-        let held = if hybrid {
-            if let Some(part) = &self.flsm {
-                // β (g − x) with x = rest + u: the constant part here, −β u implicitly.
-                for &i in &part.interface {
-                    let i = i as usize;
-                    self.f_ext[i] += (part.goals[i] - self.rest[i]) * part.beta;
-                }
-                Some(&part.active)
-            } else {
-                None
+        if hybrid && let Some(part) = &self.flsm {
+            // β (g − x) with x = rest + u: the constant part here, −β u implicitly. FLSM nodes are
+            // frozen in the integrator during the sub-steps.
+            for &i in &part.interface {
+                let i = i as usize;
+                self.f_ext[i] += (part.goals[i] - self.rest[i]) * part.beta;
             }
-        } else {
-            None
-        };
-        let saved: Vec<(usize, Vector3<f32>)> = held
-            .map(|a| a.iter().enumerate().filter(|&(_, &h)| h).map(|(i, _)| (i, self.integrator.u[i])).collect())
-            .unwrap_or_default();
-        self.integrator.advance(&self.f_int, &self.f_ext)?;
-        for (i, u) in saved {
-            self.integrator.u[i] = u;
-            self.integrator.u_prev[i] = u;
         }
+        self.integrator.advance(&self.f_int, &self.f_ext)?;
         Ok(())
     }
 

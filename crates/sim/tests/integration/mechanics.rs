@@ -1,7 +1,7 @@
 //! Whole-simulation checks against beam theory: convergence under refinement and the behaviour of
 //! nearly incompressible tissue. Test names start with `slow_` (seconds each): skip with `--skip slow_`.
 
-use hullcut_sim::{Scenario, Simulation};
+use hullcut_sim::{NodeRole, Scenario, Simulation};
 
 /// Timoshenko tip deflection of a clamped square-section cantilever under its own weight:
 /// `q L⁴ / (8 E I) + q L² / (2 k G A)` with q = ρ g A, I = b⁴/12, k = 5/6.
@@ -79,4 +79,53 @@ fn slow_nearly_incompressible_one_point_does_not_lock() {
             assert!(gauss < 0.8, "gauss8 should lock at nu 0.49: {gauss:.3} x theory");
         }
     }
+}
+
+fn organ_scenario(ratio: f64, gravity: f64, extra: &str) -> Scenario {
+    let text = format!(
+        "[body]\nshape = \"organ\"\ncell = 0.01\n[hybrid]\nratio = {ratio}\n{extra}\
+         [[boundary]]\nbox = {{ min = [-1.0, -1.0, -0.001], max = [1.0, 1.0, 0.004] }}\nfix = [\"x\", \"y\", \"z\"]\n\
+         [run]\nduration = 0.1\ndamping = 30.0\ngravity = [0.0, 0.0, {gravity}]\n"
+    );
+    Scenario::parse(&text, "organ").expect("scenario")
+}
+
+fn run(s: &Scenario) -> Simulation {
+    let mut sim = Simulation::from_scenario(s).expect("setup");
+    while sim.time() < s.run.duration {
+        sim.advance().expect("stable");
+    }
+    sim
+}
+
+#[test]
+fn hybrid_at_rest_stays_at_rest() {
+    // No load: the interface pull must not inject energy (an explicit β(g − x) on light boundary
+    // nodes did, and diverged within a few steps).
+    let sim = run(&organ_scenario(0.4, 0.0, ""));
+    assert!(sim.roles.iter().any(|&r| r == NodeRole::Interface), "the split has an interface");
+    let worst = sim.integrator.u.iter().map(|u| u.norm()).fold(0.0f32, f32::max);
+    assert!(worst < 1e-6, "a body at rest moved {worst} m");
+}
+
+#[test]
+fn hybrid_with_everything_operational_equals_tled() {
+    let tled = run(&organ_scenario(1.0, -9.81, ""));
+    let all = run(&organ_scenario(0.2, -9.81, "operational = { center = [0.0, 0.0, 0.03], radius = 1.0 }\n"));
+    assert_eq!(all.tled_cells(), all.lattice.cells.len());
+    let diff = tled.integrator.u.iter().zip(&all.integrator.u).map(|(a, b)| (a - b).norm()).fold(0.0f32, f32::max);
+    assert!(diff < 1e-9, "{diff}");
+    // And a true hybrid sags under gravity, stays stable, and keeps its fixed base in place.
+    let hybrid = run(&organ_scenario(0.4, -9.81, ""));
+    let base = hybrid
+        .lattice
+        .rest
+        .iter()
+        .zip(&hybrid.integrator.u)
+        .filter(|(p, _)| p.z < 0.004)
+        .map(|(_, u)| u.norm())
+        .fold(0.0f32, f32::max);
+    assert!(base == 0.0, "fixed base moved {base} m");
+    let sag = hybrid.integrator.u.iter().map(|u| -u.z).fold(0.0f32, f32::max);
+    assert!(sag > 0.0, "the hybrid does not sag");
 }
