@@ -103,7 +103,7 @@ fn hybrid_at_rest_stays_at_rest() {
     // No load: the interface pull must not inject energy (an explicit β(g − x) on light boundary
     // nodes did, and diverged within a few steps).
     let sim = run(&organ_scenario(0.4, 0.0, ""));
-    assert!(sim.roles.iter().any(|&r| r == NodeRole::Interface), "the split has an interface");
+    assert!(sim.roles.contains(&NodeRole::Interface), "the split has an interface");
     let worst = sim.integrator.u.iter().map(|u| u.norm()).fold(0.0f32, f32::max);
     assert!(worst < 1e-6, "a body at rest moved {worst} m");
 }
