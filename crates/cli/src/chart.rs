@@ -64,6 +64,17 @@ fn range(series: &[Series], axis: impl Fn(&(f64, f64)) -> f64, scale: Scale) -> 
     }
 }
 
+/// A compact tick label: plain for moderate magnitudes, scientific otherwise.
+fn tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 || (1e-2..1e5).contains(&a) {
+        let text = format!("{v:.3}");
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
 /// Draws `series` as lines with markers into a 1000x650 PNG.
 pub fn line_chart(
     path: &Path,
@@ -90,6 +101,8 @@ pub fn line_chart(
                 .x_desc(x_label)
                 .y_desc(y_label)
                 .label_style(("sans-serif", 16))
+                .x_label_formatter(&|v| tick(*v))
+                .y_label_formatter(&|v| tick(*v))
                 .draw()
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
             for (i, s) in series.iter().enumerate() {
