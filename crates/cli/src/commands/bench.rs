@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context as _;
-use hullcut_sim::dynamics::Integrator;
 use hullcut_sim::{Lattice, Material, Scenario, Simulation, Tled, TledParams, stability};
 use nalgebra::{Point3, Vector3};
 
@@ -175,27 +174,6 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Whether a free block perturbed by 1e-4 of a cell stays stable for `steps` at `dt`.
-fn stable_at(lattice: &Lattice, material: &Material, dt: f64, steps: usize) -> anyhow::Result<bool> {
-    let mut tled = Tled::new(lattice, None, material, TledParams::default())?;
-    let mass: Vec<f32> = lattice.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
-    let mut it = Integrator::new(mass, Vec::new(), 0, 0.0, dt as f32, 10.0 * material.wave_speed() as f32);
-    for (n, u) in it.u.iter_mut().enumerate() {
-        let s = ((n * 7919) % 13) as f32 / 13.0 - 0.5;
-        *u = Vector3::new(s, -0.5 * s, 0.25 * s) * (1e-4 * lattice.cell as f32);
-    }
-    it.u_prev.clone_from(&it.u);
-    let mut f = vec![Vector3::zeros(); lattice.node_count()];
-    let zero = vec![Vector3::zeros(); lattice.node_count()];
-    for _ in 0..steps {
-        tled.internal_forces(&it.u, &mut f);
-        if it.advance(&f, &zero).is_err() {
-            return Ok(false);
-        }
-    }
-    Ok(true)
-}
-
 fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
     let nus = if quick { vec![0.3, 0.49] } else { vec![0.25, 0.3, 0.35, 0.4, 0.45, 0.48, 0.49] };
     let (n, steps, iters) = if quick { (3, 400, 4) } else { (6, 3000, 10) };
@@ -218,7 +196,7 @@ fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
         let (mut lo, mut hi) = (0.5 * est, 2.0 * est);
         for _ in 0..iters {
             let mid = 0.5 * (lo + hi);
-            if stable_at(&lattice, &material, mid, steps)? {
+            if stability::free_run_stays_stable(&lattice, &material, mid, steps)? {
                 lo = mid;
             } else {
                 hi = mid;

@@ -156,26 +156,9 @@ fn rigid_motion_gives_zero_internal_force() {
     }
 }
 
-/// Runs a free block from a small random perturbation; returns whether it stayed stable.
+/// Runs a free block from a small perturbation; returns whether it stayed stable.
 fn stays_stable(lattice: &Lattice, material: &Material, dt: f64, steps: usize) -> bool {
-    let mut tled = Tled::new(lattice, None, material, TledParams::default()).expect("tled");
-    let mass: Vec<f32> = lattice.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
-    let mut it = Integrator::new(mass, Vec::new(), 0, 0.0, dt as f32, 10.0 * material.wave_speed() as f32);
-    for (n, u) in it.u.iter_mut().enumerate() {
-        let s = ((n * 7919) % 13) as f32 / 13.0 - 0.5;
-        *u = Vector3::new(s, -s * 0.5, s * 0.25) * (1e-4 * lattice.cell as f32);
-    }
-    it.u_prev.clone_from(&it.u);
-    let mut f = vec![Vector3::zeros(); lattice.node_count()];
-    let zero = vec![Vector3::zeros(); lattice.node_count()];
-    for _ in 0..steps {
-        tled.internal_forces(&it.u, &mut f);
-        if it.advance(&f, &zero).is_err() {
-            return false;
-        }
-    }
-    assert!(it.u.iter().all(|u| u.iter().all(|x| x.is_finite())), "a stable run has finite displacements");
-    true
+    stability::free_run_stays_stable(lattice, material, dt, steps).expect("valid material")
 }
 
 #[test]
