@@ -5,6 +5,7 @@
 
 mod chart;
 mod commands;
+mod logging;
 mod progress;
 mod report;
 
@@ -30,6 +31,7 @@ enum Command {
     Calibrate(commands::calibrate::Args),
     Rig(commands::rig::Args),
     Sim(commands::sim::Args),
+    Synth(commands::synth::Args),
 }
 
 fn main() -> ExitCode {
@@ -47,6 +49,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => commands::calibrate::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
         Command::Sim(args) => commands::sim::run(&args),
+        Command::Synth(args) => commands::synth::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

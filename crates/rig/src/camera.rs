@@ -79,6 +79,21 @@ impl Camera {
         }
     }
 
+    /// The same camera with its image resampled by `factor` (0.5 halves width and height): focal
+    /// lengths scale, and the principal point keeps its place on the sensor under the convention
+    /// that pixel centres sit at integer coordinates (`c' = (c + 0.5) · factor − 0.5`).
+    /// Distortion is in normalized coordinates and does not change.
+    pub fn scaled(&self, factor: f64) -> Camera {
+        let mut c = self.clone();
+        c.width = ((self.width as f64) * factor).round().max(1.0) as u32;
+        c.height = ((self.height as f64) * factor).round().max(1.0) as u32;
+        c.fx *= factor;
+        c.fy *= factor;
+        c.cx = (self.cx + 0.5) * factor - 0.5;
+        c.cy = (self.cy + 0.5) * factor - 0.5;
+        c
+    }
+
     /// The intrinsic matrix `K`.
     pub fn k_matrix(&self) -> Matrix3<f64> {
         Matrix3::new(self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0)

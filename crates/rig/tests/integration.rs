@@ -202,3 +202,14 @@ camera_0:
         assert!(e.to_string().contains("/nonexistent/rig.yaml"));
     }
 }
+
+#[test]
+fn a_scaled_camera_sees_the_same_point_at_the_scaled_pixel() {
+    let cam = hullcut_rig::default_rig().cameras[2].clone();
+    let half = cam.scaled(0.5);
+    assert_eq!((half.width, half.height), (320, 240));
+    let p = nalgebra::Point3::new(0.05, -0.03, 0.12);
+    let (a, b) = (cam.project(&p).pixel, half.project(&p).pixel);
+    // Pixel centres at integers: u' = (u + 0.5) / 2 - 0.5.
+    assert!(((a.x + 0.5) * 0.5 - 0.5 - b.x).abs() < 1e-9 && ((a.y + 0.5) * 0.5 - 0.5 - b.y).abs() < 1e-9);
+}

@@ -213,6 +213,19 @@ pub fn log_mesh3d(
     log_at(rec, EntityPath::from(path), &mesh, false)
 }
 
+/// Logs 3-D line strips in world coordinates (metres) at `path` (e.g. the cutting edge under
+/// `world/tool/truth/edge`), at the current time. `radius_m` is in metres.
+pub fn log_line_strips3d(
+    rec: &RecordingStream,
+    path: &str,
+    strips: &[Vec<[f32; 3]>],
+    color: [u8; 4],
+    radius_m: f32,
+) -> Result<(), VizError> {
+    let strips = rerun::LineStrips3D::new(strips.iter().cloned()).with_colors([color]).with_radii([radius_m]);
+    log_at(rec, EntityPath::from(path), &strips, false)
+}
+
 /// Logs one scalar at `path` (the full path, e.g. `metrics/time/carve`), at the current time.
 pub fn log_scalar(rec: &RecordingStream, path: &str, value: f64) -> Result<(), VizError> {
     log_at(rec, EntityPath::from(path), &Scalars::single(value), false)

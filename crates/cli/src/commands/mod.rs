@@ -4,3 +4,4 @@ pub mod bench;
 pub mod calibrate;
 pub mod rig;
 pub mod sim;
+pub mod synth;

@@ -32,6 +32,10 @@ enum RigCommand {
         /// Where to write it.
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
+        /// Resample the cameras' images by this factor (0.5 gives 320x240 cameras with the same
+        /// fields of view).
+        #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
+        scale: f64,
     },
 }
 
@@ -50,8 +54,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        RigCommand::Default { out } => {
-            default_rig().save(out)?;
+        RigCommand::Default { out, scale } => {
+            if !(*scale > 0.0 && scale.is_finite()) {
+                anyhow::bail!("--scale must be a positive number, got {scale}");
+            }
+            let mut rig = default_rig();
+            for camera in &mut rig.cameras {
+                *camera = camera.scaled(*scale);
+            }
+            rig.save(out)?;
             println!("wrote {}", out.display());
             Ok(())
         }

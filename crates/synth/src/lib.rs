@@ -1,0 +1,44 @@
+//! Synthetic capture scenes with exact ground truth, written in the same dataset format as real
+//! recordings.
+//!
+//! - Scene model: a [`Scalpel`] (handle and a No. 10-style blade, described by `tool.json`), a
+//!   gloved hand ([`hand_mesh`]) whose grip changes over time, and [`Trajectory`]s (approach, press,
+//!   cut strokes, lift) for the scenes of [`SceneKind`].
+//! - Renderer: [`CameraRenderer`], a z-buffered rasterizer in double precision that applies the
+//!   rig's distortion exactly (per-pixel undistorted rays), with Lambert shading, a textured static
+//!   background, sensor noise, motion blur and exposure drift ([`Scene::render_view`]); labels and
+//!   depth are those of the first surface hit by each pixel's centre ray.
+//! - [`synthesize`]: renders every frame set in parallel and writes a dataset with masks, depth,
+//!   `tool.json` and `truth/`, appearing at its path only once complete.
+//!
+//! Everything is deterministic for a seed. No OpenCV, no rerun.
+#![warn(missing_docs)]
+
+mod hand;
+mod mesh;
+pub mod render;
+mod scalpel;
+mod scene;
+pub mod sensor;
+mod synthesize;
+pub mod texture;
+mod trajectory;
+
+pub use hand::hand_mesh;
+pub use mesh::TriMesh;
+pub use render::{CameraRenderer, Layers, Light, Part};
+pub use scalpel::{BLADE_LENGTH, BLADE_THICKNESS, BLADE_WIDTH, HANDLE_LENGTH, HANDLE_THICKNESS, HANDLE_WIDTH, Scalpel};
+pub use scene::{BLADE_ALBEDO, DepthImage, GLOVE_ALBEDO, HANDLE_ALBEDO, RenderedView, START_NS, Scene, SceneConfig};
+pub use synthesize::{SynthSummary, synthesize};
+pub use trajectory::{Key, ORGAN_TOP, SceneKind, ToolState, Trajectory, tool_rotation};
+
+/// Why a synthesis failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// The scene's configuration is unusable.
+    #[error("synthetic scene: {0}")]
+    Config(String),
+    /// Writing the dataset failed.
+    #[error(transparent)]
+    Dataset(#[from] hullcut_dataset::DatasetError),
+}

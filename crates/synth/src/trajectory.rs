@@ -1,0 +1,274 @@
+//! Tool trajectories: approach, press into the (virtual) organ on the table, cut strokes of varied
+//! speed, depth and angle, lift; repeated with new parameters drawn from the seed.
+//!
+//! A pose is given by the blade tip's world position and three angles: the stroke's azimuth (the
+//! blade plane is vertical and contains the stroke direction), the pitch of the tool axis below the
+//! horizontal (tip lowest), and a roll of the blade about the tool axis. Between keyframes every
+//! quantity follows a smoothstep, so velocity is continuous and the peak speed of a stroke is 1.5x
+//! its mean.
+
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng, rngs::StdRng};
+
+/// Height of the top of the virtual organ resting on the table (a 6 cm thick liver), metres.
+pub const ORGAN_TOP: f64 = 0.06;
+
+/// What a scene does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SceneKind {
+    /// Cut strokes at moderate speed (up to about 0.2 m/s), every camera delivering every frame.
+    Cut,
+    /// The tool held still in the organ, for accuracy averaged over frames.
+    Static,
+    /// Fast strokes (peaks of 0.5 m/s) with the blade edge-on to two cameras, the index finger over
+    /// the blade, motion blur, strong exposure changes and a camera dropping frames.
+    Hard,
+}
+
+impl SceneKind {
+    /// Every scene with its command-line name.
+    pub const ALL: [(SceneKind, &'static str); 3] =
+        [(SceneKind::Cut, "cut"), (SceneKind::Static, "static"), (SceneKind::Hard, "hard")];
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        Self::ALL.iter().find(|(k, _)| *k == self).map_or("cut", |(_, n)| n)
+    }
+
+    /// Parses a command-line name.
+    pub fn from_name(name: &str) -> Option<SceneKind> {
+        Self::ALL.iter().find(|(_, n)| *n == name).map(|(k, _)| *k)
+    }
+}
+
+/// One keyframe of the tool's motion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Key {
+    /// Time, seconds from the start of the recording.
+    pub time: f64,
+    /// Blade tip, world metres.
+    pub tip: Point3<f64>,
+    /// Stroke azimuth, radians (direction of travel in the table plane).
+    pub azimuth: f64,
+    /// Tool axis below the horizontal, radians.
+    pub pitch: f64,
+    /// Blade roll about the tool axis, radians.
+    pub roll: f64,
+    /// Hand grip in [0, 1] (see [`crate::hand_mesh`]).
+    pub grip: f64,
+}
+
+/// The tool's state at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolState {
+    /// Tool frame → world frame.
+    pub tool_to_world: Isometry3<f64>,
+    /// Hand grip in [0, 1].
+    pub grip: f64,
+}
+
+/// A piecewise-smoothstep trajectory through keyframes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    keys: Vec<Key>,
+    tip_in_tool: Point3<f64>,
+}
+
+fn smoothstep(s: f64) -> f64 {
+    let s = s.clamp(0.0, 1.0);
+    s * s * (3.0 - 2.0 * s)
+}
+
+/// Rotation whose columns are the tool axes in world coordinates for the given angles.
+pub fn tool_rotation(azimuth: f64, pitch: f64, roll: f64) -> Rotation3<f64> {
+    let s = Vector3::new(azimuth.cos(), azimuth.sin(), 0.0);
+    let up = Vector3::z();
+    let x = s * pitch.cos() - up * pitch.sin();
+    let y0 = s * pitch.sin() + up * pitch.cos();
+    let z0 = x.cross(&y0);
+    let y = y0 * roll.cos() + z0 * roll.sin();
+    let z = x.cross(&y);
+    Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]))
+}
+
+impl Trajectory {
+    /// A trajectory through `keys` (sorted by time) for a tool whose tip is at `tip_in_tool`.
+    pub fn new(keys: Vec<Key>, tip_in_tool: Point3<f64>) -> Self {
+        Trajectory { keys, tip_in_tool }
+    }
+
+    /// The keyframes.
+    pub fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+
+    /// The interpolated keyframe values at time `t` (clamped to the first and last key).
+    pub fn key_at(&self, t: f64) -> Key {
+        let keys = &self.keys;
+        let Some(first) = keys.first() else {
+            return Key { time: t, tip: Point3::origin(), azimuth: 0.0, pitch: 0.0, roll: 0.0, grip: 0.0 };
+        };
+        let i = keys.partition_point(|k| k.time <= t);
+        if i == 0 {
+            return *first;
+        }
+        if i == keys.len() {
+            return keys[i - 1];
+        }
+        let (a, b) = (&keys[i - 1], &keys[i]);
+        let w = smoothstep((t - a.time) / (b.time - a.time));
+        let lerp = |p: f64, q: f64| p + (q - p) * w;
+        Key {
+            time: t,
+            tip: a.tip + (b.tip - a.tip) * w,
+            azimuth: lerp(a.azimuth, b.azimuth),
+            pitch: lerp(a.pitch, b.pitch),
+            roll: lerp(a.roll, b.roll),
+            grip: lerp(a.grip, b.grip),
+        }
+    }
+
+    /// The tool's pose and grip at time `t`.
+    pub fn state_at(&self, t: f64) -> ToolState {
+        let k = self.key_at(t);
+        let rotation = tool_rotation(k.azimuth, k.pitch, k.roll);
+        let origin = k.tip - rotation * self.tip_in_tool.coords;
+        let tool_to_world =
+            Isometry3::from_parts(Translation3::from(origin.coords), UnitQuaternion::from_rotation_matrix(&rotation));
+        ToolState { tool_to_world, grip: k.grip }
+    }
+
+    /// The highest tip speed over `[0, duration]`, sampled every millisecond, m/s.
+    pub fn peak_tip_speed(&self, duration: f64) -> f64 {
+        let dt = 1e-3;
+        let steps = (duration / dt).ceil() as usize;
+        (0..steps)
+            .map(|i| (self.key_at((i + 1) as f64 * dt).tip - self.key_at(i as f64 * dt).tip).norm() / dt)
+            .fold(0.0, f64::max)
+    }
+
+    /// The trajectory of a scene, `duration` seconds long, deterministic for a seed.
+    pub fn for_scene(kind: SceneKind, seed: u64, duration: f64, tip_in_tool: Point3<f64>) -> Self {
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x7a3c_91e5_0d42_b6f1);
+        let deg = f64::to_radians;
+        let mut keys = Vec::new();
+        let hover = |tip: Point3<f64>| Point3::new(tip.x, tip.y, ORGAN_TOP + 0.12);
+        match kind {
+            SceneKind::Static => {
+                let key = Key {
+                    time: 0.0,
+                    tip: Point3::new(0.01, -0.005, ORGAN_TOP - 0.012),
+                    azimuth: deg(30.0),
+                    pitch: deg(42.0),
+                    roll: deg(6.0),
+                    grip: 0.4,
+                };
+                keys.push(key);
+                keys.push(Key { time: duration.max(1.0), ..key });
+            }
+            SceneKind::Cut | SceneKind::Hard => {
+                let hard = kind == SceneKind::Hard;
+                // The default rig's camera azimuths: a stroke along one of them is edge-on to it
+                // and to the camera opposite.
+                let camera_azimuths = [15.0, 75.0, 135.0];
+                let mut t = 0.0;
+                let mut cycle = 0usize;
+                let mut previous: Option<Key> = None;
+                // Moves between strokes: quick in the hard scene, unhurried otherwise.
+                let (transfer_s, approach_s, lift_s) = if hard { (0.7, 0.5, 0.45) } else { (1.0, 1.0, 1.0) };
+                while t < duration + 1.0 {
+                    let azimuth = if hard {
+                        deg(camera_azimuths[cycle % 3] + rng.random_range(-2.0..2.0))
+                    } else {
+                        deg(rng.random_range(0.0..360.0))
+                    };
+                    let pitch = deg(rng.random_range(32.0..55.0));
+                    let roll = if hard { 0.0 } else { deg(rng.random_range(-12.0..12.0)) };
+                    let depth = rng.random_range(0.008..0.025);
+                    let length = if hard { 0.10 } else { rng.random_range(0.05..0.09) };
+                    let mean_speed = if hard { 0.1 / 0.3 } else { rng.random_range(0.05..0.12) };
+                    let grip = if hard { 1.0 } else { rng.random_range(0.1..0.7) };
+                    let dir = Vector3::new(azimuth.cos(), azimuth.sin(), 0.0);
+                    let centre = Point3::new(rng.random_range(-0.02..0.02), rng.random_range(-0.015..0.015), 0.0);
+                    let start = centre - dir * (length / 2.0);
+                    let entry = Point3::new(start.x, start.y, ORGAN_TOP + 0.004);
+                    let pressed = Point3::new(start.x, start.y, ORGAN_TOP - depth);
+                    let end = pressed + dir * length;
+                    let base = Key { time: t, tip: hover(entry), azimuth, pitch, roll, grip };
+                    match previous {
+                        None => keys.push(base),
+                        Some(prev) => {
+                            // Turn toward the new stroke while moving over to it.
+                            let mut az = azimuth;
+                            while az - prev.azimuth > std::f64::consts::PI {
+                                az -= std::f64::consts::TAU;
+                            }
+                            while az - prev.azimuth < -std::f64::consts::PI {
+                                az += std::f64::consts::TAU;
+                            }
+                            t += transfer_s;
+                            keys.push(Key { time: t, tip: hover(entry), azimuth: az, ..base });
+                        }
+                    }
+                    let az = keys.last().map_or(azimuth, |k| k.azimuth);
+                    let stroke_grip = if hard { 1.0 } else { (grip + 0.25).min(1.0) };
+                    t += approach_s;
+                    keys.push(Key { time: t, tip: entry, azimuth: az, grip: stroke_grip, ..base });
+                    t += 0.35;
+                    keys.push(Key { time: t, tip: pressed, azimuth: az, grip: stroke_grip, ..base });
+                    t += length / mean_speed;
+                    keys.push(Key { time: t, tip: end, azimuth: az, grip: stroke_grip, ..base });
+                    t += lift_s;
+                    let lifted = Key { time: t, tip: hover(end), azimuth: az, grip, ..base };
+                    keys.push(lifted);
+                    previous = Some(lifted);
+                    cycle += 1;
+                }
+            }
+        }
+        Trajectory::new(keys, tip_in_tool)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tool_rotation_is_right_handed_with_the_tip_down_and_the_spine_up() {
+        let r = tool_rotation(0.7, 0.6, 0.1);
+        assert!((r.matrix().determinant() - 1.0).abs() < 1e-12);
+        assert!((r.matrix().transpose() * r.matrix() - Matrix3::identity()).norm() < 1e-12);
+        assert!((r * Vector3::x()).z < 0.0, "the tip points down");
+        assert!((r * Vector3::y()).z > 0.0, "the spine points up, the cutting edge down");
+    }
+
+    #[test]
+    fn tip_follows_keys_and_hard_strokes_peak_at_half_a_metre_per_second() {
+        let tip = Point3::new(0.038, 0.003, 0.0);
+        let tr = Trajectory::for_scene(SceneKind::Hard, 3, 6.0, tip);
+        for k in tr.keys() {
+            let s = tr.state_at(k.time);
+            assert!((s.tool_to_world * tip - k.tip).norm() < 1e-12);
+        }
+        let peak = tr.peak_tip_speed(6.0);
+        assert!((0.45..0.56).contains(&peak), "peak {peak} m/s");
+        let cut = Trajectory::for_scene(SceneKind::Cut, 3, 6.0, tip);
+        assert!(cut.peak_tip_speed(6.0) < 0.25);
+        let still = Trajectory::for_scene(SceneKind::Static, 3, 6.0, tip);
+        assert_eq!(still.peak_tip_speed(6.0), 0.0);
+    }
+
+    #[test]
+    fn same_seed_same_trajectory() {
+        let tip = Point3::new(0.038, 0.003, 0.0);
+        assert_eq!(
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip),
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip)
+        );
+        assert_ne!(
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip),
+            Trajectory::for_scene(SceneKind::Cut, 10, 5.0, tip)
+        );
+    }
+}

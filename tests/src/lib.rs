@@ -1,0 +1,1 @@
+//! End-to-end tests across hullcut's crates live in `tests/`; this library is empty.
