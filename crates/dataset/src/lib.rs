@@ -25,7 +25,7 @@ mod types;
 mod writer;
 
 pub use error::{DatasetError, Result};
-pub use images::DepthImage;
+pub use images::{DepthImage, PngCompression};
 pub use layout::{frame_file_name, parse_frame_file_name};
 pub use ply::{read_ply, write_ply};
 pub use reader::{Dataset, Dropped};

@@ -12,7 +12,7 @@ use hullcut_rig::{Camera, Rig};
 use image::{GrayImage, ImageBuffer, PixelWithColorType, RgbImage};
 
 use crate::error::{DatasetError, Result};
-use crate::images::{DepthImage, save_png};
+use crate::images::{DepthImage, PngCompression, save_png};
 use crate::layout::{
     DATASET_TOML, DEPTH, FRAMES_CSV, FRAMES_CSV_HEADER, MASKS, MESHES, POSES_JSONL, PoseLine, RIG_YAML, TOOL_JSON,
     TRUTH, check_component, check_rig_cameras, check_transform, frame_file_name, validate_meta,
@@ -55,6 +55,8 @@ pub struct DatasetWriter {
     force: bool,
     /// Set once the temporary folder has become the output; Drop then leaves it alone.
     finished: bool,
+    /// PNG compression of every image written.
+    compression: PngCompression,
 }
 
 impl DatasetWriter {
@@ -87,14 +89,28 @@ impl DatasetWriter {
         };
         std::fs::create_dir_all(&parent).map_err(DatasetError::io(&parent))?;
         let tmp = create_unique_dir(&parent, &format!(".{name}.partial"))?;
-        let writer =
-            Self { out: out.to_owned(), tmp, meta, rig: rig.clone(), state: Mutex::default(), force, finished: false };
+        let writer = Self {
+            out: out.to_owned(),
+            tmp,
+            meta,
+            rig: rig.clone(),
+            state: Mutex::default(),
+            force,
+            finished: false,
+            compression: PngCompression::Fast,
+        };
         for camera in &writer.rig.cameras {
             let dir = writer.tmp.join(&camera.name);
             std::fs::create_dir(&dir).map_err(DatasetError::io(&dir))?;
         }
         tracing::debug!(out = %out.display(), tmp = %writer.tmp.display(), "dataset writer started");
         Ok(writer)
+    }
+
+    /// Sets the PNG compression of everything written from now on (default: fast).
+    pub fn with_compression(mut self, compression: PngCompression) -> Self {
+        self.compression = compression;
+        self
     }
 
     /// The output folder (it exists only after [`DatasetWriter::finish`]).
@@ -130,7 +146,7 @@ impl DatasetWriter {
                 v.insert(timestamp_ns);
             }
         }
-        let result = save_png(&self.tmp.join(&rel), image);
+        let result = save_png(&self.tmp.join(&rel), image, self.compression);
         if result.is_err() {
             self.lock().rows.remove(&(frame, camera));
         }
@@ -143,7 +159,7 @@ impl DatasetWriter {
         let cam = self.camera(camera)?;
         let rel = Path::new(&cam.name).join(format!("background{index:02}.png"));
         self.check_size(&rel, cam, image)?;
-        save_png(&self.tmp.join(rel), image)
+        save_png(&self.tmp.join(rel), image, self.compression)
     }
 
     /// Writes a label mask (`masks/<cam>/<frame:06>.png`; labels in [`crate::label`]).
@@ -350,7 +366,7 @@ impl DatasetWriter {
         self.check_size(&rel, cam, image)?;
         let dir = self.tmp.join(&dir_rel);
         std::fs::create_dir_all(&dir).map_err(DatasetError::io(&dir))?;
-        save_png(&self.tmp.join(rel), image)
+        save_png(&self.tmp.join(rel), image, self.compression)
     }
 }
 

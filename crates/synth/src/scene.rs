@@ -53,6 +53,8 @@ pub struct SceneConfig {
     pub background_frames: usize,
     /// Write world-frame truth meshes for every frame and label.
     pub truth_meshes: bool,
+    /// PNG compression of the written dataset.
+    pub compression: hullcut_dataset::PngCompression,
 }
 
 impl SceneConfig {
@@ -73,6 +75,7 @@ impl SceneConfig {
             dropping_camera: hard.then_some((4, 0.1)),
             background_frames: 5,
             truth_meshes: true,
+            compression: hullcut_dataset::PngCompression::Fast,
         }
     }
 }

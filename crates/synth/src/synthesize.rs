@@ -50,7 +50,7 @@ pub fn synthesize(
         frame_count: config.frames,
         cameras: rig.cameras.iter().map(|c| c.name.clone()).collect(),
     };
-    let writer = DatasetWriter::create(out, meta, rig, force)?;
+    let writer = DatasetWriter::create(out, meta, rig, force)?.with_compression(config.compression);
     writer.write_tool(&scene.scalpel().geometry)?;
     for camera in 0..rig.len() {
         for index in 0..config.background_frames {

@@ -48,6 +48,12 @@ pub struct Args {
     /// Render with this rig instead of the default six-camera rig.
     #[arg(long, value_name = "rig.yaml")]
     rig: Option<PathBuf>,
+    /// Empty-scene images per camera (<cam>/backgroundNN.png) for the background model.
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    background_frames: usize,
+    /// Compress PNGs as hard as possible (several times slower; for datasets that are shipped).
+    #[arg(long)]
+    compact: bool,
     /// Replace OUT if it exists.
     #[arg(long)]
     force: bool,
@@ -102,6 +108,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut config = SceneConfig::new(kind, args.seed, args.frames);
     config.fps = args.fps;
     config.truth_meshes = !args.no_truth_meshes;
+    config.background_frames = args.background_frames;
+    if args.compact {
+        config.compression = hullcut_dataset::PngCompression::Best;
+    }
     if let Some(path) = &args.rig {
         config.rig = Rig::load(path)?;
         if kind == SceneKind::Hard && config.rig.len() <= 4 {
