@@ -5,6 +5,7 @@
 
 mod chart;
 mod commands;
+mod frames;
 mod logging;
 mod progress;
 mod report;
@@ -30,6 +31,7 @@ enum Command {
     Bench(commands::bench::Args),
     Calibrate(commands::calibrate::Args),
     Rig(commands::rig::Args),
+    Segment(commands::segment::Args),
     Sim(commands::sim::Args),
     Synth(commands::synth::Args),
 }
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => commands::bench::run(&args),
         Command::Calibrate(args) => commands::calibrate::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
+        Command::Segment(args) => commands::segment::run(&args),
         Command::Sim(args) => commands::sim::run(&args),
         Command::Synth(args) => commands::synth::run(&args),
     };

@@ -3,5 +3,6 @@
 pub mod bench;
 pub mod calibrate;
 pub mod rig;
+pub mod segment;
 pub mod sim;
 pub mod synth;

@@ -21,10 +21,10 @@ use crate::report::{Provenance, SCHEMA_VERSION, write_json};
 /// exposure drift, camera 4 dropping about 10 % of its frames). Deterministic for a seed.
 ///
 /// Writes the dataset OUT (DESIGN "Dataset format", datasets/README.md): dataset.toml, rig.yaml,
-/// frames.csv (per-camera timestamps with jitter), <cam>/NNNNNN.png, <cam>/backgroundNN.png
-/// (empty-scene images), masks/<cam>/NNNNNN.png (0 background, 1 hand, 2 scalpel),
-/// depth/<cam>/NNNNNN.png (16-bit, mm), tool.json + tool.ply, truth/poses.jsonl and
-/// truth/meshes/<label>/NNNNNN.ply. The dataset is written to a temporary folder and renamed into
+/// frames.csv (per-camera timestamps with jitter), CAM/NNNNNN.png, CAM/backgroundNN.png
+/// (empty-scene images), masks/CAM/NNNNNN.png (0 background, 1 hand, 2 scalpel),
+/// depth/CAM/NNNNNN.png (16-bit, mm), tool.json + tool.ply, truth/poses.jsonl and
+/// truth/meshes/LABEL/NNNNNN.ply (CAM is a camera name, LABEL hand or scalpel). The dataset is written to a temporary folder and renamed into
 /// place when complete. Also REPORT (JSON) with --report and an .rrd (undistorted images and masks
 /// under world/cams/NAME every --rrd-every frames, the true tool under world/tool/truth) with --rrd.
 #[derive(Debug, clap::Args)]
@@ -48,7 +48,7 @@ pub struct Args {
     /// Render with this rig instead of the default six-camera rig.
     #[arg(long, value_name = "rig.yaml")]
     rig: Option<PathBuf>,
-    /// Empty-scene images per camera (<cam>/backgroundNN.png) for the background model.
+    /// Empty-scene images per camera (CAM/backgroundNN.png) for the background model.
     #[arg(long, value_name = "N", default_value_t = 5)]
     background_frames: usize,
     /// Compress PNGs as hard as possible (several times slower; for datasets that are shipped).

@@ -1,0 +1,309 @@
+//! Per-pixel background model from empty-scene images, and the foreground test.
+//!
+//! The test follows Horprasert et al. (1999): a pixel's colour is compared with the expected
+//! background colour after splitting the difference into a brightness part and a chromaticity
+//! part. With I = (r, g, b), s = r+g+b and the model mean E with sum Eₛ:
+//! - brightness distortion: s − γ·Eₛ > β·γ·Eₛ + 3τ (brighter) or γ·Eₛ − s > β_shadow·γ·Eₛ + 3τ
+//!   (darker), where γ is the image's exposure gain (estimated per image as the median s/Eₛ of
+//!   pixels whose chromaticity matches the model, so a global exposure change is no foreground)
+//!   and a larger β_shadow lets cast shadows, darker but of unchanged chromaticity, stay
+//!   background;
+//! - chromaticity distortion: Σ_c |c − ê_c·s| > κ·s + 3τ with ê = E/Eₛ, the L1 colour
+//!   difference after matching brightness, which does not change when shading or exposure scale
+//!   the colour.
+//!
+//! τ is the pixel's noise allowance in grey levels (from the spread over the empty-scene images,
+//! never below the noise floor). The model is stored in planes (ê_r, ê_g in Q16, 2·Eₛ, τ) and the
+//! test runs in 16-bit integer lanes, 16 pixels at a time with no branches, so the compiler
+//! vectorizes it with baseline SSE2: products are "high half of a 16×16-bit product"
+//! (`pmulhuw`), every intermediate stays below 2¹⁶ (bounds at [`BackgroundModel::foreground_row`]).
+
+use image::RgbImage;
+
+use crate::error::CaptureError;
+
+use super::SegmentParams;
+use super::classes::ClassLut;
+
+/// Pixels used for the exposure estimate: every `GAIN_STEP`-th pixel of every `GAIN_STEP`-th row.
+const GAIN_STEP: usize = 16;
+
+/// Model pixels darker than this channel sum are not used for the exposure estimate.
+const GAIN_MIN_SUM: u32 = 48;
+
+/// Range of the exposure gain estimate.
+const GAIN_RANGE: (f64, f64) = (0.5, 1.99);
+
+/// Pixels per step of the vectorized test.
+const LANES: usize = 16;
+
+/// Background colour and noise allowance per pixel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BackgroundModel {
+    width: u32,
+    height: u32,
+    /// The mean empty-scene image.
+    mean: RgbImage,
+    /// ê_r = E_r/Eₛ in Q16 (65535 = 1), per pixel.
+    chroma_r: Vec<u16>,
+    /// ê_g = E_g/Eₛ in Q16.
+    chroma_g: Vec<u16>,
+    /// ê_b = E_b/Eₛ in Q16.
+    chroma_b: Vec<u16>,
+    /// 2·Eₛ (the factor 2 makes γ·Eₛ one high-half product with γ in Q15).
+    sum2: Vec<u16>,
+    /// 3τ, grey levels.
+    tol3: Vec<u16>,
+}
+
+/// Fixed-point thresholds for one image.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Thresholds {
+    /// Exposure gain γ, Q15 (32768 = 1).
+    gain: u16,
+    /// β, Q16.
+    beta: u16,
+    /// β for darker pixels (shadows), Q16.
+    shadow: u16,
+    /// κ, Q16.
+    kappa: u16,
+}
+
+impl Thresholds {
+    pub(crate) fn new(params: &SegmentParams, gain: f64) -> Self {
+        let q16 = |v: f64| (v * 65536.0).round().clamp(0.0, 65535.0) as u16;
+        Self {
+            gain: (gain * 32768.0).round().clamp(0.0, 65535.0) as u16,
+            beta: q16(params.brightness_tolerance),
+            shadow: q16(params.shadow_tolerance),
+            kappa: q16(params.chroma_tolerance),
+        }
+    }
+}
+
+/// High half of a 16×16-bit product.
+#[inline(always)]
+fn mulhi(a: u16, b: u16) -> u16 {
+    ((u32::from(a) * u32::from(b)) >> 16) as u16
+}
+
+impl BackgroundModel {
+    /// Builds the model from empty-scene images of one camera: the per-pixel mean, and a noise
+    /// allowance τ of `noise_sigmas` standard deviations of the per-channel spread when three or
+    /// more images are given, never below `noise_floor`.
+    pub fn from_images(camera: usize, images: &[RgbImage], params: &SegmentParams) -> Result<Self, CaptureError> {
+        let Some(first) = images.first() else {
+            return Err(CaptureError::Param {
+                name: "backgrounds",
+                message: format!("camera {camera}: no empty-scene images"),
+            });
+        };
+        let (w, h) = first.dimensions();
+        for (i, im) in images.iter().enumerate() {
+            if im.dimensions() != (w, h) {
+                return Err(CaptureError::ImageSize {
+                    camera,
+                    what: format!("background image {i}"),
+                    w,
+                    h,
+                    found_w: im.width(),
+                    found_h: im.height(),
+                });
+            }
+        }
+        let n = images.len() as u32;
+        let len = w as usize * h as usize;
+        let mut sum = vec![0u32; 3 * len];
+        for im in images {
+            for (s, &v) in sum.iter_mut().zip(im.as_raw()) {
+                *s += u32::from(v);
+            }
+        }
+        let mean_raw: Vec<u8> = sum.iter().map(|&s| ((s + n / 2) / n) as u8).collect();
+        let floor = u16::from(params.noise_floor);
+        let mut tol = vec![floor; len];
+        if n >= 3 {
+            let mut sq = vec![0u32; len];
+            for im in images {
+                for ((q, p), m) in sq.iter_mut().zip(im.as_raw().chunks_exact(3)).zip(mean_raw.chunks_exact(3)) {
+                    for c in 0..3 {
+                        let d = i32::from(p[c]) - i32::from(m[c]);
+                        *q += (d * d) as u32;
+                    }
+                }
+            }
+            let denom = f64::from(3 * (n - 1));
+            for (t, q) in tol.iter_mut().zip(&sq) {
+                let sd = (f64::from(*q) / denom).sqrt();
+                *t = (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
+            }
+        }
+        let mut model = Self {
+            width: w,
+            height: h,
+            mean: RgbImage::from_raw(w, h, mean_raw).unwrap_or_else(|| RgbImage::new(w, h)),
+            chroma_r: Vec::with_capacity(len),
+            chroma_g: Vec::with_capacity(len),
+            chroma_b: Vec::with_capacity(len),
+            sum2: Vec::with_capacity(len),
+            tol3: tol.iter().map(|&t| 3 * t).collect(),
+        };
+        for p in model.mean.pixels() {
+            let [r, g, b] = p.0.map(u32::from);
+            let es = r + g + b;
+            let q = |c: u32| (c * 65535 + es / 2).checked_div(es).unwrap_or(0) as u16;
+            model.chroma_r.push(q(r));
+            model.chroma_g.push(q(g));
+            model.chroma_b.push(q(b));
+            model.sum2.push((2 * es) as u16);
+        }
+        Ok(model)
+    }
+
+    /// Image width, pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Image height, pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The mean empty-scene image (the model's expected image).
+    pub fn mean_image(&self) -> &RgbImage {
+        &self.mean
+    }
+
+    /// Exposure gain of `image` against the model, clamped to 0.5..1.99: the median brightness
+    /// ratio s/Eₛ over a sparse grid of pixels whose chromaticity matches the model (so the
+    /// foreground hardly biases it).
+    pub(crate) fn exposure_gain(&self, image: &RgbImage, params: &SegmentParams, ratios: &mut Vec<f32>) -> f64 {
+        let w = self.width as usize;
+        let raw = image.as_raw();
+        let mean = self.mean.as_raw();
+        let kappa = params.chroma_tolerance as f32;
+        ratios.clear();
+        for y in (GAIN_STEP / 2..self.height as usize).step_by(GAIN_STEP) {
+            for x in (GAIN_STEP / 2..w).step_by(GAIN_STEP) {
+                let k = y * w + x;
+                let (p, e) = (&raw[3 * k..3 * k + 3], &mean[3 * k..3 * k + 3]);
+                let es: u32 = e.iter().map(|&v| u32::from(v)).sum();
+                if es < GAIN_MIN_SUM {
+                    continue;
+                }
+                let s = p.iter().map(|&v| f32::from(v)).sum::<f32>();
+                let k_s = s / es as f32;
+                let dc: f32 = (0..3).map(|c| (f32::from(p[c]) - f32::from(e[c]) * k_s).abs()).sum();
+                if dc > kappa * s + f32::from(self.tol3[k]) {
+                    continue;
+                }
+                ratios.push(k_s);
+            }
+        }
+        if ratios.is_empty() {
+            return 1.0;
+        }
+        let mid = ratios.len() / 2;
+        let (_, m, _) = ratios.select_nth_unstable_by(mid, f32::total_cmp);
+        f64::from(*m).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
+    }
+
+    /// Foreground test and colour classes for row `y`: `out[x]` = 0 for background, else the
+    /// encoded class of the pixel's colour. Returns whether the row has any foreground.
+    ///
+    /// Bounds (all u16): s ≤ 765; 2Eₛ ≤ 1530; γ·Eₛ = hi(γ·2Eₛ) ≤ 1.99·765 < 1530; β·γEₛ + 3τ ≤
+    /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + 3τ ≤ 765 + 765.
+    /// Differences that could go negative saturate at 0.
+    pub(crate) fn foreground_row(
+        &self,
+        row_rgb: &[u8],
+        y: usize,
+        t: Thresholds,
+        lut: &ClassLut,
+        out: &mut [u8],
+    ) -> bool {
+        let w = self.width as usize;
+        let range = y * w..(y + 1) * w;
+        let (hr, hg, hb) =
+            (&self.chroma_r[range.clone()], &self.chroma_g[range.clone()], &self.chroma_b[range.clone()]);
+        let (es2, tol3) = (&self.sum2[range.clone()], &self.tol3[range]);
+        let mut any = false;
+        let chunks = w / LANES;
+        for c in 0..chunks {
+            let span = c * LANES..(c + 1) * LANES;
+            let (Ok(p), Ok(o)) = (
+                <&[u8; 3 * LANES]>::try_from(&row_rgb[3 * span.start..3 * span.end]),
+                <&mut [u8; LANES]>::try_from(&mut out[span.clone()]),
+            ) else {
+                continue;
+            };
+            let fg = test_lanes(
+                p,
+                [&hr[span.clone()], &hg[span.clone()], &hb[span.clone()], &es2[span.clone()], &tol3[span]],
+                t,
+                o,
+            );
+            if fg {
+                any = true;
+                classify(p, lut, o);
+            }
+        }
+        // The last pixels of a row whose width is not a multiple of LANES, one at a time.
+        for x in chunks * LANES..w {
+            let p = [row_rgb[3 * x], row_rgb[3 * x + 1], row_rgb[3 * x + 2]];
+            let fg = test_pixel(p.map(u16::from), [hr[x], hg[x], hb[x], es2[x], tol3[x]], t);
+            out[x] = if fg { lut.get(p[0], p[1], p[2]) } else { 0 };
+            any |= fg;
+        }
+        any
+    }
+}
+
+/// The foreground test for one pixel (see the module docs).
+#[inline(always)]
+fn test_pixel([r, g, b]: [u16; 3], m: [u16; 5], t: Thresholds) -> bool {
+    let [hr, hg, hb, es2, tol3] = m;
+    let s = r + g + b;
+    let ges = mulhi(t.gain, es2);
+    let brighter = s.saturating_sub(ges) > mulhi(t.beta, ges) + tol3;
+    let darker = ges.saturating_sub(s) > mulhi(t.shadow, ges) + tol3;
+    let dc = r.abs_diff(mulhi(hr, s)) + g.abs_diff(mulhi(hg, s)) + b.abs_diff(mulhi(hb, s));
+    let tc = mulhi(t.kappa, s) + tol3;
+    brighter | darker | (dc > tc)
+}
+
+/// The foreground test for `LANES` pixels (1 = foreground), written for the auto-vectorizer:
+/// fixed-size arrays, planar inputs, no branches. Returns whether any pixel is foreground
+/// (reduced in registers: reading `out` back would stall on store forwarding).
+#[inline(always)]
+fn test_lanes(p: &[u8; 3 * LANES], m: [&[u16]; 5], t: Thresholds, out: &mut [u8; LANES]) -> bool {
+    let [hr, hg, hb, es2, tol3] = m;
+    let (Ok(hr), Ok(hg), Ok(hb), Ok(es2), Ok(tol3)) = (
+        <&[u16; LANES]>::try_from(hr),
+        <&[u16; LANES]>::try_from(hg),
+        <&[u16; LANES]>::try_from(hb),
+        <&[u16; LANES]>::try_from(es2),
+        <&[u16; LANES]>::try_from(tol3),
+    ) else {
+        return false;
+    };
+    let mut acc = 0u8;
+    for i in 0..LANES {
+        let px = [u16::from(p[3 * i]), u16::from(p[3 * i + 1]), u16::from(p[3 * i + 2])];
+        let f = u8::from(test_pixel(px, [hr[i], hg[i], hb[i], es2[i], tol3[i]], t));
+        out[i] = f;
+        acc |= f;
+    }
+    acc != 0
+}
+
+/// Replaces foreground flags by encoded colour classes.
+#[inline]
+fn classify(p: &[u8; 3 * LANES], lut: &ClassLut, out: &mut [u8; LANES]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        if *o != 0 {
+            *o = lut.get(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+        }
+    }
+}

@@ -1,0 +1,262 @@
+//! Colour classes of the foreground: one Gaussian per label in (r/s, b/s, s/765), where s = r+g+b.
+//!
+//! Chromaticity (r/s, b/s) does not change when shading or exposure scales a colour, so it carries
+//! the label; brightness (s/765) is a weak third feature with a wide spread. The classes are
+//! compiled into a lookup table over 6-bit-per-channel RGB (256 KiB) so that classifying a
+//! foreground pixel is one load.
+
+use hullcut_dataset::label;
+use image::{GrayImage, RgbImage};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::CaptureError;
+
+/// Pixels darker than this channel sum carry no usable chromaticity; they are left out when
+/// learning classes.
+const MIN_LEARN_SUM: u32 = 24;
+
+/// Variance added to every diagonal entry of a learnt covariance (keeps it invertible when the
+/// training pixels are nearly uniform): 0.01² in chromaticity and brightness.
+const COV_FLOOR: f64 = 1e-4;
+
+/// One colour class: a label and a Gaussian over (r/s, b/s, s/765).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ColourClass {
+    /// The label this class assigns (e.g. [`label::HAND`]).
+    pub label: u8,
+    /// Mean feature vector (r/s, b/s, s/765).
+    pub mean: [f64; 3],
+    /// Covariance of the features.
+    pub cov: [[f64; 3]; 3],
+}
+
+impl ColourClass {
+    /// A class from an albedo (8-bit RGB at full light) whose brightness varies uniformly between
+    /// `shade.0` and `shade.1` times the albedo, with chromaticity spread `chroma_sd`.
+    pub fn from_albedo(label: u8, albedo: [f64; 3], shade: (f64, f64), chroma_sd: f64) -> Self {
+        let s = albedo[0] + albedo[1] + albedo[2];
+        let (r, b) = if s > 0.0 { (albedo[0] / s, albedo[2] / s) } else { (1.0 / 3.0, 1.0 / 3.0) };
+        let (lo, hi) = (s / 765.0 * shade.0, s / 765.0 * shade.1);
+        // A uniform distribution on [lo, hi] has standard deviation (hi - lo) / sqrt(12).
+        let y_sd = ((hi - lo) / 12f64.sqrt()).max(0.02);
+        let c2 = chroma_sd * chroma_sd;
+        Self { label, mean: [r, b, 0.5 * (lo + hi)], cov: [[c2, 0.0, 0.0], [0.0, c2, 0.0], [0.0, 0.0, y_sd * y_sd]] }
+    }
+
+    fn inverse(&self) -> Option<([[f64; 3]; 3], f64)> {
+        let m = &self.cov;
+        let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        if !(det.is_finite() && det > 0.0) {
+            return None;
+        }
+        let mut inv = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                let (a, b) = ((j + 1) % 3, (j + 2) % 3);
+                let (c, d) = ((i + 1) % 3, (i + 2) % 3);
+                inv[i][j] = (m[a][c] * m[b][d] - m[a][d] * m[b][c]) / det;
+            }
+        }
+        Some((inv, det.ln()))
+    }
+}
+
+/// The foreground's colour classes and how to decide between them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ColourClasses {
+    /// The classes; several may share a label.
+    pub classes: Vec<ColourClass>,
+    /// A foreground pixel whose squared Mahalanobis distance to every class exceeds this is
+    /// labelled [`label::UNKNOWN`]; `None` always takes the most likely class.
+    pub reject_mahalanobis2: Option<f64>,
+}
+
+impl Default for ColourClasses {
+    /// The synthetic palette: a blue nitrile glove (60,110,200) as hand and steel (150,150,155)
+    /// handle / (205,205,210) blade as scalpel, shaded 0.3–1.0 with ±15 % exposure; chromaticity
+    /// spread 0.03 covers sensor noise on dark pixels and motion-blurred edges.
+    fn default() -> Self {
+        let shade = (0.3 * 0.85, 1.0 * 1.15);
+        Self {
+            classes: vec![
+                ColourClass::from_albedo(label::HAND, [60.0, 110.0, 200.0], shade, 0.03),
+                ColourClass::from_albedo(label::SCALPEL, [150.0, 150.0, 155.0], shade, 0.03),
+                ColourClass::from_albedo(label::SCALPEL, [205.0, 205.0, 210.0], shade, 0.03),
+            ],
+            reject_mahalanobis2: None,
+        }
+    }
+}
+
+fn features(r: f64, g: f64, b: f64) -> [f64; 3] {
+    let s = r + g + b;
+    if s <= 0.0 { [1.0 / 3.0, 1.0 / 3.0, 0.0] } else { [r / s, b / s, s / 765.0] }
+}
+
+impl ColourClasses {
+    /// Learns one class per foreground label ([`label::NAMED`]) from images and their truth
+    /// masks: the mean and covariance of the features of the label's pixels (pixels darker than a
+    /// channel sum of 24 are skipped; a label needs `min_pixels` pixels). Keeps
+    /// `reject_mahalanobis2` of the default.
+    pub fn fit<'a>(
+        samples: impl IntoIterator<Item = (&'a RgbImage, &'a GrayImage)>,
+        min_pixels: u64,
+    ) -> Result<Self, CaptureError> {
+        // Per label: count, sum of features, sum of outer products.
+        let mut acc = [(0u64, [0.0f64; 3], [[0.0f64; 3]; 3]); 2];
+        for (i, (image, mask)) in samples.into_iter().enumerate() {
+            if image.dimensions() != mask.dimensions() {
+                return Err(CaptureError::ColourClass {
+                    label: "any".into(),
+                    message: format!(
+                        "sample {i}: image is {}x{}, mask is {}x{}",
+                        image.width(),
+                        image.height(),
+                        mask.width(),
+                        mask.height()
+                    ),
+                });
+            }
+            for (px, &m) in image.pixels().zip(mask.as_raw()) {
+                let Some(k) = label::NAMED.iter().position(|&(l, _)| l == m) else { continue };
+                let [r, g, b] = px.0;
+                if u32::from(r) + u32::from(g) + u32::from(b) < MIN_LEARN_SUM {
+                    continue;
+                }
+                let f = features(f64::from(r), f64::from(g), f64::from(b));
+                let (n, sum, outer) = &mut acc[k];
+                *n += 1;
+                for i in 0..3 {
+                    sum[i] += f[i];
+                    for j in 0..3 {
+                        outer[i][j] += f[i] * f[j];
+                    }
+                }
+            }
+        }
+        let mut classes = Vec::new();
+        for (k, &(lbl, name)) in label::NAMED.iter().enumerate() {
+            let (n, sum, outer) = acc[k];
+            if n < min_pixels.max(2) {
+                return Err(CaptureError::ColourClass {
+                    label: name.into(),
+                    message: format!("{n} usable pixel(s) in the truth masks, at least {min_pixels} needed"),
+                });
+            }
+            let nf = n as f64;
+            let mean = sum.map(|s| s / nf);
+            let mut cov = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    cov[i][j] = (outer[i][j] - nf * mean[i] * mean[j]) / (nf - 1.0);
+                }
+                cov[i][i] += COV_FLOOR;
+            }
+            classes.push(ColourClass { label: lbl, mean, cov });
+        }
+        Ok(Self { classes, reject_mahalanobis2: Self::default().reject_mahalanobis2 })
+    }
+
+    /// The label of one colour (maximum likelihood over the classes; [`label::UNKNOWN`] when
+    /// rejected or when there are no usable classes).
+    pub fn classify(&self, rgb: [u8; 3]) -> u8 {
+        let compiled = self.compile();
+        classify_compiled(
+            &compiled,
+            self.reject_mahalanobis2,
+            features(f64::from(rgb[0]), f64::from(rgb[1]), f64::from(rgb[2])),
+        )
+    }
+
+    fn compile(&self) -> Vec<Compiled> {
+        self.classes
+            .iter()
+            .filter_map(|c| c.inverse().map(|(inv, log_det)| Compiled { label: c.label, mean: c.mean, inv, log_det }))
+            .collect()
+    }
+
+    /// Checks that every class has a finite mean and an invertible covariance.
+    pub fn validate(&self) -> Result<(), CaptureError> {
+        for c in &self.classes {
+            if c.mean.iter().any(|v| !v.is_finite()) || c.inverse().is_none() {
+                return Err(CaptureError::ColourClass {
+                    label: label::NAMED
+                        .iter()
+                        .find(|n| n.0 == c.label)
+                        .map_or_else(|| c.label.to_string(), |n| n.1.into()),
+                    message: "mean not finite or covariance not positive definite".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A class ready for evaluation: inverse covariance and log-determinant.
+#[derive(Debug, Clone, Copy)]
+struct Compiled {
+    label: u8,
+    mean: [f64; 3],
+    inv: [[f64; 3]; 3],
+    log_det: f64,
+}
+
+fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, f: [f64; 3]) -> u8 {
+    let mut best = (f64::INFINITY, label::UNKNOWN, f64::INFINITY);
+    for Compiled { label: lbl, mean, inv, log_det } in compiled {
+        let d = [f[0] - mean[0], f[1] - mean[1], f[2] - mean[2]];
+        let mut m2 = 0.0;
+        for i in 0..3 {
+            for j in 0..3 {
+                m2 += d[i] * inv[i][j] * d[j];
+            }
+        }
+        // Negative log-likelihood up to a constant.
+        let score = m2 + log_det;
+        if score < best.0 {
+            best = (score, *lbl, m2);
+        }
+    }
+    match reject {
+        Some(r) if best.2 > r => label::UNKNOWN,
+        _ => best.1,
+    }
+}
+
+/// Bits kept per channel in the lookup table.
+const LUT_BITS: u32 = 6;
+
+/// Colour → label lookup over 6-bit-per-channel RGB, in the segmenter's working encoding.
+#[derive(Debug, Clone)]
+pub(crate) struct ClassLut {
+    table: Vec<u8>,
+}
+
+impl ClassLut {
+    /// Compiles the classes; `encode` maps a label to the working encoding.
+    pub(crate) fn new(classes: &ColourClasses, encode: impl Fn(u8) -> u8 + Sync) -> Self {
+        let compiled = classes.compile();
+        let n = 1usize << LUT_BITS;
+        let step = f64::from(1u32 << (8 - LUT_BITS));
+        let table = (0..n * n * n)
+            .into_par_iter()
+            .map(|i| {
+                let (r, g, b) = (i >> (2 * LUT_BITS), (i >> LUT_BITS) & (n - 1), i & (n - 1));
+                // Centre of the bin.
+                let c = |v: usize| v as f64 * step + 0.5 * (step - 1.0);
+                encode(classify_compiled(&compiled, classes.reject_mahalanobis2, features(c(r), c(g), c(b))))
+            })
+            .collect();
+        Self { table }
+    }
+
+    /// The encoded label of one colour.
+    #[inline(always)]
+    pub(crate) fn get(&self, r: u8, g: u8, b: u8) -> u8 {
+        let s = 8 - LUT_BITS;
+        let i = (usize::from(r >> s) << (2 * LUT_BITS)) | (usize::from(g >> s) << LUT_BITS) | usize::from(b >> s);
+        self.table.get(i).copied().unwrap_or(0)
+    }
+}

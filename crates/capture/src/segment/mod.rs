@@ -1,0 +1,432 @@
+//! Segmentation of camera images into label masks (0 background, 1 hand, 2 scalpel, 255
+//! unknown).
+//!
+//! Per camera: a foreground test against a per-pixel background model built from empty-scene
+//! images ([`BackgroundModel`], robust to shading and global exposure change), or OpenCV's MOG2
+//! when a camera has none ([`Method::Mog2`]); each foreground pixel gets a label from the colour
+//! classes ([`ColourClasses`]); then clean-up: isolated pixels are removed (a pixel needs
+//! `min_neighbors` foreground neighbours, which keeps one-pixel-wide blade edges), an optional
+//! opening, and a closing that fills small holes. [`Segmenter::segment_frame_set`] runs the
+//! cameras in parallel (rayon) with per-camera buffers that are reused from frame to frame.
+
+mod background;
+mod classes;
+mod mog2;
+mod morph;
+mod report;
+
+use hullcut_dataset::{Dataset, FrameSet, label};
+use image::{GrayImage, RgbImage};
+use rayon::prelude::*;
+use serde::Serialize;
+
+pub use background::BackgroundModel;
+pub use classes::{ColourClass, ColourClasses};
+pub use mog2::Mog2Params;
+pub use report::{IouAccumulator, LabelScore, SegmentationReport, iou};
+
+use crate::error::CaptureError;
+use background::Thresholds;
+use classes::ClassLut;
+use mog2::Mog2;
+
+/// Settings of segmentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentParams {
+    /// β: how much brighter than expected (relative, after exposure compensation) a pixel may
+    /// be and still be background. Small, because a static scene's shading does not change;
+    /// 0.08 leaves room for exposure non-linearity.
+    pub brightness_tolerance: f64,
+    /// β for darker pixels: how much darker than expected (relative) a pixel of unchanged
+    /// chromaticity may be and still be background. Equal to `brightness_tolerance` by default
+    /// (the synthetic scenes have no cast shadows, and a grey scalpel darker than a grey wall is
+    /// told apart only by brightness); raise it (e.g. 0.5) where the hand casts shadows.
+    pub shadow_tolerance: f64,
+    /// κ: chromaticity distortion, relative to the pixel's channel sum, beyond which a pixel is
+    /// foreground.
+    pub chroma_tolerance: f64,
+    /// Smallest per-pixel noise allowance τ, grey levels per channel (about 2.5σ of a sensor
+    /// with σ = 2 levels; the tests add 3τ over three channels).
+    pub noise_floor: u8,
+    /// τ in standard deviations of the spread over the empty-scene images (three or more images).
+    pub noise_sigmas: f64,
+    /// Estimate each image's exposure gain against the model (global auto-exposure).
+    pub exposure_compensation: bool,
+    /// A foreground pixel with fewer foreground neighbours (of 8) is removed; 0 disables.
+    pub min_neighbors: u8,
+    /// Radius of the opening (square (2r+1)²); 0 disables. Opening erases structures thinner
+    /// than 2r+1 pixels, a blade seen edge-on among them, so it is off by default.
+    pub open_radius: u32,
+    /// Radius of the closing that fills holes and gaps; 0 disables.
+    pub close_radius: u32,
+    /// The MOG2 fallback.
+    pub mog2: Mog2Params,
+    /// Colour classes of the foreground.
+    pub classes: ColourClasses,
+}
+
+impl Default for SegmentParams {
+    fn default() -> Self {
+        Self {
+            brightness_tolerance: 0.08,
+            shadow_tolerance: 0.08,
+            chroma_tolerance: 0.06,
+            noise_floor: 5,
+            noise_sigmas: 3.0,
+            exposure_compensation: true,
+            min_neighbors: 2,
+            open_radius: 0,
+            close_radius: 1,
+            mog2: Mog2Params::default(),
+            classes: ColourClasses::default(),
+        }
+    }
+}
+
+impl SegmentParams {
+    fn validate(&self) -> Result<(), CaptureError> {
+        let check = |name: &'static str, v: f64| {
+            if (0.0..=0.99).contains(&v) {
+                Ok(())
+            } else {
+                Err(CaptureError::Param { name, message: format!("{v} is outside 0..0.99") })
+            }
+        };
+        check("brightness_tolerance", self.brightness_tolerance)?;
+        check("shadow_tolerance", self.shadow_tolerance)?;
+        check("chroma_tolerance", self.chroma_tolerance)?;
+        if !(self.noise_sigmas.is_finite() && self.noise_sigmas >= 0.0) {
+            return Err(CaptureError::Param {
+                name: "noise_sigmas",
+                message: format!("{} is negative", self.noise_sigmas),
+            });
+        }
+        if self.min_neighbors > 8 {
+            return Err(CaptureError::Param {
+                name: "min_neighbors",
+                message: format!("{} exceeds 8", self.min_neighbors),
+            });
+        }
+        self.classes.validate()
+    }
+}
+
+/// How a camera finds its foreground.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Per-pixel model from empty-scene images.
+    Background,
+    /// OpenCV's MOG2, learnt from the stream (no empty-scene images).
+    Mog2,
+}
+
+/// Working encoding of labels inside the segmenter: ordered so that dilation by maximum lets
+/// scalpel win over hand and both over unknown.
+const ENC_UNKNOWN: u8 = 1;
+const ENC_HAND: u8 = 2;
+const ENC_SCALPEL: u8 = 3;
+
+fn encode(l: u8) -> u8 {
+    match l {
+        label::BACKGROUND => 0,
+        label::HAND => ENC_HAND,
+        label::SCALPEL => ENC_SCALPEL,
+        _ => ENC_UNKNOWN,
+    }
+}
+
+#[derive(Debug)]
+enum Model {
+    Background(BackgroundModel),
+    Mog2(Box<Mog2>),
+}
+
+/// Buffers reused from frame to frame.
+#[derive(Debug, Default)]
+struct Scratch {
+    labels: Vec<u8>,
+    work1: Vec<u8>,
+    work2: Vec<u8>,
+    tmp: Vec<u8>,
+    vsum: Vec<u8>,
+    ratios: Vec<f32>,
+    /// Rows that may hold foreground, per buffer.
+    act0: Vec<bool>,
+    act1: Vec<bool>,
+    act2: Vec<bool>,
+}
+
+/// Working encoding → label, without a table (vectorizes): 0 → 0, 1 → 255, 2 → 1, 3 → 2.
+#[inline(always)]
+fn decode(v: u8) -> u8 {
+    v.wrapping_sub(1) ^ u8::from(v <= 1).wrapping_neg()
+}
+
+#[derive(Debug)]
+struct CameraSegmenter {
+    camera: usize,
+    model: Model,
+    scratch: Scratch,
+    /// Size of the MOG2 stream, fixed by its first frame.
+    size: Option<(u32, u32)>,
+    last_gain: f64,
+}
+
+/// Segments the images of a rig's cameras; see the module docs.
+#[derive(Debug)]
+pub struct Segmenter {
+    params: SegmentParams,
+    lut: ClassLut,
+    cameras: Vec<CameraSegmenter>,
+}
+
+impl Segmenter {
+    /// A segmenter with one entry of `backgrounds` per camera: its empty-scene images, or none
+    /// for the MOG2 fallback.
+    pub fn new(params: SegmentParams, backgrounds: &[Vec<RgbImage>]) -> Result<Self, CaptureError> {
+        params.validate()?;
+        let cameras = backgrounds
+            .iter()
+            .enumerate()
+            .map(|(camera, images)| {
+                let model = if images.is_empty() {
+                    tracing::info!(camera, "no empty-scene images: MOG2 background subtraction");
+                    Model::Mog2(Box::new(Mog2::new(camera, &params.mog2)?))
+                } else {
+                    Model::Background(BackgroundModel::from_images(camera, images, &params)?)
+                };
+                let size = match &model {
+                    Model::Background(m) => Some((m.width(), m.height())),
+                    Model::Mog2(_) => None,
+                };
+                Ok(CameraSegmenter { camera, model, scratch: Scratch::default(), size, last_gain: 1.0 })
+            })
+            .collect::<Result<Vec<_>, CaptureError>>()?;
+        let lut = ClassLut::new(&params.classes, encode);
+        Ok(Self { params, lut, cameras })
+    }
+
+    /// A segmenter for a dataset's cameras from their `<cam>/background*.png` images (MOG2 for a
+    /// camera without any).
+    pub fn from_dataset(dataset: &Dataset, params: SegmentParams) -> Result<Self, CaptureError> {
+        let backgrounds =
+            (0..dataset.meta().cameras.len()).map(|c| dataset.background_images(c)).collect::<Result<Vec<_>, _>>()?;
+        Self::new(params, &backgrounds)
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &SegmentParams {
+        &self.params
+    }
+
+    /// Number of cameras.
+    pub fn cameras(&self) -> usize {
+        self.cameras.len()
+    }
+
+    /// How camera `camera` finds its foreground (`None` outside the rig).
+    pub fn method(&self, camera: usize) -> Option<Method> {
+        self.cameras.get(camera).map(|c| match c.model {
+            Model::Background(_) => Method::Background,
+            Model::Mog2(_) => Method::Mog2,
+        })
+    }
+
+    /// Exposure gain estimated for camera `camera`'s last image (1 without compensation or MOG2).
+    pub fn last_exposure_gain(&self, camera: usize) -> Option<f64> {
+        self.cameras.get(camera).map(|c| c.last_gain)
+    }
+
+    /// Replaces the colour classes (recompiles the lookup table).
+    pub fn set_classes(&mut self, classes: ColourClasses) -> Result<(), CaptureError> {
+        classes.validate()?;
+        self.lut = ClassLut::new(&classes, encode);
+        self.params.classes = classes;
+        Ok(())
+    }
+
+    /// Segments one image of camera `camera`.
+    pub fn segment(&mut self, camera: usize, image: &RgbImage) -> Result<GrayImage, CaptureError> {
+        let mut out = GrayImage::new(image.width(), image.height());
+        self.segment_into(camera, image, &mut out)?;
+        Ok(out)
+    }
+
+    /// Segments one image of camera `camera` into `out` (resized when its size differs).
+    pub fn segment_into(&mut self, camera: usize, image: &RgbImage, out: &mut GrayImage) -> Result<(), CaptureError> {
+        let cameras = self.cameras.len();
+        let cam = self.cameras.get_mut(camera).ok_or(CaptureError::UnknownCamera { camera, cameras })?;
+        if out.dimensions() != image.dimensions() {
+            *out = GrayImage::new(image.width(), image.height());
+        }
+        cam.run(image, &self.params, &self.lut, out)
+    }
+
+    /// Segments every view of a frame set, cameras in parallel; `None` where the view is missing.
+    pub fn segment_frame_set(&mut self, set: &FrameSet) -> Result<Vec<Option<GrayImage>>, CaptureError> {
+        let mut masks = Vec::new();
+        self.segment_frame_set_into(set, &mut masks)?;
+        Ok(masks)
+    }
+
+    /// Like [`Self::segment_frame_set`], reusing the masks already in `masks` (one entry per
+    /// view afterwards): a pipeline that hands the same vector back each frame allocates nothing.
+    pub fn segment_frame_set_into(
+        &mut self,
+        set: &FrameSet,
+        masks: &mut Vec<Option<GrayImage>>,
+    ) -> Result<(), CaptureError> {
+        if set.views.len() > self.cameras.len() {
+            return Err(CaptureError::UnknownCamera { camera: set.views.len() - 1, cameras: self.cameras.len() });
+        }
+        masks.resize(set.views.len(), None);
+        let (params, lut) = (&self.params, &self.lut);
+        self.cameras.par_iter_mut().zip(set.views.par_iter()).zip(masks.par_iter_mut()).try_for_each(
+            |((cam, view), mask)| {
+                let Some(view) = view else {
+                    *mask = None;
+                    return Ok(());
+                };
+                let (w, h) = view.image.dimensions();
+                let out = match mask {
+                    Some(m) if m.dimensions() == (w, h) => m,
+                    _ => mask.insert(GrayImage::new(w, h)),
+                };
+                cam.run(&view.image, params, lut, out)
+            },
+        )
+    }
+}
+
+impl CameraSegmenter {
+    fn run(
+        &mut self,
+        image: &RgbImage,
+        params: &SegmentParams,
+        lut: &ClassLut,
+        out: &mut GrayImage,
+    ) -> Result<(), CaptureError> {
+        let (w, h) = image.dimensions();
+        match self.size {
+            Some((ew, eh)) if (ew, eh) != (w, h) => {
+                return Err(CaptureError::ImageSize {
+                    camera: self.camera,
+                    what: "image".into(),
+                    w: ew,
+                    h: eh,
+                    found_w: w,
+                    found_h: h,
+                });
+            }
+            _ => self.size = Some((w, h)),
+        }
+        let (w, h) = (w as usize, h as usize);
+        let s = &mut self.scratch;
+        for buf in [&mut s.labels, &mut s.work1, &mut s.work2] {
+            buf.resize(w * h, 0);
+        }
+        for act in [&mut s.act0, &mut s.act1, &mut s.act2] {
+            act.resize(h, false);
+        }
+        let raw = image.as_raw();
+        // 1. Foreground, labelled by colour class, into `labels`; `act0` marks rows with any.
+        match &mut self.model {
+            Model::Background(model) => {
+                let gain =
+                    if params.exposure_compensation { model.exposure_gain(image, params, &mut s.ratios) } else { 1.0 };
+                self.last_gain = gain;
+                let t = Thresholds::new(params, gain);
+                for (y, (row, labels)) in raw.chunks_exact(3 * w).zip(s.labels.chunks_exact_mut(w)).enumerate() {
+                    s.act0[y] = model.foreground_row(row, y, t, lut, labels);
+                }
+            }
+            Model::Mog2(m) => {
+                m.apply(image, &mut s.labels)?;
+                for (y, (row, labels)) in raw.chunks_exact(3 * w).zip(s.labels.chunks_exact_mut(w)).enumerate() {
+                    s.act0[y] = morph::any(labels);
+                    if s.act0[y] {
+                        for (l, p) in labels.iter_mut().zip(row.chunks_exact(3)) {
+                            if *l != 0 {
+                                *l = lut.get(p[0], p[1], p[2]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // 2. Isolated pixels: labels -> work1 (act1).
+        morph::neighbour_filter(&s.labels, &mut s.work1, w, params.min_neighbors, &s.act0, &mut s.act1, &mut s.vsum);
+        // 3. Opening: work1 -> work1, masked by erode-then-dilate (labels kept).
+        if params.open_radius > 0 {
+            let r = params.open_radius as usize;
+            morph::erode_min(&s.work1, &mut s.work2, w, r, &s.act1, &mut s.act2, &mut s.tmp);
+            morph::dilate_max(&s.work2, &mut s.labels, w, r, &s.act2, &mut s.act0, &mut s.tmp);
+            for y in 0..h {
+                if s.act1[y] && s.act0[y] {
+                    let row = &mut s.work1[y * w..(y + 1) * w];
+                    for (a, &o) in row.iter_mut().zip(&s.labels[y * w..(y + 1) * w]) {
+                        *a = if o != 0 { *a } else { 0 };
+                    }
+                    s.act1[y] = morph::any(row);
+                } else {
+                    s.act1[y] = false;
+                }
+            }
+        }
+        // 4. Closing: pixels the closing adds take the label of the dilation (scalpel first).
+        // Rows inactive in a buffer count as zero there (their bytes are stale).
+        let out: &mut [u8] = out;
+        if params.close_radius > 0 {
+            let r = params.close_radius as usize;
+            morph::dilate_max(&s.work1, &mut s.work2, w, r, &s.act1, &mut s.act2, &mut s.tmp);
+            morph::erode_min(&s.work2, &mut s.labels, w, r, &s.act2, &mut s.act0, &mut s.tmp);
+            for y in 0..h {
+                let o = &mut out[y * w..(y + 1) * w];
+                let (a, d, c) =
+                    (&s.work1[y * w..(y + 1) * w], &s.work2[y * w..(y + 1) * w], &s.labels[y * w..(y + 1) * w]);
+                match (s.act1[y], s.act0[y]) {
+                    (false, false) => o.fill(0),
+                    (true, false) => o.iter_mut().zip(a).for_each(|(o, &a)| *o = decode(a)),
+                    // Closed but no raw foreground: every pixel comes from the dilation.
+                    (false, true) => {
+                        o.iter_mut().zip(d).zip(c).for_each(|((o, &d), &c)| *o = decode(if c != 0 { d } else { 0 }))
+                    }
+                    (true, true) => {
+                        for (((o, &a), &d), &c) in o.iter_mut().zip(a).zip(d).zip(c) {
+                            let v = if a != 0 {
+                                a
+                            } else if c != 0 {
+                                d
+                            } else {
+                                0
+                            };
+                            *o = decode(v);
+                        }
+                    }
+                }
+            }
+        } else {
+            for (y, o) in out.chunks_exact_mut(w).enumerate() {
+                if s.act1[y] {
+                    o.iter_mut().zip(&s.work1[y * w..(y + 1) * w]).for_each(|(o, &a)| *o = decode(a));
+                } else {
+                    o.fill(0);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decode_inverts_encode() {
+        for l in [label::BACKGROUND, label::HAND, label::SCALPEL, label::UNKNOWN] {
+            assert_eq!(decode(encode(l)), l);
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! Segmentation on procedural images with known masks.
+
+use anyhow::Result;
+use hullcut_capture::{ColourClasses, IouAccumulator, Method, SegmentParams, Segmenter, iou};
+use hullcut_dataset::{FrameSet, View, label};
+use image::{GrayImage, RgbImage};
+
+use crate::common::{backgrounds, render, render_frame};
+
+const W: u32 = 640;
+const H: u32 = 480;
+const CAMERAS: usize = 6;
+
+/// Exposure gain of frame k: the ±15 % drift of the renderer's hard setting, and 1 in between.
+fn gain(frame: u64) -> f64 {
+    [1.0, 1.15, 0.85, 1.07, 0.93][(frame % 5) as usize]
+}
+
+fn frame_set(frame: u64) -> (FrameSet, Vec<GrayImage>) {
+    let mut views = Vec::new();
+    let mut truth = Vec::new();
+    for camera in 0..CAMERAS {
+        let (image, mask) = render_frame(W, H, camera, frame, gain(frame));
+        views.push(Some(View { camera, timestamp_ns: frame as i64, image, mask: None }));
+        truth.push(mask);
+    }
+    (FrameSet { frame, timestamp_ns: frame as i64, views }, truth)
+}
+
+fn segmenter(params: SegmentParams) -> Result<Segmenter> {
+    let bgs: Vec<Vec<RgbImage>> = (0..CAMERAS).map(|c| backgrounds(W, H, c, 3)).collect();
+    Ok(Segmenter::new(params, &bgs)?)
+}
+
+/// Fraction of truly-background pixels labelled as anything else.
+fn false_foreground(pred: &GrayImage, truth: &GrayImage) -> (u64, u64) {
+    let mut fp = 0;
+    let mut bg = 0;
+    for (&p, &t) in pred.as_raw().iter().zip(truth.as_raw()) {
+        if t == label::BACKGROUND {
+            bg += 1;
+            fp += u64::from(p != label::BACKGROUND);
+        }
+    }
+    (fp, bg)
+}
+
+#[test]
+fn background_model_segments_hand_and_scalpel() -> Result<()> {
+    let mut seg = segmenter(SegmentParams::default())?;
+    assert_eq!(seg.method(0), Some(Method::Background));
+    let mut acc = IouAccumulator::new();
+    let (mut fp, mut bg) = (0, 0);
+    for frame in 0..10 {
+        let (set, truth) = frame_set(frame);
+        let masks = seg.segment_frame_set(&set)?;
+        for (camera, (m, t)) in masks.iter().zip(&truth).enumerate() {
+            let m = m.as_ref().expect("every view present");
+            acc.add(camera, m, t)?;
+            let (f, b) = false_foreground(m, t);
+            fp += f;
+            bg += b;
+        }
+    }
+    let report = acc.report();
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    let false_rate = fp as f64 / bg as f64;
+    println!("false foreground: {fp} of {bg} background pixels ({false_rate:.6})");
+    let [hand, scalpel] = [&report.labels[0], &report.labels[1]];
+    assert_eq!((hand.name.as_str(), scalpel.name.as_str()), ("hand", "scalpel"));
+    assert_eq!(report.views, 60);
+    // Measured over these 60 views (10 frames, exposure 0.85..1.15): hand IoU pooled 0.992, worst
+    // view 0.989; scalpel pooled 0.926, worst 0.893, recall 0.9995; false foreground 3.1e-4 of the
+    // background. Nearly every error is an edge pixel: a pixel a quarter covered by the object
+    // already differs clearly from the drape, so silhouettes grow by about half a pixel per side
+    // (conservative for carving). That costs a 7-pixel handle and a 1-3 pixel blade far more IoU
+    // than the 120-pixel glove, hence the lower scalpel bounds. The bounds leave 2-3 % (hand) and
+    // about 5 % (scalpel) for changes to the scene or defaults; recall must stay near 1 because a
+    // missed blade pixel can carve the blade away.
+    assert!(hand.iou_pooled.is_some_and(|v| v > 0.97) && hand.iou_min.is_some_and(|v| v > 0.95), "{hand:?}");
+    assert!(scalpel.iou_pooled.is_some_and(|v| v > 0.88) && scalpel.iou_min.is_some_and(|v| v > 0.84), "{scalpel:?}");
+    assert!(hand.recall.is_some_and(|v| v > 0.99) && scalpel.recall.is_some_and(|v| v > 0.99));
+    assert!(false_rate < 1e-3, "false foreground {false_rate}");
+    Ok(())
+}
+
+#[test]
+fn exposure_change_is_not_foreground_with_compensation() -> Result<()> {
+    // An empty scene at ±15 % exposure. With compensation the estimated gain matches the true one
+    // within 1 % (a median over ~1200 pixels, each with noise of about 1 %) and almost nothing is
+    // foreground (measured: 0 pixels); without it 21 % of the image is foreground at either gain
+    // (wherever 15 % of the brightness exceeds the 8 % tolerance plus the 3τ noise allowance).
+    let mut seg = segmenter(SegmentParams::default())?;
+    let mut raw = segmenter(SegmentParams { exposure_compensation: false, ..SegmentParams::default() })?;
+    for (k, g) in [1.15, 0.85].into_iter().enumerate() {
+        let (image, _) = render(W, H, 2, None, g, 0x5eed + k as u64);
+        let fg = |m: &GrayImage| {
+            m.as_raw().iter().filter(|&&v| v != label::BACKGROUND).count() as f64 / m.as_raw().len() as f64
+        };
+        let compensated = fg(&seg.segment(2, &image)?);
+        let estimated = seg.last_exposure_gain(2).unwrap_or(0.0);
+        let uncompensated = fg(&raw.segment(2, &image)?);
+        println!(
+            "gain {g}: estimated {estimated:.4}, foreground {compensated:.6} with, {uncompensated:.4} without compensation"
+        );
+        assert!((estimated - g).abs() < 0.01, "gain {g} estimated as {estimated}");
+        assert!(compensated < 1e-4, "{compensated}");
+        assert!(uncompensated > 0.1, "{uncompensated}");
+    }
+    Ok(())
+}
+
+#[test]
+fn shadows_are_background_only_when_tolerated() -> Result<()> {
+    // A cast shadow: the empty scene darkened to 60 % inside a disc (chromaticity unchanged).
+    // The default tolerates 8 % darkening (the synthetic scenes have no shadows), so the disc is
+    // foreground; with shadow_tolerance 0.5 it is background, while the glove (chromaticity far
+    // from the drape's) stays foreground.
+    let (mut image, _) = render(W, H, 0, None, 1.0, 0x5ad0);
+    let (cx, cy, r) = (320.0, 300.0, 60.0);
+    for (x, y, p) in image.enumerate_pixels_mut() {
+        if (f64::from(x) - cx).hypot(f64::from(y) - cy) < r {
+            p.0 = p.0.map(|v| (f64::from(v) * 0.6).round() as u8);
+        }
+    }
+    let disc = std::f64::consts::PI * r * r;
+    let fg = |m: &GrayImage| m.as_raw().iter().filter(|&&v| v != label::BACKGROUND).count() as f64;
+    let mut strict = segmenter(SegmentParams::default())?;
+    let mut tolerant = segmenter(SegmentParams { shadow_tolerance: 0.5, ..SegmentParams::default() })?;
+    let (strict_fg, tolerant_fg) = (fg(&strict.segment(0, &image)?), fg(&tolerant.segment(0, &image)?));
+    println!("shadow disc {disc:.0} px: foreground {strict_fg} (default), {tolerant_fg} (shadow tolerance 0.5)");
+    assert!(strict_fg > 0.9 * disc, "{strict_fg}");
+    assert!(tolerant_fg < 0.01 * disc, "{tolerant_fg}");
+    let (set, truth) = frame_set(2);
+    let mask = tolerant.segment(0, &set.views[0].as_ref().expect("present").image)?;
+    assert!(iou(&mask, &truth[0], label::HAND).is_some_and(|v| v > 0.97));
+    Ok(())
+}
+
+#[test]
+fn opening_erases_the_thin_blade_which_is_why_it_is_off() -> Result<()> {
+    // A 3x3 opening removes anything thinner than 3 px: the glove survives, the narrow end of
+    // the blade (1-3 px, widened by about a pixel by mixed edge pixels) does not. Measured on this
+    // frame set: scalpel recall 0.9997 without, 0.957 with the opening (the lost 4 % are blade,
+    // the part the pose needs most); hand IoU 0.992 either way.
+    let (set, truth) = frame_set(4);
+    let mut plain = segmenter(SegmentParams::default())?;
+    let mut opened = segmenter(SegmentParams { open_radius: 1, ..SegmentParams::default() })?;
+    let (mut a, mut b) = (IouAccumulator::new(), IouAccumulator::new());
+    for (camera, (p, o)) in
+        plain.segment_frame_set(&set)?.iter().zip(opened.segment_frame_set(&set)?.iter()).enumerate()
+    {
+        a.add(camera, p.as_ref().expect("present"), &truth[camera])?;
+        b.add(camera, o.as_ref().expect("present"), &truth[camera])?;
+    }
+    let (a, b) = (a.report(), b.report());
+    let recall = |r: &hullcut_capture::SegmentationReport| r.labels[1].recall.unwrap_or(0.0);
+    println!(
+        "scalpel recall {:.4} plain, {:.4} opened; hand IoU {:?} / {:?}",
+        recall(&a),
+        recall(&b),
+        a.labels[0].iou_pooled,
+        b.labels[0].iou_pooled
+    );
+    assert!(recall(&b) < recall(&a) - 0.02);
+    assert!(b.labels[0].iou_pooled.is_some_and(|v| v > 0.97));
+    Ok(())
+}
+
+#[test]
+fn parallel_frame_set_equals_camera_by_camera() -> Result<()> {
+    let (set, _) = frame_set(3);
+    let mut a = segmenter(SegmentParams::default())?;
+    let mut b = segmenter(SegmentParams::default())?;
+    let parallel = a.segment_frame_set(&set)?;
+    for (camera, view) in set.views.iter().enumerate() {
+        let view = view.as_ref().expect("present");
+        let single = b.segment(camera, &view.image)?;
+        assert!(parallel[camera].as_ref() == Some(&single), "camera {camera}");
+    }
+    // A missing view stays missing; a wrong-sized image is an error naming the camera.
+    let mut partial = set.clone();
+    partial.views[4] = None;
+    assert!(a.segment_frame_set(&partial)?[4].is_none());
+    let err = a.segment(1, &RgbImage::new(320, 240)).expect_err("size");
+    assert!(err.to_string().contains("camera 1"), "{err}");
+    Ok(())
+}
+
+#[test]
+fn colour_classes_are_learnt_from_truth_masks() -> Result<()> {
+    let samples: Vec<(RgbImage, GrayImage)> = (0..3).map(|k| render_frame(W, H, k as usize, k, 1.0)).collect();
+    let learnt = ColourClasses::fit(samples.iter().map(|(i, m)| (i, m)), 100)?;
+    let hand = learnt.classes.iter().find(|c| c.label == label::HAND).expect("hand class");
+    let scalpel = learnt.classes.iter().find(|c| c.label == label::SCALPEL).expect("scalpel class");
+    // Glove chromaticity (60, 200)/370 = (0.162, 0.541); steel about (0.33, 0.34). Edge pixels
+    // mixed with the drape pull the means by at most a few hundredths.
+    println!("learnt hand mean {:?}, scalpel mean {:?}", hand.mean, scalpel.mean);
+    assert!((hand.mean[0] - 0.162).abs() < 0.02 && (hand.mean[1] - 0.541).abs() < 0.03, "{hand:?}");
+    assert!((scalpel.mean[0] - 0.33).abs() < 0.03 && (scalpel.mean[1] - 0.34).abs() < 0.03, "{scalpel:?}");
+    assert_eq!(learnt.classify([60, 110, 200]), label::HAND);
+    assert_eq!(learnt.classify([150, 150, 155]), label::SCALPEL);
+    assert_eq!(ColourClasses::default().classify([30, 55, 100]), label::HAND, "a shaded glove");
+    assert_eq!(ColourClasses::default().classify([62, 62, 64]), label::SCALPEL, "a shaded handle");
+
+    // Segmenting with the learnt classes is as good as with the palette defaults (within 1 %).
+    let mut seg = segmenter(SegmentParams::default())?;
+    let mut with_defaults = IouAccumulator::new();
+    let mut with_learnt = IouAccumulator::new();
+    let (set, truth) = frame_set(7);
+    for (camera, m) in seg.segment_frame_set(&set)?.iter().enumerate() {
+        with_defaults.add(camera, m.as_ref().expect("present"), &truth[camera])?;
+    }
+    seg.set_classes(learnt)?;
+    for (camera, m) in seg.segment_frame_set(&set)?.iter().enumerate() {
+        with_learnt.add(camera, m.as_ref().expect("present"), &truth[camera])?;
+    }
+    for k in 0..2 {
+        let (d, l) = (with_defaults.report().labels[k].iou_pooled, with_learnt.report().labels[k].iou_pooled);
+        assert!(l.unwrap_or(0.0) > d.unwrap_or(1.0) - 0.01, "label {k}: learnt {l:?} defaults {d:?}");
+    }
+
+    // Too few pixels of a label is an error naming it.
+    let empty = GrayImage::new(W, H);
+    let err = ColourClasses::fit([(&samples[0].0, &empty)], 100).expect_err("no hand pixels");
+    assert!(err.to_string().contains("hand"), "{err}");
+    Ok(())
+}
+
+#[test]
+fn iou_counts_pixels_and_ignores_unknown_truth() {
+    let mut truth = GrayImage::new(4, 1);
+    let mut pred = GrayImage::new(4, 1);
+    // truth: hand hand bg unknown; pred: hand bg hand hand.
+    for (x, v) in [1, 1, 0, 255].into_iter().enumerate() {
+        truth.put_pixel(x as u32, 0, image::Luma([v]));
+    }
+    for (x, v) in [1, 0, 1, 1].into_iter().enumerate() {
+        pred.put_pixel(x as u32, 0, image::Luma([v]));
+    }
+    // Intersection 1 (x=0); union 3 (x=0,1,2); x=3 is unknown in truth and not counted.
+    assert_eq!(iou(&pred, &truth, label::HAND), Some(1.0 / 3.0));
+    assert_eq!(iou(&pred, &truth, label::SCALPEL), None, "label in neither mask");
+    assert_eq!(iou(&pred, &GrayImage::new(2, 2), label::HAND), None, "sizes differ");
+    let mut acc = IouAccumulator::new();
+    acc.add(0, &pred, &truth).expect("same size");
+    let r = acc.report();
+    assert_eq!((r.labels[0].true_positive, r.labels[0].false_positive, r.labels[0].false_negative), (1, 1, 1));
+    assert_eq!(r.labels[1].views, 0);
+    assert!(acc.add(0, &pred, &GrayImage::new(2, 2)).is_err());
+}
+
+#[test]
+fn mog2_fallback_finds_objects_entering_a_learnt_scene() -> Result<()> {
+    // Without empty-scene images MOG2 learns the background from the stream: here 300 frames of
+    // the empty scene (8 noise realizations in turn), then the hand and scalpel enter. MOG2 learns
+    // at rate 1/min(2n, history) after n frames, so early on (n = 15: rate 1/30) a uniformly
+    // coloured, slowly moving glove is absorbed within a few frames (measured: hand recall 0.64);
+    // after 300 frames the rate is 1/500 and the objects stay foreground.
+    let (w, h) = (320, 240);
+    let mut seg = Segmenter::new(SegmentParams::default(), &[Vec::new()])?;
+    assert_eq!(seg.method(0), Some(Method::Mog2));
+    let empty: Vec<RgbImage> = (0..8).map(|k| render(w, h, 0, None, 1.0, 0xe0 + k).0).collect();
+    for k in 0..300 {
+        seg.segment(0, &empty[k % empty.len()])?;
+    }
+    let mut acc = IouAccumulator::new();
+    for frame in 0..10 {
+        let (image, truth) = render_frame(w, h, 0, frame, 1.0);
+        acc.add(0, &seg.segment(0, &image)?, &truth)?;
+    }
+    let r = acc.report();
+    println!("{}", serde_json::to_string(&r)?);
+    // Measured: hand IoU 0.985 pooled, 0.978 worst; scalpel 0.816 pooled (edge pixels weigh more
+    // at half resolution), recall 0.999. Bounds leave about 3 % (hand) and 6 % (scalpel).
+    let [hand, scalpel] = [&r.labels[0], &r.labels[1]];
+    assert!(hand.iou_pooled.is_some_and(|v| v > 0.95) && hand.iou_min.is_some_and(|v| v > 0.93), "{hand:?}");
+    assert!(scalpel.iou_pooled.is_some_and(|v| v > 0.75) && scalpel.recall.is_some_and(|v| v > 0.98), "{scalpel:?}");
+    Ok(())
+}
