@@ -76,6 +76,8 @@ pub struct CameraRenderer {
     background_rgb: Vec<[f32; 3]>,
     background_depth: Vec<f64>,
     light: Light,
+    /// The lens' invertible radius, computed once (it is a root search).
+    monotonic_radius: f64,
 }
 
 impl CameraRenderer {
@@ -96,6 +98,7 @@ impl CameraRenderer {
             background_rgb: vec![[0.0; 3]; w * h],
             background_depth: vec![0.0; w * h],
             light,
+            monotonic_radius: camera.distortion.monotonic_radius(),
         };
         renderer.shade_background();
         renderer
@@ -185,7 +188,7 @@ impl CameraRenderer {
     fn pixel_bounds(&self, tri: [Point3<f64>; 3]) -> Option<[usize; 4]> {
         let cam = &self.camera;
         let (w, h) = (cam.width as f64, cam.height as f64);
-        let limit = cam.distortion.monotonic_radius();
+        let limit = self.monotonic_radius;
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         for e in 0..3 {
             let (p, q) = (tri[e], tri[(e + 1) % 3]);

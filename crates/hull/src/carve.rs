@@ -1,0 +1,314 @@
+//! Octree carving with whole-footprint tests and occlusion-aware labels.
+//!
+//! A cell is projected into every view; its footprint is the pixel rectangle around its eight
+//! projected corners, widened by a margin (so that the curvature distortion gives projected edges,
+//! and pixels that the footprint only touches, are included). With the summed-area tables of
+//! [`Silhouette`], the label counts inside that rectangle cost four lookups per class:
+//!
+//! - a view *refutes* a cell when the footprint lies inside its image and holds only background;
+//!   `carve_votes` refuting views carve it (1 is the classic hull; 2 keeps one bad silhouette from
+//!   deleting real volume);
+//! - a view *supports* a label when the footprint holds pixels of that label. Pixels of the other
+//!   label or unknown ones never refute (the label may be hidden behind them: occlusion-aware,
+//!   after Guan, Franco and Pollefeys 2008), and a label needs `min_support` supporting views;
+//! - a cell that no view can refute but that is not uniform is split into eight, down to the leaf
+//!   size; leaves that stay mixed are kept (the hull is conservative).
+//!
+//! A blade thinner than a cell survives: its pixels lie in the cell's footprint in every view that
+//! sees it, so no such view refutes the cell.
+
+use hullcut_dataset::label;
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use crate::{HullError, Silhouette};
+
+/// An axis-aligned box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    /// Lower corner, metres.
+    pub min: Point3<f64>,
+    /// Upper corner, metres.
+    pub max: Point3<f64>,
+}
+
+impl Aabb {
+    /// The default rig's workspace: x, y in ±0.2 m, z in 0..0.4 m.
+    pub fn default_workspace() -> Self {
+        let h = hullcut_rig::DEFAULT_WORKSPACE / 2.0;
+        Aabb { min: Point3::new(-h, -h, 0.0), max: Point3::new(h, h, 2.0 * h) }
+    }
+
+    /// The longest side.
+    pub fn extent(&self) -> f64 {
+        (self.max - self.min).max()
+    }
+}
+
+/// Settings of carving.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HullParams {
+    /// Region carved (a cube is made of its longest side, anchored at `min`).
+    pub workspace: Aabb,
+    /// Requested leaf size, metres; the effective one is `extent / 2^depth`, not larger.
+    pub leaf_size: f64,
+    /// Views that must see a cell as pure background to carve it (k of N).
+    pub carve_votes: usize,
+    /// Views that must see a label in a cell's footprint for the cell to carry that label.
+    pub min_support: usize,
+    /// Footprint margin, pixels.
+    pub margin_px: f64,
+    /// Octree level at which carving starts (8^level cells, in parallel).
+    pub start_level: u32,
+}
+
+impl Default for HullParams {
+    fn default() -> Self {
+        HullParams {
+            workspace: Aabb::default_workspace(),
+            leaf_size: hullcut_rig::DEFAULT_WORKSPACE / 128.0,
+            carve_votes: 1,
+            min_support: 2,
+            margin_px: 1.0,
+            start_level: 3,
+        }
+    }
+}
+
+/// A kept octree cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cell {
+    /// Lower corner, metres.
+    pub min: Point3<f64>,
+    /// Side, metres (the leaf size, or a power-of-two multiple for a uniform cell).
+    pub size: f64,
+    /// Carries the hand label.
+    pub hand: bool,
+    /// Carries the scalpel label.
+    pub scalpel: bool,
+}
+
+impl Cell {
+    /// Whether the cell carries a label (`label::HAND` or `label::SCALPEL`).
+    pub fn has(&self, l: u8) -> bool {
+        match l {
+            label::HAND => self.hand,
+            label::SCALPEL => self.scalpel,
+            _ => false,
+        }
+    }
+
+    /// Centre of the cell.
+    pub fn centre(&self) -> Point3<f64> {
+        self.min + Vector3::repeat(self.size / 2.0)
+    }
+}
+
+/// Counters of one carving run.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CarveStats {
+    /// Cell–view footprint tests.
+    pub footprint_tests: u64,
+    /// Cells visited.
+    pub cells_visited: u64,
+    /// Views that took part.
+    pub views_used: usize,
+    /// Views left out (no mask).
+    pub views_missing: usize,
+    /// Cells kept although at least one view refuted them (the k-of-N rule at work).
+    pub kept_against_refutation: u64,
+    /// Kept cells with no label reaching `min_support` (occupied, label unknown).
+    pub unlabelled_cells: u64,
+}
+
+/// The carved hull: kept cells with their labels.
+#[derive(Debug, Clone)]
+pub struct Occupancy {
+    /// Kept cells (leaves, and larger uniform cells).
+    pub cells: Vec<Cell>,
+    /// Effective leaf size, metres.
+    pub leaf_size: f64,
+    /// Lower corner of the carved cube.
+    pub origin: Point3<f64>,
+    /// Leaves along each side of the carved cube (`2^depth`).
+    pub resolution: usize,
+    /// Counters.
+    pub stats: CarveStats,
+}
+
+impl Occupancy {
+    /// Volume of the cells carrying a label (or of every kept cell for `None`), cubic metres.
+    pub fn volume(&self, l: Option<u8>) -> f64 {
+        self.cells.iter().filter(|c| l.is_none_or(|l| c.has(l))).map(|c| c.size.powi(3)).sum()
+    }
+
+    /// Whether a point lies in a kept cell carrying the label (any kept cell for `None`), with a
+    /// tolerance of a nanometre so that points on a face shared by two cells are never lost to
+    /// rounding.
+    pub fn contains(&self, p: &Point3<f64>, l: Option<u8>) -> bool {
+        const EPS: f64 = 1e-9;
+        self.cells.iter().any(|c| {
+            l.is_none_or(|l| c.has(l)) && (0..3).all(|a| p[a] >= c.min[a] - EPS && p[a] <= c.min[a] + c.size + EPS)
+        })
+    }
+}
+
+/// What one view says about a cell.
+#[derive(Debug, Clone, Copy)]
+enum Verdict {
+    /// Footprint inside the image and all background.
+    Refutes,
+    /// The view cannot tell (behind the camera, outside the image, beyond the lens' valid range).
+    Abstains,
+    /// Label counts inside the footprint.
+    Sees(crate::silhouette::Counts),
+}
+
+fn judge(view: &Silhouette, min: &Point3<f64>, size: f64, margin: f64) -> Verdict {
+    let cam = view.camera();
+    let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for k in 0..8 {
+        let p = min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * size;
+        let pc = cam.world_to_camera(&p);
+        if pc.z <= 1e-3 {
+            return Verdict::Abstains;
+        }
+        let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
+        if xn.norm() >= view.monotonic_radius() {
+            return Verdict::Abstains;
+        }
+        let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
+        u0 = u0.min(uv.x);
+        v0 = v0.min(uv.y);
+        u1 = u1.max(uv.x);
+        v1 = v1.max(uv.y);
+    }
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    let (i0, j0, i1, j1) = ((u0 - margin).ceil(), (v0 - margin).ceil(), (u1 + margin).floor(), (v1 + margin).floor());
+    let inside = i0 >= 0.0 && j0 >= 0.0 && i1 <= w - 1.0 && j1 <= h - 1.0;
+    let (ci0, cj0, ci1, cj1) = (i0.max(0.0), j0.max(0.0), i1.min(w - 1.0), j1.min(h - 1.0));
+    if ci0 > ci1 || cj0 > cj1 {
+        return Verdict::Abstains;
+    }
+    let counts = view.counts(ci0 as usize, cj0 as usize, ci1 as usize, cj1 as usize);
+    if counts.foreground() == 0 {
+        if inside { Verdict::Refutes } else { Verdict::Abstains }
+    } else {
+        Verdict::Sees(counts)
+    }
+}
+
+struct Carver<'a> {
+    views: Vec<&'a Silhouette>,
+    params: &'a HullParams,
+    leaf_level: u32,
+}
+
+#[derive(Default)]
+struct Local {
+    cells: Vec<Cell>,
+    stats: CarveStats,
+}
+
+impl Carver<'_> {
+    fn visit(&self, min: Point3<f64>, size: f64, level: u32, out: &mut Local) {
+        out.stats.cells_visited += 1;
+        let (mut refutes, mut hand, mut scalpel, mut uniform) = (0usize, 0usize, 0usize, true);
+        let mut uniform_label = None;
+        for view in &self.views {
+            out.stats.footprint_tests += 1;
+            match judge(view, &min, size, self.params.margin_px) {
+                Verdict::Refutes => {
+                    refutes += 1;
+                    uniform = false;
+                    if refutes >= self.params.carve_votes {
+                        return;
+                    }
+                }
+                Verdict::Abstains => uniform = false,
+                Verdict::Sees(c) => {
+                    hand += usize::from(c.hand > 0);
+                    scalpel += usize::from(c.scalpel > 0);
+                    let single = if c.hand == c.total {
+                        Some(label::HAND)
+                    } else if c.scalpel == c.total {
+                        Some(label::SCALPEL)
+                    } else {
+                        None
+                    };
+                    match (single, uniform_label) {
+                        (Some(l), None) => uniform_label = Some(l),
+                        (Some(l), Some(u)) if l == u => {}
+                        _ => uniform = false,
+                    }
+                }
+            }
+        }
+        if level < self.leaf_level && !uniform {
+            let half = size / 2.0;
+            for k in 0..8 {
+                let offset = Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * half;
+                self.visit(min + offset, half, level + 1, out);
+            }
+            return;
+        }
+        if refutes > 0 {
+            out.stats.kept_against_refutation += 1;
+        }
+        let cell =
+            Cell { min, size, hand: hand >= self.params.min_support, scalpel: scalpel >= self.params.min_support };
+        if !cell.hand && !cell.scalpel {
+            out.stats.unlabelled_cells += 1;
+        }
+        out.cells.push(cell);
+    }
+}
+
+/// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
+pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
+    if params.leaf_size.is_nan() || params.leaf_size <= 0.0 || params.carve_votes == 0 {
+        return Err(HullError::Params(format!(
+            "leaf_size must be positive and carve_votes at least 1 (got {} m, {})",
+            params.leaf_size, params.carve_votes
+        )));
+    }
+    let present: Vec<&Silhouette> = views.iter().flatten().collect();
+    if present.len() < params.carve_votes {
+        return Err(HullError::TooFewViews { present: present.len(), needed: params.carve_votes });
+    }
+    let extent = params.workspace.extent();
+    if extent.is_nan() || extent <= 0.0 {
+        return Err(HullError::Params("the workspace is empty".into()));
+    }
+    let leaf_level = (extent / params.leaf_size).log2().ceil().max(0.0) as u32;
+    let start = params.start_level.min(leaf_level);
+    let carver = Carver { views: present, params, leaf_level };
+    let n = 1usize << start;
+    let size = extent / n as f64;
+    let origin = params.workspace.min;
+    let locals: Vec<Local> = (0..n * n * n)
+        .into_par_iter()
+        .map(|k| {
+            let (i, j, l) = (k % n, (k / n) % n, k / (n * n));
+            let min = origin + Vector3::new(i as f64, j as f64, l as f64) * size;
+            let mut local = Local::default();
+            carver.visit(min, size, start, &mut local);
+            local
+        })
+        .collect();
+    let mut stats = CarveStats {
+        views_used: carver.views.len(),
+        views_missing: views.len() - carver.views.len(),
+        ..CarveStats::default()
+    };
+    let mut cells = Vec::new();
+    for local in locals {
+        cells.extend(local.cells);
+        stats.footprint_tests += local.stats.footprint_tests;
+        stats.cells_visited += local.stats.cells_visited;
+        stats.kept_against_refutation += local.stats.kept_against_refutation;
+        stats.unlabelled_cells += local.stats.unlabelled_cells;
+    }
+    let resolution = 1usize << leaf_level;
+    Ok(Occupancy { cells, leaf_size: extent / resolution as f64, origin, resolution, stats })
+}

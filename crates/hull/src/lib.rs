@@ -1,0 +1,75 @@
+//! Visual hull of hand and scalpel from calibrated silhouettes.
+//!
+//! Entry points:
+//! - [`Silhouette`]: a view's label mask as summed-area tables (label counts in any rectangle in
+//!   four lookups); [`silhouettes`] builds them for a rig, checking sizes.
+//! - [`carve`] with [`HullParams`]: octree carving where each cell is tested against its whole
+//!   projected footprint in every view, k-of-N carving, occlusion-aware labels; returns an
+//!   [`Occupancy`] (kept cells with labels, counters).
+//! - [`DenseGrid`]: one label's occupancy on the leaf grid and its closed surface
+//!   ([`DenseGrid::surface`], surface nets).
+//!
+//! CPU only so far (rayon across the top-level cells). No feature flags.
+#![warn(missing_docs)]
+
+mod carve;
+mod silhouette;
+mod surface;
+
+pub use carve::{Aabb, CarveStats, Cell, HullParams, Occupancy, carve};
+pub use silhouette::{Counts, Silhouette};
+pub use surface::{DenseGrid, is_watertight};
+
+use hullcut_rig::Rig;
+use image::GrayImage;
+
+/// Why carving could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum HullError {
+    /// Bad parameters.
+    #[error("visual hull: {0}")]
+    Params(String),
+    /// Fewer views than the carving rule needs.
+    #[error("visual hull: {present} views present, the k-of-N rule needs at least {needed}")]
+    TooFewViews {
+        /// Views with a mask.
+        present: usize,
+        /// `carve_votes`.
+        needed: usize,
+    },
+    /// A mask whose size is not its camera's.
+    #[error("visual hull: camera {camera}: mask is {found_w}x{found_h}, the rig says {w}x{h}")]
+    MaskSize {
+        /// Camera name.
+        camera: String,
+        /// Rig width.
+        w: u32,
+        /// Rig height.
+        h: u32,
+        /// Mask width.
+        found_w: u32,
+        /// Mask height.
+        found_h: u32,
+    },
+}
+
+/// Summed-area tables for each camera's mask (`None` for a missing view).
+pub fn silhouettes(rig: &Rig, masks: &[Option<&GrayImage>]) -> Result<Vec<Option<Silhouette>>, HullError> {
+    rig.cameras
+        .iter()
+        .zip(masks.iter().chain(std::iter::repeat(&None)))
+        .map(|(cam, mask)| {
+            let Some(mask) = mask else { return Ok(None) };
+            if mask.dimensions() != (cam.width, cam.height) {
+                return Err(HullError::MaskSize {
+                    camera: cam.name.clone(),
+                    w: cam.width,
+                    h: cam.height,
+                    found_w: mask.width(),
+                    found_h: mask.height(),
+                });
+            }
+            Ok(Some(Silhouette::new(cam, mask)))
+        })
+        .collect()
+}

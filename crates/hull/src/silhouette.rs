@@ -1,0 +1,102 @@
+//! Per-view summed-area tables of a label mask, so that the label counts inside any pixel
+//! rectangle cost four lookups, whatever its size.
+
+use hullcut_dataset::label;
+use hullcut_rig::Camera;
+use image::GrayImage;
+
+/// Pixel counts of each class inside a rectangle of a mask.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Pixels in the rectangle.
+    pub total: u32,
+    /// Hand pixels.
+    pub hand: u32,
+    /// Scalpel pixels.
+    pub scalpel: u32,
+    /// Unknown pixels (label 255, or any label this crate does not know).
+    pub unknown: u32,
+}
+
+impl Counts {
+    /// Pixels that are not background.
+    pub fn foreground(&self) -> u32 {
+        self.hand + self.scalpel + self.unknown
+    }
+
+    /// Pixels of a foreground label (`label::HAND` or `label::SCALPEL`).
+    pub fn of(&self, l: u8) -> u32 {
+        match l {
+            label::HAND => self.hand,
+            label::SCALPEL => self.scalpel,
+            _ => self.unknown,
+        }
+    }
+}
+
+/// One camera's mask as summed-area tables (one per class), `(w + 1) × (h + 1)` entries each.
+#[derive(Debug, Clone)]
+pub struct Silhouette {
+    camera: Camera,
+    /// The lens' invertible radius, computed once (it is a root search).
+    monotonic_radius: f64,
+    stride: usize,
+    hand: Vec<u32>,
+    scalpel: Vec<u32>,
+    unknown: Vec<u32>,
+}
+
+impl Silhouette {
+    /// Builds the tables of a mask taken by `camera` (sizes must agree; the caller checks).
+    pub fn new(camera: &Camera, mask: &GrayImage) -> Self {
+        let (w, h) = (mask.width() as usize, mask.height() as usize);
+        let stride = w + 1;
+        let mut tables = [vec![0u32; stride * (h + 1)], vec![0u32; stride * (h + 1)], vec![0u32; stride * (h + 1)]];
+        let raw = mask.as_raw();
+        for j in 0..h {
+            let mut row = [0u32; 3];
+            for i in 0..w {
+                match raw[j * w + i] {
+                    label::BACKGROUND => {}
+                    label::HAND => row[0] += 1,
+                    label::SCALPEL => row[1] += 1,
+                    _ => row[2] += 1,
+                }
+                for (t, r) in tables.iter_mut().zip(row) {
+                    t[(j + 1) * stride + i + 1] = t[j * stride + i + 1] + r;
+                }
+            }
+        }
+        let [hand, scalpel, unknown] = tables;
+        Silhouette {
+            camera: camera.clone(),
+            monotonic_radius: camera.distortion.monotonic_radius(),
+            stride,
+            hand,
+            scalpel,
+            unknown,
+        }
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Normalized radius within which the camera's distortion can be inverted.
+    pub fn monotonic_radius(&self) -> f64 {
+        self.monotonic_radius
+    }
+
+    /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).
+    pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
+        let s = self.stride;
+        let sum = |t: &[u32]| t[(j1 + 1) * s + i1 + 1] + t[j0 * s + i0] - t[j0 * s + i1 + 1] - t[(j1 + 1) * s + i0];
+        Counts {
+            total: ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32,
+            hand: sum(&self.hand),
+            scalpel: sum(&self.scalpel),
+            unknown: sum(&self.unknown),
+        }
+    }
+}
