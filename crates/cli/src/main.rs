@@ -30,6 +30,7 @@ struct Cli {
 enum Command {
     Bench(commands::bench::Args),
     Calibrate(commands::calibrate::Args),
+    Reconstruct(commands::reconstruct::Args),
     Rig(commands::rig::Args),
     Segment(commands::segment::Args),
     Sim(commands::sim::Args),
@@ -49,6 +50,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bench(args) => commands::bench::run(&args),
         Command::Calibrate(args) => commands::calibrate::run(&args),
+        Command::Reconstruct(args) => commands::reconstruct::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
         Command::Segment(args) => commands::segment::run(&args),
         Command::Sim(args) => commands::sim::run(&args),

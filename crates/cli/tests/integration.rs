@@ -291,3 +291,54 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
     }
     out
 }
+
+#[test]
+fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dataset = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+    let (out, report) = (dir.path().join("rec"), dir.path().join("rec.json"));
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let o = hullcut(&[
+        "reconstruct",
+        "--dataset",
+        dataset,
+        "--out",
+        &path(&out),
+        "--frames",
+        "6:9",
+        "--masks",
+        "segment",
+        "--report",
+        &path(&report),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for label in ["hand", "scalpel"] {
+        for frame in 6..9 {
+            let ply = out.join("hull").join(label).join(format!("{frame:06}.ply"));
+            let mesh = hullcut_dataset::read_ply(&ply).expect("mesh written");
+            assert!(hullcut_hull::is_watertight(&mesh), "{} is not closed", ply.display());
+        }
+    }
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    assert_eq!(r["kind"], "reconstruction");
+    assert_eq!(r["masks"], "segment");
+    assert_eq!(r["counters"]["frame_sets"], 3);
+    assert_eq!(r["resolution"], 128);
+    for a in r["accuracy"].as_array().expect("accuracy") {
+        // The truth is in the dataset: every label is scored on every frame.
+        assert_eq!(a["frames"], 3, "{a}");
+        let iou = a["iou_mean"].as_f64().expect("iou");
+        let bound = a["exact_hull_truth_iou_mean"].as_f64().expect("exact hull iou");
+        assert!(iou > 0.0 && iou <= 1.0 && bound > 0.0, "{a}");
+        assert!(a["chamfer_mm_mean"].as_f64().expect("chamfer") < 30.0, "{a}");
+    }
+    for key in ["read", "segment", "carve", "surface", "total"] {
+        assert!(r["timings"][key]["count"].as_u64().expect("timing") >= 1, "{key}");
+    }
+
+    let bad = hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&out), "--frames", "20:30"]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(stderr(&bad).contains("20:30") && stderr(&bad).contains("9 frames"), "{}", stderr(&bad));
+    let bad = hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&out), "--masks", "magic"]);
+    assert!(stderr(&bad).contains("magic"));
+}

@@ -60,6 +60,9 @@ pub struct HullParams {
     pub margin_px: f64,
     /// Octree level at which carving starts (8^level cells, in parallel).
     pub start_level: u32,
+    /// A cell both labels reach goes to the one covering more of its footprints (summed over
+    /// views), instead of carrying both.
+    pub exclusive_labels: bool,
 }
 
 impl Default for HullParams {
@@ -71,6 +74,7 @@ impl Default for HullParams {
             min_support: 2,
             margin_px: 1.0,
             start_level: 3,
+            exclusive_labels: true,
         }
     }
 }
@@ -214,6 +218,7 @@ impl Carver<'_> {
     fn visit(&self, min: Point3<f64>, size: f64, level: u32, out: &mut Local) {
         out.stats.cells_visited += 1;
         let (mut refutes, mut hand, mut scalpel, mut uniform) = (0usize, 0usize, 0usize, true);
+        let (mut hand_share, mut scalpel_share) = (0.0f64, 0.0f64);
         let mut uniform_label = None;
         for view in &self.views {
             out.stats.footprint_tests += 1;
@@ -229,6 +234,8 @@ impl Carver<'_> {
                 Verdict::Sees(c) => {
                     hand += usize::from(c.hand > 0);
                     scalpel += usize::from(c.scalpel > 0);
+                    hand_share += f64::from(c.hand) / f64::from(c.total);
+                    scalpel_share += f64::from(c.scalpel) / f64::from(c.total);
                     let single = if c.hand == c.total {
                         Some(label::HAND)
                     } else if c.scalpel == c.total {
@@ -255,8 +262,12 @@ impl Carver<'_> {
         if refutes > 0 {
             out.stats.kept_against_refutation += 1;
         }
-        let cell =
-            Cell { min, size, hand: hand >= self.params.min_support, scalpel: scalpel >= self.params.min_support };
+        let (mut has_hand, mut has_scalpel) = (hand >= self.params.min_support, scalpel >= self.params.min_support);
+        if self.params.exclusive_labels && has_hand && has_scalpel {
+            has_hand = hand_share >= scalpel_share;
+            has_scalpel = !has_hand;
+        }
+        let cell = Cell { min, size, hand: has_hand, scalpel: has_scalpel };
         if !cell.hand && !cell.scalpel {
             out.stats.unlabelled_cells += 1;
         }

@@ -12,6 +12,7 @@
 //! CPU only so far (rayon across the top-level cells). No feature flags.
 #![warn(missing_docs)]
 
+pub mod accuracy;
 mod carve;
 mod silhouette;
 mod surface;

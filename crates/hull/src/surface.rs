@@ -73,6 +73,34 @@ impl DenseGrid {
         Some(DenseGrid { origin, leaf, dims, occupied })
     }
 
+    /// Whether a world point falls in an occupied leaf.
+    pub fn contains(&self, p: &Point3<f64>) -> bool {
+        let idx = [0, 1, 2].map(|a| ((p[a] - self.origin[a]) / self.leaf).round());
+        if idx.iter().zip(self.dims).any(|(&x, n)| x < 0.0 || x >= n as f64) {
+            return false;
+        }
+        self.at(idx[0] as usize, idx[1] as usize, idx[2] as usize)
+    }
+
+    /// The box the occupied leaves span (their outer faces), if any.
+    pub fn bounds(&self) -> Option<(Point3<f64>, Point3<f64>)> {
+        let [nx, ny, _] = self.dims;
+        let mut out: Option<(Point3<f64>, Point3<f64>)> = None;
+        for (n, &o) in self.occupied.iter().enumerate() {
+            if !o {
+                continue;
+            }
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            let c = self.origin + Vector3::new(i as f64, j as f64, k as f64) * self.leaf;
+            let (lo, hi) = (c - Vector3::repeat(self.leaf / 2.0), c + Vector3::repeat(self.leaf / 2.0));
+            out = Some(match out {
+                None => (lo, hi),
+                Some((a, b)) => (a.inf(&lo), b.sup(&hi)),
+            });
+        }
+        out
+    }
+
     fn at(&self, i: usize, j: usize, k: usize) -> bool {
         self.occupied[(k * self.dims[1] + j) * self.dims[0] + i]
     }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod reconstruct;
 pub mod rig;
 pub mod segment;
 pub mod sim;

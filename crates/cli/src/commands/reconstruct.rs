@@ -1,0 +1,455 @@
+//! `hullcut reconstruct`: visual hulls of hand and scalpel for every frame set of a dataset.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use hullcut_capture::segment::{SegmentParams, Segmenter};
+use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
+use hullcut_hull::accuracy::{outer_surface_samples, sample_surface, surface_distance, volumetric_iou};
+use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
+use serde::Serialize;
+
+use crate::frames::parse_frames;
+use crate::logging::{CameraLogger, log_tool};
+use crate::progress::bar;
+use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+
+/// Carve the visual hull of hand and scalpel from every frame set of a dataset.
+///
+/// Each view's label mask (from masks/, or segmented from the images) becomes summed-area tables;
+/// an octree over the workspace (x, y in ±0.2 m, z in 0..0.4 m) is carved by testing every cell's
+/// whole projected footprint in every view, so a blade thinner than a voxel survives; pixels of the
+/// other label never carve (occlusion-aware labels); a missing view is left out; with
+/// --carve-votes K a cell needs K background views to go (one bad silhouette cannot delete the
+/// tool). Surfaces are closed meshes by surface nets. Where the dataset has truth, the report
+/// gives volumetric IoU against the true shapes and against the exact visual hull (the best any
+/// silhouette method reaches from these views: truth masks carved at a quarter of the voxel), and
+/// Chamfer and Hausdorff distances to the true surfaces. Blade poses (OUT/poses.jsonl) come with
+/// the pose stage.
+///
+/// Writes: OUT/hull/LABEL/NNNNNN.ply (closed world-frame meshes, LABEL hand or scalpel; a label with
+/// nothing carved writes no file and is counted); REPORT (JSON) with --report; an .rrd (images,
+/// masks, leaves as points and meshes under world/hull/LABEL, the true tool, timings and accuracy
+/// as scalars) with --rrd.
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// The dataset.
+    #[arg(long, value_name = "DIR")]
+    dataset: PathBuf,
+    /// Output folder.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Leaf (voxel) size, metres; the effective one is 0.4 m / 2^n, not larger.
+    #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
+    voxel: f64,
+    /// Frames: A:B (half-open) or N (the first N).
+    #[arg(long, value_name = "A:B|N")]
+    frames: Option<String>,
+    /// Compute backend. Only `cpu` exists so far (the wgpu backend is a later issue).
+    #[arg(long, value_name = "cpu|gpu", default_value = "cpu")]
+    backend: String,
+    /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
+    #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
+    masks: String,
+    /// Views that must see a cell as background to carve it (k of N).
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    carve_votes: usize,
+    /// Measure accuracy every N-th frame (it costs about a second per frame).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    accuracy_every: u64,
+    /// Write a JSON report.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Log to this rerun recording.
+    #[arg(long, value_name = "FILE")]
+    rrd: Option<PathBuf>,
+    /// Log images and leaves every N-th frame (meshes and scalars every frame).
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    rrd_every: u64,
+}
+
+#[derive(Debug, Default, Serialize)]
+struct LabelAccuracy {
+    label: &'static str,
+    frames: usize,
+    iou_mean: Option<f64>,
+    iou_min: Option<f64>,
+    exact_hull_iou_mean: Option<f64>,
+    exact_hull_truth_iou_mean: Option<f64>,
+    chamfer_mm_mean: Option<f64>,
+    hausdorff_mm_max: Option<f64>,
+    #[serde(skip)]
+    iou: Vec<f64>,
+    #[serde(skip)]
+    exact: Vec<f64>,
+    #[serde(skip)]
+    exact_truth: Vec<f64>,
+    #[serde(skip)]
+    chamfer: Vec<f64>,
+    #[serde(skip)]
+    hausdorff: Vec<f64>,
+}
+
+#[derive(Debug, Serialize)]
+struct Timings {
+    read: StageTiming,
+    segment: Option<StageTiming>,
+    carve: StageTiming,
+    surface: StageTiming,
+    accuracy: StageTiming,
+    total: StageTiming,
+}
+
+#[derive(Debug, Default, Serialize)]
+struct Counters {
+    frame_sets: usize,
+    views_missing: usize,
+    cells_kept: u64,
+    kept_against_refutation: u64,
+    unlabelled_cells: u64,
+    footprint_tests: u64,
+    empty_label_frames: usize,
+    meshes_written: usize,
+}
+
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    schema_version: u32,
+    kind: &'static str,
+    #[serde(flatten)]
+    provenance: Provenance,
+    dataset: String,
+    out: String,
+    frames: [u64; 2],
+    backend: &'a str,
+    masks: &'a str,
+    voxel_m: f64,
+    resolution: usize,
+    carve_votes: usize,
+    min_support: usize,
+    counters: Counters,
+    accuracy: Vec<LabelAccuracy>,
+    timings: Timings,
+}
+
+/// Runs the command.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let t_start = Instant::now();
+    if args.backend != "cpu" {
+        bail!("--backend {}: only the cpu backend exists so far", args.backend);
+    }
+    if args.accuracy_every == 0 || args.rrd_every == 0 {
+        bail!("--accuracy-every and --rrd-every must be at least 1");
+    }
+    let ds = Dataset::open(&args.dataset)?;
+    let use_files = match args.masks.as_str() {
+        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", args.dataset.display()),
+        "files" => true,
+        "segment" => false,
+        "auto" => ds.has_masks(),
+        other => bail!("--masks {other}: expected auto, files or segment"),
+    };
+    let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
+    let params = HullParams { leaf_size: args.voxel, carve_votes: args.carve_votes, ..HullParams::default() };
+    let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };
+    let tool = ds.tool()?;
+    let poses = ds.truth_poses()?.unwrap_or_default();
+    let rec = match &args.rrd {
+        Some(path) => {
+            let rec = hullcut_viz::open_recording("hullcut-reconstruct", &hullcut_viz::Sink::File(path.clone()))?;
+            hullcut_viz::log_world(&rec)?;
+            let cams = CameraLogger::new(&rec, ds.rig())?;
+            Some((rec, cams))
+        }
+        None => None,
+    };
+    for (_, name) in label::NAMED {
+        let dir = args.out.join("hull").join(name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
+    let pb = bar(frames.len() as u64, "carving");
+    let mut t = StageTimes::default();
+    let mut counters = Counters::default();
+    let mut accuracy: Vec<LabelAccuracy> =
+        label::NAMED.iter().map(|&(_, name)| LabelAccuracy { label: name, ..LabelAccuracy::default() }).collect();
+    let mut resolution = 0;
+    for &frame in &frames {
+        let t_frame = Instant::now();
+        let clock = Instant::now();
+        let mut set = ds.read_frame_set(frame, use_files || ds.has_masks())?;
+        t.read.push(clock.elapsed());
+        let truth_masks: Vec<Option<image::GrayImage>> =
+            set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.clone())).collect();
+        if let Some(seg) = &mut segmenter {
+            let clock = Instant::now();
+            let masks = seg.segment_frame_set(&set).with_context(|| format!("segmenting frame {frame}"))?;
+            t.segment.push(clock.elapsed());
+            for (view, mask) in set.views.iter_mut().zip(masks) {
+                if let Some(view) = view {
+                    view.mask = mask;
+                }
+            }
+        }
+        let clock = Instant::now();
+        let masks: Vec<Option<&image::GrayImage>> =
+            set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
+        let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
+        let occ = carve(&views, &params).with_context(|| format!("frame {frame}"))?;
+        t.carve.push(clock.elapsed());
+        resolution = occ.resolution;
+        counters.frame_sets += 1;
+        counters.views_missing += occ.stats.views_missing;
+        counters.cells_kept += occ.cells.len() as u64;
+        counters.kept_against_refutation += occ.stats.kept_against_refutation;
+        counters.unlabelled_cells += occ.stats.unlabelled_cells;
+        counters.footprint_tests += occ.stats.footprint_tests;
+
+        let clock = Instant::now();
+        let mut grids = Vec::new();
+        for &(l, name) in &label::NAMED {
+            let grid = DenseGrid::from_occupancy(&occ, Some(l));
+            let mesh = grid.as_ref().map(DenseGrid::surface);
+            match &mesh {
+                Some(mesh) => {
+                    let path = args.out.join("hull").join(name).join(format!("{frame:06}.ply"));
+                    hullcut_dataset::write_ply(&path, mesh)?;
+                    counters.meshes_written += 1;
+                }
+                None => counters.empty_label_frames += 1,
+            }
+            grids.push((l, name, grid, mesh));
+        }
+        t.surface.push(clock.elapsed());
+
+        if frame.is_multiple_of(args.accuracy_every) {
+            let clock = Instant::now();
+            let pose = poses.iter().find(|p| p.frame == frame);
+            let exact = if truth_masks.iter().any(Option::is_some) {
+                let refs: Vec<Option<&image::GrayImage>> = truth_masks.iter().map(Option::as_ref).collect();
+                let fine = HullParams { leaf_size: occ.leaf_size / 4.0, ..params.clone() };
+                Some(carve(&silhouettes(ds.rig(), &refs)?, &fine)?)
+            } else {
+                None
+            };
+            for (k, (l, name, grid, mesh)) in grids.iter().enumerate() {
+                let truth = truth_mesh(&ds, name, frame, tool.as_ref(), pose.map(|p| &p.tool_to_world))?;
+                score(
+                    &mut accuracy[k],
+                    grid.as_ref(),
+                    mesh.as_ref(),
+                    truth.as_ref(),
+                    exact.as_ref(),
+                    *l,
+                    occ.leaf_size,
+                );
+            }
+            t.accuracy.push(clock.elapsed());
+        }
+        if let Some((rec, cams)) = &rec {
+            log_frame(rec, cams, &set, &occ, &grids, frame, args.rrd_every, &t)?;
+            if let (Some(tool), Some(pose)) = (&tool, poses.iter().find(|p| p.frame == frame)) {
+                log_tool(rec, "truth", tool, &pose.tool_to_world)?;
+            }
+        }
+        t.total.push(t_frame.elapsed());
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if let Some((rec, _)) = &rec {
+        hullcut_viz::flush(rec)?;
+    }
+    for a in &mut accuracy {
+        a.frames = a.iou.len();
+        let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        a.iou_mean = mean(&a.iou);
+        a.iou_min = a.iou.iter().copied().reduce(f64::min);
+        a.exact_hull_iou_mean = mean(&a.exact);
+        a.exact_hull_truth_iou_mean = mean(&a.exact_truth);
+        a.chamfer_mm_mean = mean(&a.chamfer);
+        a.hausdorff_mm_max = a.hausdorff.iter().copied().reduce(f64::max);
+    }
+    let carve_t = StageTiming::from_durations(&t.carve);
+    println!(
+        "carved {} frame sets at {resolution}³ ({:.2} mm leaves): carve {:.2} ms, surfaces {:.2} ms per frame (mean)",
+        counters.frame_sets,
+        params.workspace.extent() / resolution.max(1) as f64 * 1e3,
+        carve_t.mean_ms,
+        StageTiming::from_durations(&t.surface).mean_ms
+    );
+    for a in accuracy.iter().filter(|a| a.frames > 0) {
+        println!(
+            "  {:8} IoU {:.3} with the truth (the exact visual hull reaches {:.3}; IoU with it {:.3}), Chamfer {:.2} mm, Hausdorff {:.2} mm over {} frames",
+            a.label,
+            a.iou_mean.unwrap_or(f64::NAN),
+            a.exact_hull_truth_iou_mean.unwrap_or(f64::NAN),
+            a.exact_hull_iou_mean.unwrap_or(f64::NAN),
+            a.chamfer_mm_mean.unwrap_or(f64::NAN),
+            a.hausdorff_mm_max.unwrap_or(f64::NAN),
+            a.frames
+        );
+    }
+    if let Some(path) = &args.report {
+        let report = Report {
+            schema_version: SCHEMA_VERSION,
+            kind: "reconstruction",
+            provenance: Provenance::current(),
+            dataset: args.dataset.display().to_string(),
+            out: args.out.display().to_string(),
+            frames: [range.start, range.end],
+            backend: &args.backend,
+            masks: if use_files { "files" } else { "segment" },
+            voxel_m: params.workspace.extent() / resolution.max(1) as f64,
+            resolution,
+            carve_votes: params.carve_votes,
+            min_support: params.min_support,
+            counters,
+            accuracy,
+            timings: Timings {
+                read: StageTiming::from_durations(&t.read),
+                segment: (!t.segment.is_empty()).then(|| StageTiming::from_durations(&t.segment)),
+                carve: carve_t,
+                surface: StageTiming::from_durations(&t.surface),
+                accuracy: StageTiming::from_durations(&t.accuracy),
+                total: StageTiming::from_durations(&[t_start.elapsed()]),
+            },
+        };
+        write_json(path, &report)?;
+    }
+    Ok(())
+}
+
+#[derive(Debug, Default)]
+struct StageTimes {
+    read: Vec<Duration>,
+    segment: Vec<Duration>,
+    carve: Vec<Duration>,
+    surface: Vec<Duration>,
+    accuracy: Vec<Duration>,
+    total: Vec<Duration>,
+}
+
+/// The true shape of a label at a frame: the dataset's truth mesh, or for the scalpel its tool
+/// mesh at the true pose.
+fn truth_mesh(
+    ds: &Dataset,
+    name: &str,
+    frame: u64,
+    tool: Option<&hullcut_dataset::ToolGeometry>,
+    pose: Option<&nalgebra::Matrix4<f64>>,
+) -> anyhow::Result<Option<Mesh>> {
+    if let Some(mesh) = ds.read_truth_mesh(name, frame)? {
+        return Ok(Some(mesh));
+    }
+    Ok(match (name, tool, pose) {
+        ("scalpel", Some(tool), Some(pose)) => Some(Mesh {
+            vertices: tool.mesh.vertices.iter().map(|p| pose.transform_point(p)).collect(),
+            triangles: tool.mesh.triangles.clone(),
+        }),
+        _ => None,
+    })
+}
+
+fn score(
+    acc: &mut LabelAccuracy,
+    grid: Option<&DenseGrid>,
+    mesh: Option<&Mesh>,
+    truth: Option<&Mesh>,
+    exact: Option<&Occupancy>,
+    l: u8,
+    leaf: f64,
+) {
+    let Some(truth) = truth else { return };
+    const SAMPLES: usize = 8000;
+    if let Some(iou) = volumetric_iou(grid, truth, SAMPLES) {
+        acc.iou.push(iou);
+    }
+    if let Some(exact) = exact {
+        let exact_grid = DenseGrid::from_occupancy(exact, Some(l));
+        if let (Some(g), Some(e)) = (grid, exact_grid.as_ref())
+            && let Some(iou) = grid_iou(g, e, SAMPLES)
+        {
+            acc.exact.push(iou);
+        }
+        if let Some(iou) = volumetric_iou(exact_grid.as_ref(), truth, SAMPLES) {
+            acc.exact_truth.push(iou);
+        }
+    }
+    if let Some(mesh) = mesh {
+        let spacing = leaf;
+        let ours = sample_surface(mesh, spacing);
+        let theirs = outer_surface_samples(truth, spacing);
+        if let Some(d) = surface_distance(&ours, &theirs, 2.0 * leaf) {
+            acc.chamfer.push(d.chamfer * 1e3);
+            acc.hausdorff.push(d.hausdorff * 1e3);
+        }
+    }
+}
+
+/// IoU of two leaf grids by sampling their joint bounding box.
+fn grid_iou(a: &DenseGrid, b: &DenseGrid, samples: usize) -> Option<f64> {
+    let (alo, ahi) = a.bounds()?;
+    let (blo, bhi) = b.bounds()?;
+    let (lo, hi) = (alo.inf(&blo), ahi.sup(&bhi));
+    let n = (samples as f64).cbrt().ceil() as usize;
+    let (mut both, mut either) = (0u64, 0u64);
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let f = |x: usize, a: usize| lo[a] + (hi[a] - lo[a]) * (x as f64 + 0.5) / n as f64;
+                let p = nalgebra::Point3::new(f(i, 0), f(j, 1), f(k, 2));
+                let (x, y) = (a.contains(&p), b.contains(&p));
+                both += u64::from(x && y);
+                either += u64::from(x || y);
+            }
+        }
+    }
+    (either > 0).then(|| both as f64 / either as f64)
+}
+
+#[allow(clippy::too_many_arguments)] // one call site; the pieces are what one frame logs
+fn log_frame(
+    rec: &hullcut_viz::RecordingStream,
+    cams: &CameraLogger,
+    set: &FrameSet,
+    occ: &Occupancy,
+    grids: &[(u8, &str, Option<DenseGrid>, Option<Mesh>)],
+    frame: u64,
+    every: u64,
+    t: &StageTimes,
+) -> anyhow::Result<()> {
+    hullcut_viz::set_frame(rec, frame as i64);
+    hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
+    let colours = |l: u8| if l == label::HAND { [70, 130, 255, 255] } else { [255, 200, 40, 255] };
+    if frame.is_multiple_of(every) {
+        cams.log_frame_set(rec, set)?;
+        for &(l, name) in &label::NAMED {
+            let centres: Vec<[f32; 3]> = occ
+                .cells
+                .iter()
+                .filter(|c| c.has(l))
+                .map(|c| c.centre())
+                .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect();
+            hullcut_viz::log_points3d(
+                rec,
+                &format!("world/hull/{name}/leaves"),
+                &centres,
+                colours(l),
+                (occ.leaf_size / 2.0) as f32,
+            )?;
+        }
+    }
+    for (l, name, _, mesh) in grids {
+        if let Some(mesh) = mesh {
+            let v: Vec<[f32; 3]> = mesh.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+            hullcut_viz::log_mesh3d(rec, &format!("world/hull/{name}/mesh"), &v, &mesh.triangles, colours(*l))?;
+        }
+    }
+    let last = |d: &[Duration]| d.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
+    hullcut_viz::log_scalar(rec, "metrics/time/carve", last(&t.carve))?;
+    hullcut_viz::log_scalar(rec, "metrics/time/surface", last(&t.surface))?;
+    Ok(())
+}

@@ -1,0 +1,168 @@
+//! Accuracy of a hull against ground truth: volumetric IoU (Monte Carlo over the union of the two
+//! bounding boxes, inside-ness of the truth by generalized winding number, so unions of
+//! overlapping closed parts count once), and Chamfer and Hausdorff distances between surfaces
+//! (dense surface samples, nearest neighbours through a uniform hash grid).
+
+use std::collections::HashMap;
+
+use hullcut_dataset::Mesh;
+use nalgebra::Point3;
+use rayon::prelude::*;
+
+use crate::DenseGrid;
+
+/// Generalized winding number of a closed (or nearly closed) mesh at `p`: 1 inside, 0 outside,
+/// n inside n overlapping parts.
+pub fn winding_number(mesh: &Mesh, p: &Point3<f64>) -> f64 {
+    let mut sum = 0.0;
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize] - p);
+        let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
+        let det = a.dot(&b.cross(&c));
+        let den = la * lb * lc + a.dot(&b) * lc + b.dot(&c) * la + c.dot(&a) * lb;
+        sum += 2.0 * det.atan2(den);
+    }
+    sum / (4.0 * std::f64::consts::PI)
+}
+
+fn bounds(points: impl Iterator<Item = Point3<f64>>) -> Option<(Point3<f64>, Point3<f64>)> {
+    points.fold(None, |acc, p| match acc {
+        None => Some((p, p)),
+        Some((lo, hi)) => Some((lo.inf(&p), hi.sup(&p))),
+    })
+}
+
+/// A deterministic uniform number in [0, 1) from a counter.
+fn unit(k: u64) -> f64 {
+    let mut z = k.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Volumetric IoU between a hull (on its leaf grid) and the solid a truth mesh bounds, from
+/// `samples` points spread uniformly over the union of their bounding boxes (deterministic).
+/// None when both are empty.
+pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) -> Option<f64> {
+    let truth_box = bounds(truth.vertices.iter().copied());
+    let hull_box = hull.and_then(|g| g.bounds());
+    let (lo, hi) = match (truth_box, hull_box) {
+        (Some(a), Some(b)) => (a.0.inf(&b.0), a.1.sup(&b.1)),
+        (Some(a), None) | (None, Some(a)) => a,
+        (None, None) => return None,
+    };
+    let (both, either) = (0..samples as u64)
+        .into_par_iter()
+        .map(|k| {
+            let p = Point3::new(
+                lo.x + (hi.x - lo.x) * unit(3 * k),
+                lo.y + (hi.y - lo.y) * unit(3 * k + 1),
+                lo.z + (hi.z - lo.z) * unit(3 * k + 2),
+            );
+            let in_hull = hull.is_some_and(|g| g.contains(&p));
+            let in_truth = winding_number(truth, &p) >= 0.5;
+            (u64::from(in_hull && in_truth), u64::from(in_hull || in_truth))
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (either > 0).then(|| both as f64 / either as f64)
+}
+
+/// Points on a mesh's surface about `spacing` apart (at least one per triangle's area share),
+/// deterministic.
+pub fn sample_surface(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
+    let mut out = Vec::new();
+    let mut counter = 0u64;
+    let mut carry = 0.0;
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+        let area = (b - a).cross(&(c - a)).norm() / 2.0;
+        carry += area / (spacing * spacing);
+        while carry >= 1.0 {
+            carry -= 1.0;
+            let (mut r1, mut r2) = (unit(counter), unit(counter + 1));
+            counter += 2;
+            if r1 + r2 > 1.0 {
+                (r1, r2) = (1.0 - r1, 1.0 - r2);
+            }
+            out.push(a + (b - a) * r1 + (c - a) * r2);
+        }
+    }
+    out
+}
+
+/// Distances between two point sets standing for surfaces.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceDistance {
+    /// Mean of the two directed mean nearest-neighbour distances, metres.
+    pub chamfer: f64,
+    /// Largest nearest-neighbour distance in either direction, metres.
+    pub hausdorff: f64,
+}
+
+struct HashGrid<'a> {
+    cell: f64,
+    map: HashMap<[i64; 3], Vec<usize>>,
+    points: &'a [Point3<f64>],
+}
+
+impl<'a> HashGrid<'a> {
+    fn new(points: &'a [Point3<f64>], cell: f64) -> Self {
+        let mut map: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, p) in points.iter().enumerate() {
+            map.entry(Self::key(p, cell)).or_default().push(i);
+        }
+        HashGrid { cell, map, points }
+    }
+
+    fn key(p: &Point3<f64>, cell: f64) -> [i64; 3] {
+        [p.x, p.y, p.z].map(|x| (x / cell).floor() as i64)
+    }
+
+    /// Nearest distance, searching shells of cells outward until no closer point can exist.
+    fn nearest(&self, p: &Point3<f64>) -> f64 {
+        let k = Self::key(p, self.cell);
+        let mut best = f64::INFINITY;
+        for r in 0i64..1000 {
+            for dz in -r..=r {
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        if dx.abs().max(dy.abs()).max(dz.abs()) != r {
+                            continue;
+                        }
+                        if let Some(ids) = self.map.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                            for &i in ids {
+                                best = best.min((self.points[i] - p).norm());
+                            }
+                        }
+                    }
+                }
+            }
+            if best <= r as f64 * self.cell {
+                break;
+            }
+        }
+        best
+    }
+}
+
+/// Chamfer and Hausdorff distances between two sampled surfaces; None if either is empty.
+pub fn surface_distance(a: &[Point3<f64>], b: &[Point3<f64>], cell: f64) -> Option<SurfaceDistance> {
+    if a.is_empty() || b.is_empty() {
+        return None;
+    }
+    let directed = |from: &[Point3<f64>], to: &[Point3<f64>]| {
+        let grid = HashGrid::new(to, cell);
+        let d: Vec<f64> = from.par_iter().map(|p| grid.nearest(p)).collect();
+        (d.iter().sum::<f64>() / d.len() as f64, d.iter().copied().fold(0.0, f64::max))
+    };
+    let (ab, ab_max) = directed(a, b);
+    let (ba, ba_max) = directed(b, a);
+    Some(SurfaceDistance { chamfer: (ab + ba) / 2.0, hausdorff: ab_max.max(ba_max) })
+}
+
+/// Surface samples of a truth mesh made of overlapping closed parts, keeping only points on the
+/// outer surface (winding number of the whole mesh below 1: a point on one part's surface has ½
+/// from that part, plus 1 for every other part it lies inside).
+pub fn outer_surface_samples(truth: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
+    sample_surface(truth, spacing).into_par_iter().filter(|p| winding_number(truth, p) < 1.0).collect()
+}
