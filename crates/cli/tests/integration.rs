@@ -208,6 +208,26 @@ fn bench_sim_quick_writes_tables_and_charts() {
 }
 
 #[test]
+fn bench_hull_quick_compares_octree_and_dense_grid() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "hull", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.path().join("hull.csv")).expect("csv");
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    // Where both ran, the octree keeps exactly the dense grid's cells with the same accuracy, with
+    // fewer footprint tests.
+    for dense in rows.iter().filter(|r| r[0] == "dense") {
+        let octree = rows.iter().find(|r| r[0] == "octree" && r[1] == dense[1]).expect("octree row");
+        assert_eq!(octree[5..], dense[5..], "resolution {}", dense[1]);
+        let tests = |r: &Vec<&str>| r[4].parse::<u64>().expect("tests");
+        assert!(tests(octree) < tests(dense), "{octree:?} vs {dense:?}");
+    }
+    for name in ["hull_speed.png", "hull_accuracy.png"] {
+        assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"));
+    }
+}
+
+#[test]
 fn synth_writes_a_dataset_a_report_and_a_recording() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (out, report, rrd) = (dir.path().join("ds"), dir.path().join("synth.json"), dir.path().join("synth.rrd"));

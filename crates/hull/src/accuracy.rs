@@ -166,3 +166,24 @@ pub fn surface_distance(a: &[Point3<f64>], b: &[Point3<f64>], cell: f64) -> Opti
 pub fn outer_surface_samples(truth: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
     sample_surface(truth, spacing).into_par_iter().filter(|p| winding_number(truth, p) < 1.0).collect()
 }
+
+/// IoU of two leaf grids, from a regular lattice of about `samples` points over their joint
+/// bounding box. None when both are empty.
+pub fn grid_iou(a: &DenseGrid, b: &DenseGrid, samples: usize) -> Option<f64> {
+    let (lo, hi) = match (a.bounds(), b.bounds()) {
+        (Some(x), Some(y)) => (x.0.inf(&y.0), x.1.sup(&y.1)),
+        (Some(x), None) | (None, Some(x)) => x,
+        (None, None) => return None,
+    };
+    let n = (samples as f64).cbrt().ceil() as usize;
+    let f = |x: usize, axis: usize| lo[axis] + (hi[axis] - lo[axis]) * (x as f64 + 0.5) / n as f64;
+    let (both, either) = (0..n * n * n)
+        .into_par_iter()
+        .map(|k| {
+            let p = Point3::new(f(k % n, 0), f((k / n) % n, 1), f(k / (n * n), 2));
+            let (x, y) = (a.contains(&p), b.contains(&p));
+            (u64::from(x && y), u64::from(x || y))
+        })
+        .reduce(|| (0, 0), |s, t| (s.0 + t.0, s.1 + t.1));
+    (either > 0).then(|| both as f64 / either as f64)
+}

@@ -34,16 +34,15 @@ impl Counts {
     }
 }
 
-/// One camera's mask as summed-area tables (one per class), `(w + 1) × (h + 1)` entries each.
+/// One camera's mask as a summed-area table, `(w + 1) × (h + 1)` entries of (hand, scalpel,
+/// unknown) counts, interleaved so that a rectangle query touches four cache lines, not twelve.
 #[derive(Debug, Clone)]
 pub struct Silhouette {
     camera: Camera,
     /// The lens' invertible radius, computed once (it is a root search).
     monotonic_radius: f64,
     stride: usize,
-    hand: Vec<u32>,
-    scalpel: Vec<u32>,
-    unknown: Vec<u32>,
+    table: Vec<[u32; 3]>,
 }
 
 impl Silhouette {
@@ -51,7 +50,7 @@ impl Silhouette {
     pub fn new(camera: &Camera, mask: &GrayImage) -> Self {
         let (w, h) = (mask.width() as usize, mask.height() as usize);
         let stride = w + 1;
-        let mut tables = [vec![0u32; stride * (h + 1)], vec![0u32; stride * (h + 1)], vec![0u32; stride * (h + 1)]];
+        let mut table = vec![[0u32; 3]; stride * (h + 1)];
         let raw = mask.as_raw();
         for j in 0..h {
             let mut row = [0u32; 3];
@@ -62,20 +61,11 @@ impl Silhouette {
                     label::SCALPEL => row[1] += 1,
                     _ => row[2] += 1,
                 }
-                for (t, r) in tables.iter_mut().zip(row) {
-                    t[(j + 1) * stride + i + 1] = t[j * stride + i + 1] + r;
-                }
+                let above = table[j * stride + i + 1];
+                table[(j + 1) * stride + i + 1] = [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
             }
         }
-        let [hand, scalpel, unknown] = tables;
-        Silhouette {
-            camera: camera.clone(),
-            monotonic_radius: camera.distortion.monotonic_radius(),
-            stride,
-            hand,
-            scalpel,
-            unknown,
-        }
+        Silhouette { camera: camera.clone(), monotonic_radius: camera.distortion.monotonic_radius(), stride, table }
     }
 
     /// The camera.
@@ -91,12 +81,13 @@ impl Silhouette {
     /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).
     pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
         let s = self.stride;
-        let sum = |t: &[u32]| t[(j1 + 1) * s + i1 + 1] + t[j0 * s + i0] - t[j0 * s + i1 + 1] - t[(j1 + 1) * s + i0];
-        Counts {
-            total: ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32,
-            hand: sum(&self.hand),
-            scalpel: sum(&self.scalpel),
-            unknown: sum(&self.unknown),
-        }
+        let (a, b, c, d) = (
+            self.table[(j1 + 1) * s + i1 + 1],
+            self.table[j0 * s + i0],
+            self.table[j0 * s + i1 + 1],
+            self.table[(j1 + 1) * s + i0],
+        );
+        let sum = |k: usize| a[k] + b[k] - c[k] - d[k];
+        Counts { total: ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32, hand: sum(0), scalpel: sum(1), unknown: sum(2) }
     }
 }

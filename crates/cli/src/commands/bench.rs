@@ -13,7 +13,13 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim` (the others arrive with their stages). `sim` measures
+/// Targets: `sim` and `hull` (the others arrive with their stages).
+/// `hull` measures
+///   hull.csv, hull_speed.png, hull_accuracy.png
+///                     carving time of one rendered cut-scene frame (6 x 640x480 truth masks)
+///                     against resolution, octree against a dense grid (every leaf tested), and
+///                     IoU with the exact visual hull (512³) against time.
+/// `sim` measures
 ///   scaling.csv/png   wall time per simulated second against lattice nodes, for all-TLED,
 ///                     all-FLSM and hybrid (ratio 0.4) models of the seed's liver material;
 ///   ratio.csv/png     the TLED ratio's accuracy (displacement error against an all-TLED run)
@@ -42,6 +48,8 @@ pub struct Args {
 enum Target {
     /// The soft-tissue simulator.
     Sim,
+    /// The visual hull.
+    Hull,
 }
 
 /// Runs the command.
@@ -54,6 +62,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
         }
+        Target::Hull => super::bench_hull::run(&args.out, quick)?,
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod bench_hull;
 pub mod calibrate;
 pub mod reconstruct;
 pub mod rig;

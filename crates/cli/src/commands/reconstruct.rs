@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
-use hullcut_hull::accuracy::{outer_surface_samples, sample_surface, surface_distance, volumetric_iou};
+use hullcut_hull::accuracy::{grid_iou, outer_surface_samples, sample_surface, surface_distance, volumetric_iou};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
 use serde::Serialize;
 
@@ -386,27 +386,6 @@ fn score(
             acc.hausdorff.push(d.hausdorff * 1e3);
         }
     }
-}
-
-/// IoU of two leaf grids by sampling their joint bounding box.
-fn grid_iou(a: &DenseGrid, b: &DenseGrid, samples: usize) -> Option<f64> {
-    let (alo, ahi) = a.bounds()?;
-    let (blo, bhi) = b.bounds()?;
-    let (lo, hi) = (alo.inf(&blo), ahi.sup(&bhi));
-    let n = (samples as f64).cbrt().ceil() as usize;
-    let (mut both, mut either) = (0u64, 0u64);
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let f = |x: usize, a: usize| lo[a] + (hi[a] - lo[a]) * (x as f64 + 0.5) / n as f64;
-                let p = nalgebra::Point3::new(f(i, 0), f(j, 1), f(k, 2));
-                let (x, y) = (a.contains(&p), b.contains(&p));
-                both += u64::from(x && y);
-                either += u64::from(x || y);
-            }
-        }
-    }
-    (either > 0).then(|| both as f64 / either as f64)
 }
 
 #[allow(clippy::too_many_arguments)] // one call site; the pieces are what one frame logs
