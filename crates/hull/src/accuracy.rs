@@ -187,3 +187,51 @@ pub fn grid_iou(a: &DenseGrid, b: &DenseGrid, samples: usize) -> Option<f64> {
         .reduce(|| (0, 0), |s, t| (s.0 + t.0, s.1 + t.1));
     (either > 0).then(|| both as f64 / either as f64)
 }
+
+/// Silhouette consistency of one view: the hull's kept leaves re-projected into the camera
+/// (each leaf as the pixel box around its eight projected corners) against the observed mask's
+/// foreground, as an IoU over pixels. None when both are empty or the view is missing.
+pub fn silhouette_consistency(occ: &crate::Occupancy, view: &crate::Silhouette) -> Option<f64> {
+    let cam = view.camera();
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut covered = vec![false; w * h];
+    for cell in &occ.cells {
+        let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        let mut ok = true;
+        for k in 0..8 {
+            let offset = nalgebra::Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64);
+            let pr = cam.project(&(cell.min + offset * cell.size));
+            if pr.depth <= 0.0 || !pr.pixel.x.is_finite() {
+                ok = false;
+                break;
+            }
+            u0 = u0.min(pr.pixel.x);
+            v0 = v0.min(pr.pixel.y);
+            u1 = u1.max(pr.pixel.x);
+            v1 = v1.max(pr.pixel.y);
+        }
+        if !ok {
+            continue;
+        }
+        let (i0, j0) = (u0.ceil().max(0.0) as usize, v0.ceil().max(0.0) as usize);
+        let (i1, j1) = (u1.floor().min(w as f64 - 1.0), v1.floor().min(h as f64 - 1.0));
+        if i1 < 0.0 || j1 < 0.0 {
+            continue;
+        }
+        for j in j0..=j1 as usize {
+            for i in i0..=i1 as usize {
+                covered[j * w + i] = true;
+            }
+        }
+    }
+    let (mut both, mut either) = (0u64, 0u64);
+    for j in 0..h {
+        for i in 0..w {
+            let fg = view.counts(i, j, i, j).foreground() > 0;
+            let c = covered[j * w + i];
+            both += u64::from(fg && c);
+            either += u64::from(fg || c);
+        }
+    }
+    (either > 0).then(|| both as f64 / either as f64)
+}

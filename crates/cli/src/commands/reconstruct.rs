@@ -6,7 +6,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
-use hullcut_hull::accuracy::{grid_iou, outer_surface_samples, sample_surface, surface_distance, volumetric_iou};
+use hullcut_hull::accuracy::{
+    grid_iou, outer_surface_samples, sample_surface, silhouette_consistency, surface_distance, volumetric_iou,
+};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
 use serde::Serialize;
 
@@ -92,6 +94,17 @@ struct LabelAccuracy {
     hausdorff: Vec<f64>,
 }
 
+/// Re-projected hull against the observed masks, per camera.
+#[derive(Debug, Default, Serialize)]
+struct Consistency {
+    camera: String,
+    frames: usize,
+    iou_mean: Option<f64>,
+    iou_min: Option<f64>,
+    #[serde(skip)]
+    values: Vec<f64>,
+}
+
 #[derive(Debug, Serialize)]
 struct Timings {
     read: StageTiming,
@@ -131,6 +144,7 @@ struct Report<'a> {
     min_support: usize,
     counters: Counters,
     accuracy: Vec<LabelAccuracy>,
+    silhouette_consistency: Vec<Consistency>,
     timings: Timings,
 }
 
@@ -175,6 +189,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut counters = Counters::default();
     let mut accuracy: Vec<LabelAccuracy> =
         label::NAMED.iter().map(|&(_, name)| LabelAccuracy { label: name, ..LabelAccuracy::default() }).collect();
+    let mut consistency: Vec<Consistency> =
+        ds.meta().cameras.iter().map(|c| Consistency { camera: c.clone(), ..Consistency::default() }).collect();
     let mut resolution = 0;
     for &frame in &frames {
         let t_frame = Instant::now();
@@ -234,6 +250,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             } else {
                 None
             };
+            for (c, view) in consistency.iter_mut().zip(&views) {
+                if let Some(iou) = view.as_ref().and_then(|v| silhouette_consistency(&occ, v)) {
+                    c.values.push(iou);
+                }
+            }
             for (k, (l, name, grid, mesh)) in grids.iter().enumerate() {
                 let truth = truth_mesh(&ds, name, frame, tool.as_ref(), pose.map(|p| &p.tool_to_world))?;
                 score(
@@ -247,6 +268,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 );
             }
             t.accuracy.push(clock.elapsed());
+            if let Some((rec, _)) = &rec {
+                hullcut_viz::set_frame(rec, frame as i64);
+                for a in &accuracy {
+                    if let Some(iou) = a.iou.last() {
+                        hullcut_viz::log_scalar(rec, &format!("metrics/accuracy/{}_iou", a.label), *iou)?;
+                    }
+                }
+            }
         }
         if let Some((rec, cams)) = &rec {
             log_frame(rec, cams, &set, &occ, &grids, frame, args.rrd_every, &t)?;
@@ -270,6 +299,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         a.exact_hull_truth_iou_mean = mean(&a.exact_truth);
         a.chamfer_mm_mean = mean(&a.chamfer);
         a.hausdorff_mm_max = a.hausdorff.iter().copied().reduce(f64::max);
+    }
+    for c in &mut consistency {
+        c.frames = c.values.len();
+        c.iou_mean = (!c.values.is_empty()).then(|| c.values.iter().sum::<f64>() / c.values.len() as f64);
+        c.iou_min = c.values.iter().copied().reduce(f64::min);
     }
     let carve_t = StageTiming::from_durations(&t.carve);
     println!(
@@ -307,6 +341,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             min_support: params.min_support,
             counters,
             accuracy,
+            silhouette_consistency: consistency,
             timings: Timings {
                 read: StageTiming::from_durations(&t.read),
                 segment: (!t.segment.is_empty()).then(|| StageTiming::from_durations(&t.segment)),
