@@ -168,24 +168,38 @@ enum Verdict {
     Sees(crate::silhouette::Counts),
 }
 
-fn judge(view: &Silhouette, min: &Point3<f64>, size: f64, margin: f64) -> Verdict {
+/// A point projected into a view (pixel), or None where the view cannot tell (behind the camera,
+/// beyond the lens' invertible range).
+type Projected = Option<[f64; 2]>;
+
+fn project(view: &Silhouette, p: &Point3<f64>) -> Projected {
+    let cam = view.camera();
+    let pc = cam.world_to_camera(p);
+    if pc.z <= 1e-3 {
+        return None;
+    }
+    let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
+    if xn.norm() >= view.monotonic_radius() {
+        return None;
+    }
+    let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
+    Some([uv.x, uv.y])
+}
+
+/// Offset of corner `k` (bits x, y, z) of a cell, in cell sizes.
+fn corner_offset(k: usize) -> Vector3<f64> {
+    Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64)
+}
+
+fn judge(view: &Silhouette, corners: &[Projected; 8], margin: f64) -> Verdict {
     let cam = view.camera();
     let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    for k in 0..8 {
-        let p = min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * size;
-        let pc = cam.world_to_camera(&p);
-        if pc.z <= 1e-3 {
-            return Verdict::Abstains;
-        }
-        let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
-        if xn.norm() >= view.monotonic_radius() {
-            return Verdict::Abstains;
-        }
-        let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
-        u0 = u0.min(uv.x);
-        v0 = v0.min(uv.y);
-        u1 = u1.max(uv.x);
-        v1 = v1.max(uv.y);
+    for c in corners {
+        let Some([u, v]) = *c else { return Verdict::Abstains };
+        u0 = u0.min(u);
+        v0 = v0.min(v);
+        u1 = u1.max(u);
+        v1 = v1.max(v);
     }
     let (w, h) = (cam.width as f64, cam.height as f64);
     let (i0, j0, i1, j1) = ((u0 - margin).ceil(), (v0 - margin).ceil(), (u1 + margin).floor(), (v1 + margin).floor());
@@ -215,14 +229,39 @@ struct Local {
 }
 
 impl Carver<'_> {
-    fn visit(&self, min: Point3<f64>, size: f64, level: u32, out: &mut Local) {
+    /// The corners of a cell in every view.
+    fn corners(&self, min: &Point3<f64>, size: f64) -> Vec<[Projected; 8]> {
+        self.views.iter().map(|v| std::array::from_fn(|k| project(v, &(min + corner_offset(k) * size)))).collect()
+    }
+
+    /// Visits a cell whose corners are already projected (`corners[view]`); children reuse the
+    /// parent's corners and share the 19 new lattice points between them.
+    /// A root cell (`corners` None) projects its corners itself: all views up front when it may be
+    /// split, view by view otherwise (a dense grid of leaves then stops at the first refuting view).
+    fn visit(&self, min: Point3<f64>, size: f64, level: u32, corners: Option<&[[Projected; 8]]>, out: &mut Local) {
+        let owned;
+        let corners = match corners {
+            None if level < self.leaf_level => {
+                owned = self.corners(&min, size);
+                Some(&owned[..])
+            }
+            other => other,
+        };
         out.stats.cells_visited += 1;
         let (mut refutes, mut hand, mut scalpel, mut uniform) = (0usize, 0usize, 0usize, true);
         let (mut hand_share, mut scalpel_share) = (0.0f64, 0.0f64);
         let mut uniform_label = None;
-        for view in &self.views {
+        for (v, view) in self.views.iter().enumerate() {
             out.stats.footprint_tests += 1;
-            match judge(view, &min, size, self.params.margin_px) {
+            let lazy;
+            let view_corners = match corners {
+                Some(c) => &c[v],
+                None => {
+                    lazy = std::array::from_fn(|k| project(view, &(min + corner_offset(k) * size)));
+                    &lazy
+                }
+            };
+            match judge(view, view_corners, self.params.margin_px) {
                 Verdict::Refutes => {
                     refutes += 1;
                     uniform = false;
@@ -251,11 +290,36 @@ impl Carver<'_> {
                 }
             }
         }
-        if level < self.leaf_level && !uniform {
+        if let (true, Some(corners)) = (level < self.leaf_level && !uniform, corners) {
             let half = size / 2.0;
+            // The 3x3x3 lattice of the children's corners, per view (index a + 3b + 9c).
+            let lattice: Vec<[Projected; 27]> = self
+                .views
+                .iter()
+                .zip(corners)
+                .map(|(view, parent)| {
+                    std::array::from_fn(|n| {
+                        let (a, b, c) = (n % 3, (n / 3) % 3, n / 9);
+                        if a % 2 == 0 && b % 2 == 0 && c % 2 == 0 {
+                            parent[a / 2 + 2 * (b / 2) + 4 * (c / 2)]
+                        } else {
+                            project(view, &(min + Vector3::new(a as f64, b as f64, c as f64) * half))
+                        }
+                    })
+                })
+                .collect();
             for k in 0..8 {
-                let offset = Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * half;
-                self.visit(min + offset, half, level + 1, out);
+                let child: Vec<[Projected; 8]> = lattice
+                    .iter()
+                    .map(|l| {
+                        std::array::from_fn(|m| {
+                            let (a, b, c) =
+                                ((k & 1) + (m & 1), ((k >> 1) & 1) + ((m >> 1) & 1), ((k >> 2) & 1) + ((m >> 2) & 1));
+                            l[a + 3 * b + 9 * c]
+                        })
+                    })
+                    .collect();
+                self.visit(min + corner_offset(k) * half, half, level + 1, Some(&child), out);
             }
             return;
         }
@@ -303,7 +367,7 @@ pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupa
             let (i, j, l) = (k % n, (k / n) % n, k / (n * n));
             let min = origin + Vector3::new(i as f64, j as f64, l as f64) * size;
             let mut local = Local::default();
-            carver.visit(min, size, start, &mut local);
+            carver.visit(min, size, start, None, &mut local);
             local
         })
         .collect();
