@@ -197,16 +197,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let clock = Instant::now();
         let mut set = ds.read_frame_set(frame, use_files || ds.has_masks())?;
         t.read.push(clock.elapsed());
-        let truth_masks: Vec<Option<image::GrayImage>> =
-            set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.clone())).collect();
+        // Masks read with the images are the truth. Segmenting moves them aside (the segmented masks
+        // take their place, nothing is copied); with mask files they are what is carved.
+        let mut set_aside: Vec<Option<image::GrayImage>> = Vec::new();
         if let Some(seg) = &mut segmenter {
             let clock = Instant::now();
             let masks = seg.segment_frame_set(&set).with_context(|| format!("segmenting frame {frame}"))?;
             t.segment.push(clock.elapsed());
             for (view, mask) in set.views.iter_mut().zip(masks) {
-                if let Some(view) = view {
-                    view.mask = mask;
-                }
+                set_aside.push(view.as_mut().and_then(|v| std::mem::replace(&mut v.mask, mask)));
             }
         }
         let clock = Instant::now();
@@ -243,8 +242,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if frame.is_multiple_of(args.accuracy_every) {
             let clock = Instant::now();
             let pose = poses.iter().find(|p| p.frame == frame);
+            let truth_masks: Vec<Option<&image::GrayImage>> =
+                if segmenter.is_some() { set_aside.iter().map(Option::as_ref).collect() } else { masks.clone() };
             let exact = if truth_masks.iter().any(Option::is_some) {
-                let refs: Vec<Option<&image::GrayImage>> = truth_masks.iter().map(Option::as_ref).collect();
+                let refs = truth_masks;
                 let fine = HullParams { leaf_size: occ.leaf_size / 4.0, ..params.clone() };
                 Some(carve(&silhouettes(ds.rig(), &refs)?, &fine)?)
             } else {
