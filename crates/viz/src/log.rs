@@ -231,6 +231,12 @@ pub fn log_scalar(rec: &RecordingStream, path: &str, value: f64) -> Result<(), V
     log_at(rec, EntityPath::from(path), &Scalars::single(value), false)
 }
 
+/// Clears `path` and everything under it from the current time on (an entity that has nothing to
+/// show this frame, e.g. a pose that was refused).
+pub fn log_clear(rec: &RecordingStream, path: &str) -> Result<(), VizError> {
+    log_at(rec, EntityPath::from(path), &rerun::Clear::recursive(), false)
+}
+
 #[cfg(test)]
 mod tests {
     use hullcut_rig::Camera;

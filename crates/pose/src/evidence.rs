@@ -1,0 +1,220 @@
+//! What one camera's label mask says about the tool, restricted to a region of interest around
+//! it: a distance transform of the foreground (where the tool may be: scalpel, hand or unknown
+//! pixels, since the hand may hide it) and a sample of the scalpel pixels (what the tool must
+//! explain).
+
+use hullcut_dataset::label;
+use hullcut_rig::Camera;
+use image::GrayImage;
+use nalgebra::{Point2, Point3, Vector2};
+
+/// Scalpel pixels kept per view (evenly strided); the fit's cost grows with them.
+const MAX_SAMPLES: usize = 512;
+/// Chamfer weights of the 3-4 distance transform (in thirds of a pixel).
+const STRAIGHT: u32 = 3;
+const DIAGONAL: u32 = 4;
+/// Distance given to pixels with no foreground anywhere in the region, pixels.
+const FAR_PX: f32 = 1000.0;
+
+/// One view's evidence.
+#[derive(Debug, Clone)]
+pub struct ViewEvidence<'a> {
+    /// The camera.
+    pub camera: &'a Camera,
+    radius: f64,
+    mask: &'a GrayImage,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    dt: Vec<f32>,
+    /// Points on the scalpel silhouette's outline against the background, in the region: the
+    /// midpoints between scalpel pixels and their background 4-neighbours (at most
+    /// [`MAX_SAMPLES`], evenly strided).
+    pub samples: Vec<Point2<f64>>,
+}
+
+impl<'a> ViewEvidence<'a> {
+    /// The evidence of a mask (sizes must agree with the camera) in the region covering the
+    /// projections of `around`, widened by `margin_px`. `None` when none of `around` projects
+    /// into the image.
+    pub fn new(
+        camera: &'a Camera,
+        monotonic_radius: f64,
+        mask: &'a GrayImage,
+        around: &[Point3<f64>],
+        margin_px: f64,
+    ) -> Option<Self> {
+        let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for p in around {
+            if let Some(uv) = project(camera, monotonic_radius, p) {
+                u0 = u0.min(uv.x);
+                v0 = v0.min(uv.y);
+                u1 = u1.max(uv.x);
+                v1 = v1.max(uv.y);
+            }
+        }
+        let (iw, ih) = (mask.width() as f64, mask.height() as f64);
+        let x0 = (u0 - margin_px).floor().max(0.0);
+        let y0 = (v0 - margin_px).floor().max(0.0);
+        let x1 = (u1 + margin_px).ceil().min(iw - 1.0);
+        let y1 = (v1 + margin_px).ceil().min(ih - 1.0);
+        if !(x1 >= x0 && y1 >= y0) {
+            return None;
+        }
+        let (x0, y0) = (x0 as usize, y0 as usize);
+        let (w, h) = (x1 as usize - x0 + 1, y1 as usize - y0 + 1);
+        let raw = mask.as_raw();
+        let stride = mask.width() as usize;
+        let mut dist = vec![u32::MAX / 2; w * h];
+        let mut scalpel = Vec::new();
+        for j in 0..h {
+            let row = &raw[(y0 + j) * stride + x0..(y0 + j) * stride + x0 + w];
+            for (i, &l) in row.iter().enumerate() {
+                if l != label::BACKGROUND {
+                    dist[j * w + i] = 0;
+                }
+                if l == label::SCALPEL {
+                    outline_points(raw, stride, mask.height() as usize, x0 + i, y0 + j, &mut scalpel);
+                }
+            }
+        }
+        chamfer(&mut dist, w, h);
+        let dt = dist.iter().map(|&d| if d >= u32::MAX / 4 { FAR_PX } else { d as f32 / STRAIGHT as f32 }).collect();
+        let step = scalpel.len().div_ceil(MAX_SAMPLES).max(1);
+        let samples = scalpel.into_iter().step_by(step).collect();
+        Some(ViewEvidence { camera, radius: monotonic_radius, mask, x0, y0, w, h, dt, samples })
+    }
+
+    /// World point → pixel, or `None` behind the camera or beyond the lens' invertible radius.
+    pub fn project(&self, p: &Point3<f64>) -> Option<Point2<f64>> {
+        project(self.camera, self.radius, p)
+    }
+
+    /// How far a pixel position lies outside the foreground: the distance to the nearest foreground
+    /// pixel centre (bilinear inside the region; outside it, the distance to the region is added
+    /// to its border's value) less one pixel, since a point of the tool may project anywhere short
+    /// of the next background pixel's centre; 0 on foreground.
+    pub fn outside_foreground(&self, uv: &Point2<f64>) -> f64 {
+        let x = uv.x - self.x0 as f64;
+        let y = uv.y - self.y0 as f64;
+        let xc = x.clamp(0.0, (self.w - 1) as f64);
+        let yc = y.clamp(0.0, (self.h - 1) as f64);
+        let outside = Vector2::new(x - xc, y - yc).norm();
+        let (i, j) = (xc.floor() as usize, yc.floor() as usize);
+        let (i1, j1) = ((i + 1).min(self.w - 1), (j + 1).min(self.h - 1));
+        let (fx, fy) = (xc - i as f64, yc - j as f64);
+        let at = |i: usize, j: usize| self.dt[j * self.w + i] as f64;
+        let top = at(i, j) * (1.0 - fx) + at(i1, j) * fx;
+        let bottom = at(i, j1) * (1.0 - fx) + at(i1, j1) * fx;
+        (top * (1.0 - fy) + bottom * fy + outside - 1.0).max(0.0)
+    }
+
+    /// Label of the pixel containing `uv`, or `None` outside the image.
+    pub fn label_at(&self, uv: &Point2<f64>) -> Option<u8> {
+        let (i, j) = (uv.x.round(), uv.y.round());
+        if i < 0.0 || j < 0.0 || i >= self.mask.width() as f64 || j >= self.mask.height() as f64 {
+            return None;
+        }
+        Some(self.mask.get_pixel(i as u32, j as u32).0[0])
+    }
+}
+
+/// The outline points of a scalpel pixel: the midpoints between it and each of its 4-neighbours
+/// that is background. The tool's outline crosses the segment between the two pixel centres
+/// (one ray hits it, the other misses) at a uniformly unknown place, so the midpoint is its
+/// unbiased estimate. Outlines against the hand are the hand's and give no point; neither does
+/// the image border.
+fn outline_points(raw: &[u8], stride: usize, height: usize, i: usize, j: usize, out: &mut Vec<Point2<f64>>) {
+    let (x, y) = (i as f64, j as f64);
+    if i > 0 && raw[j * stride + i - 1] == label::BACKGROUND {
+        out.push(Point2::new(x - 0.5, y));
+    }
+    if i + 1 < stride && raw[j * stride + i + 1] == label::BACKGROUND {
+        out.push(Point2::new(x + 0.5, y));
+    }
+    if j > 0 && raw[(j - 1) * stride + i] == label::BACKGROUND {
+        out.push(Point2::new(x, y - 0.5));
+    }
+    if j + 1 < height && raw[(j + 1) * stride + i] == label::BACKGROUND {
+        out.push(Point2::new(x, y + 0.5));
+    }
+}
+
+/// World point → pixel, or `None` behind the camera or beyond the lens' invertible radius.
+pub(crate) fn project(camera: &Camera, radius: f64, p: &Point3<f64>) -> Option<Point2<f64>> {
+    let pc = camera.world_to_camera(p);
+    if pc.z <= 1e-3 {
+        return None;
+    }
+    let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
+    if xn.norm() >= radius {
+        return None;
+    }
+    Some(camera.normalized_to_pixel(camera.distortion.distort(xn)))
+}
+
+/// Two-pass 3-4 chamfer distance transform in place (0 on foreground, in thirds of a pixel).
+fn chamfer(d: &mut [u32], w: usize, h: usize) {
+    for j in 0..h {
+        for i in 0..w {
+            let mut v = d[j * w + i];
+            if v == 0 {
+                continue;
+            }
+            if i > 0 {
+                v = v.min(d[j * w + i - 1] + STRAIGHT);
+            }
+            if j > 0 {
+                v = v.min(d[(j - 1) * w + i] + STRAIGHT);
+                if i > 0 {
+                    v = v.min(d[(j - 1) * w + i - 1] + DIAGONAL);
+                }
+                if i + 1 < w {
+                    v = v.min(d[(j - 1) * w + i + 1] + DIAGONAL);
+                }
+            }
+            d[j * w + i] = v;
+        }
+    }
+    for j in (0..h).rev() {
+        for i in (0..w).rev() {
+            let mut v = d[j * w + i];
+            if v == 0 {
+                continue;
+            }
+            if i + 1 < w {
+                v = v.min(d[j * w + i + 1] + STRAIGHT);
+            }
+            if j + 1 < h {
+                v = v.min(d[(j + 1) * w + i] + STRAIGHT);
+                if i + 1 < w {
+                    v = v.min(d[(j + 1) * w + i + 1] + DIAGONAL);
+                }
+                if i > 0 {
+                    v = v.min(d[(j + 1) * w + i - 1] + DIAGONAL);
+                }
+            }
+            d[j * w + i] = v;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chamfer_distances_are_close_to_euclidean() {
+        let (w, h) = (41, 41);
+        let mut d = vec![u32::MAX / 2; w * h];
+        d[20 * w + 20] = 0;
+        chamfer(&mut d, w, h);
+        for (i, j) in [(30, 20), (20, 5), (30, 30), (40, 33)] {
+            let exact = (((i as f64) - 20.0).powi(2) + ((j as f64) - 20.0).powi(2)).sqrt();
+            let got = d[j * w + i] as f64 / 3.0;
+            // The 3-4 chamfer metric is within 8% of the Euclidean distance.
+            assert!((got - exact).abs() <= 0.08 * exact + 1e-9, "({i},{j}): {got} vs {exact}");
+        }
+    }
+}

@@ -1,0 +1,41 @@
+//! The blade's pose (plane, cutting edge, tip) from the scalpel hull and the silhouettes,
+//! tracked over time, with a confidence that can refuse a frame.
+//!
+//! Method:
+//! - [`Template`]: the instrument's known shape from `tool.json` (blade polygon, body, interior
+//!   points). The hull's thickness says nothing about a 0.4 mm blade, so the known blade is fitted
+//!   instead of reading the plane off the hull.
+//! - The scalpel hull gives the starting poses (its largest connected component's axis and
+//!   extent; both directions, twelve rolls) when there is no track; otherwise the track's
+//!   constant-velocity prediction starts the fit.
+//! - The fit: Levenberg–Marquardt over six parameters so that every sampled scalpel pixel lies in
+//!   the projected tool and every interior point of the tool projects onto foreground (the hand may
+//!   hide the tool, so hand pixels count), Huber-weighted, in pixels.
+//! - [`Tracker`]: confidence from the fit's agreement, the number of views that see the blade's
+//!   face (not edge-on, not hidden by the hand), the scalpel leaf count and the step from the last
+//!   trusted pose; a frame below the threshold is refused with a reason, the last trusted pose is
+//!   held for a bounded time. Trusted poses pass a One Euro filter on SE(3) ([`OneEuro`]).
+//! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose.
+#![warn(missing_docs)]
+
+mod evidence;
+mod filter;
+mod fit;
+mod geometry;
+mod init;
+mod metrics;
+mod template;
+mod track;
+
+pub use filter::{OneEuro, OneEuroParams};
+pub use metrics::{PoseError, pose_error};
+pub use template::Template;
+pub use track::{BladePose, Diagnostics, PoseEstimate, Tracker, TrackerParams, ViewInput, isometry_from_matrix};
+
+/// Why a pose estimator could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub enum ToolError {
+    /// The tool geometry cannot serve as a template.
+    #[error("tool.json: {0}")]
+    Template(String),
+}

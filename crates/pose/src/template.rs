@@ -1,0 +1,228 @@
+//! The instrument's known shape (`tool.json`), reduced to what the fit needs: the blade as a
+//! convex polygon in its mid-plane, the body (handle) as a vertex set whose projection's convex
+//! hull stands for its silhouette, and interior points of both.
+
+use hullcut_dataset::ToolGeometry;
+use hullcut_hull::accuracy::winding_number;
+use nalgebra::{Point2, Point3, Vector3};
+
+use crate::ToolError;
+use crate::geometry::convex_hull;
+
+/// Interior points aimed at on the blade and on the body each (the coverage term's samples).
+const INTERIOR_TARGET: usize = 48;
+
+/// The tool as the fit sees it, in the tool frame (metres).
+#[derive(Debug, Clone)]
+pub struct Template {
+    /// Blade outline: a convex polygon in the blade's mid-plane, in order.
+    pub blade: Vec<Point3<f64>>,
+    /// Vertices of the tool mesh off the blade (the handle); empty for a bare blade.
+    pub body: Vec<Point3<f64>>,
+    /// Points inside the blade (first [`Template::blade_interior`] of them), then inside the body.
+    pub interior: Vec<Point3<f64>>,
+    /// How many of [`Template::interior`] lie on the blade.
+    pub blade_interior: usize,
+    /// Blade tip.
+    pub tip: Point3<f64>,
+    /// Cutting edge, tip to heel.
+    pub edge: Vec<Point3<f64>>,
+    /// Unit blade normal.
+    pub normal: Vector3<f64>,
+    /// Centre of the blade polygon (the point the tracker filters and rotations pivot about).
+    pub blade_centre: Point3<f64>,
+    /// Length of the whole tool along its longest axis, metres (to check a hull matches it).
+    pub length: f64,
+}
+
+impl Template {
+    /// Builds the template of a tool: the blade polygon is the convex hull of `blade_outline`
+    /// (or, without one, of the mesh vertices within a blade thickness of the mid-plane through
+    /// the tip), projected onto the mid-plane; the body is every other mesh vertex.
+    pub fn new(tool: &ToolGeometry) -> Result<Self, ToolError> {
+        let n = tool.blade_normal.normalize();
+        let plane_tol = tool.blade_thickness.max(1e-6);
+        let on_blade = |p: &Point3<f64>| (p - tool.tip).dot(&n).abs() <= plane_tol;
+        let candidates: Vec<Point3<f64>> = match &tool.blade_outline {
+            Some(outline) if outline.len() >= 3 => outline.clone(),
+            _ => {
+                let mut v: Vec<Point3<f64>> = tool.mesh.vertices.iter().copied().filter(on_blade).collect();
+                v.extend(tool.cutting_edge.iter().copied());
+                v
+            }
+        };
+        // In-plane basis: u along the edge (tip → heel reversed), w = n × u.
+        let heel = tool.cutting_edge.last().copied().unwrap_or(tool.tip);
+        let along = tool.tip - heel;
+        let u = (along - n * along.dot(&n)).try_normalize(1e-12).unwrap_or_else(|| n.cross(&Vector3::x()).normalize());
+        let w = n.cross(&u);
+        let to_plane = |p: &Point3<f64>| Point2::new((p - tool.tip).dot(&u), (p - tool.tip).dot(&w));
+        let from_plane = |q: &Point2<f64>| tool.tip + u * q.x + w * q.y;
+        let flat: Vec<Point2<f64>> = candidates.iter().map(to_plane).collect();
+        let polygon = convex_hull(&flat);
+        if polygon.len() < 3 {
+            return Err(ToolError::Template("the blade outline spans no area".to_owned()));
+        }
+        let blade: Vec<Point3<f64>> = polygon.iter().map(from_plane).collect();
+        let blade_centre = Point3::from(blade.iter().map(|p| p.coords).sum::<Vector3<f64>>() / blade.len() as f64);
+
+        let mut interior = blade_interior(&polygon).iter().map(from_plane).collect::<Vec<_>>();
+        let blade_interior = interior.len();
+        let body: Vec<Point3<f64>> = tool
+            .mesh
+            .vertices
+            .iter()
+            .copied()
+            .filter(|p| !on_blade(p) || !inside_polygon(&polygon, &to_plane(p)))
+            .collect();
+        interior.extend(body_interior(tool, &body));
+
+        let all: Vec<Point3<f64>> = tool.mesh.vertices.iter().copied().chain(blade.iter().copied()).collect();
+        let length = principal_length(&all);
+        Ok(Template {
+            blade,
+            body,
+            interior,
+            blade_interior,
+            tip: tool.tip,
+            edge: tool.cutting_edge.clone(),
+            normal: n,
+            blade_centre,
+            length,
+        })
+    }
+}
+
+impl Template {
+    /// The pose turned over: rotated half a turn about the tool's long axis through the blade's
+    /// centre (spine and cutting edge swapped, the plane kept).
+    pub fn turned_over(&self, pose: &nalgebra::Isometry3<f64>) -> nalgebra::Isometry3<f64> {
+        let axis = (self.tip - self.body_or_blade_centre()).normalize();
+        let half_turn = nalgebra::UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
+        let c = self.blade_centre.coords;
+        let about_centre = nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(c - half_turn * c), half_turn);
+        pose * about_centre
+    }
+
+    /// Centre of the body's vertices, or of the blade for a bare blade.
+    pub fn body_or_blade_centre(&self) -> Point3<f64> {
+        if self.body.is_empty() {
+            return self.blade_centre;
+        }
+        Point3::from(self.body.iter().map(|p| p.coords).sum::<Vector3<f64>>() / self.body.len() as f64)
+    }
+}
+
+/// A grid of points inside a convex polygon, about [`INTERIOR_TARGET`] of them.
+fn blade_interior(polygon: &[Point2<f64>]) -> Vec<Point2<f64>> {
+    let (lo, hi) = bounds2(polygon);
+    let area = polygon_area(polygon).abs();
+    let spacing = (area / INTERIOR_TARGET as f64).sqrt();
+    let mut out = Vec::new();
+    let mut y = lo.y + spacing / 2.0;
+    while y < hi.y {
+        let mut x = lo.x + spacing / 2.0;
+        while x < hi.x {
+            let q = Point2::new(x, y);
+            if inside_polygon(polygon, &q) {
+                out.push(q);
+            }
+            x += spacing;
+        }
+        y += spacing;
+    }
+    out
+}
+
+/// A grid of points inside the tool mesh but off the blade (the body), about
+/// [`INTERIOR_TARGET`] of them.
+fn body_interior(tool: &ToolGeometry, body: &[Point3<f64>]) -> Vec<Point3<f64>> {
+    if body.is_empty() {
+        return Vec::new();
+    }
+    let mut lo = body[0];
+    let mut hi = body[0];
+    for p in body {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let volume = (hi - lo).iter().map(|d| d.max(1e-4)).product::<f64>();
+    let spacing = (volume / INTERIOR_TARGET as f64).cbrt();
+    let steps = (hi - lo).map(|d| ((d / spacing).round() as usize).max(1));
+    let mut out = Vec::new();
+    for i in 0..steps.x {
+        for j in 0..steps.y {
+            for k in 0..steps.z {
+                let f = Vector3::new(
+                    (i as f64 + 0.5) / steps.x as f64,
+                    (j as f64 + 0.5) / steps.y as f64,
+                    (k as f64 + 0.5) / steps.z as f64,
+                );
+                let p = lo + (hi - lo).component_mul(&f);
+                if winding_number(&tool.mesh, &p) > 0.5 {
+                    out.push(p);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn bounds2(points: &[Point2<f64>]) -> (Point2<f64>, Point2<f64>) {
+    let mut lo = Point2::new(f64::MAX, f64::MAX);
+    let mut hi = Point2::new(f64::MIN, f64::MIN);
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    (lo, hi)
+}
+
+/// Signed area (positive for counter-clockwise).
+pub(crate) fn polygon_area(polygon: &[Point2<f64>]) -> f64 {
+    let n = polygon.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+            a.x * b.y - b.x * a.y
+        })
+        .sum::<f64>()
+        / 2.0
+}
+
+/// Whether a point is inside a convex polygon of either orientation (boundary included).
+pub(crate) fn inside_polygon(polygon: &[Point2<f64>], q: &Point2<f64>) -> bool {
+    let n = polygon.len();
+    let mut sign = 0.0f64;
+    for i in 0..n {
+        let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+        let c = (b - a).perp(&(q - a));
+        if c != 0.0 {
+            if sign != 0.0 && c.signum() != sign {
+                return false;
+            }
+            sign = c.signum();
+        }
+    }
+    true
+}
+
+/// Extent along the first principal axis.
+fn principal_length(points: &[Point3<f64>]) -> f64 {
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n;
+    let mut cov = nalgebra::Matrix3::zeros();
+    for p in points {
+        let d = p.coords - mean;
+        cov += d * d.transpose();
+    }
+    let eig = nalgebra::SymmetricEigen::new(cov);
+    let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    let (mut lo, mut hi) = (f64::MAX, f64::MIN);
+    for p in points {
+        let s = (p.coords - mean).dot(&axis);
+        lo = lo.min(s);
+        hi = hi.max(s);
+    }
+    hi - lo
+}

@@ -1,0 +1,467 @@
+//! Tracking the blade frame by frame: start from the hull or from the track's prediction, fit
+//! the template, judge the fit, filter trusted poses, hold the last trusted one for a bounded
+//! time when a frame is refused.
+
+use hullcut_dataset::label;
+use hullcut_hull::Occupancy;
+use hullcut_rig::Camera;
+use image::GrayImage;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::evidence::ViewEvidence;
+use crate::filter::{OneEuro, OneEuroParams};
+use crate::fit::{Fit, cost, fit, moved};
+use crate::init::{HullSummary, candidates, summarize};
+use crate::template::Template;
+
+/// Region of interest around the hull and the prediction, pixels.
+const ROI_MARGIN_PX: f64 = 12.0;
+/// A second scalpel component this large against the largest makes the hull ambiguous (the
+/// hand hides much of a held scalpel, so a loose one can be several times larger).
+const SECOND_COMPONENT: f64 = 0.15;
+/// Starting poses kept for a full fit when starting from the hull alone.
+const STARTS_FITTED: usize = 4;
+
+/// Settings of the tracker.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerParams {
+    /// Frames with a lower confidence are refused.
+    pub min_confidence: f64,
+    /// How long the last trusted pose is held after it, seconds.
+    pub hold_s: f64,
+    /// Faster tip motion between trusted frames is an implausible jump, m/s.
+    pub max_speed_m_s: f64,
+    /// Faster rotation between trusted frames is an implausible jump, rad/s.
+    pub max_angular_speed_rad_s: f64,
+    /// A view closer than this to edge-on (angle between its line of sight and the blade
+    /// plane) does not count as seeing the blade's face, degrees.
+    pub edge_on_deg: f64,
+    /// A view where less than this fraction of the blade lands on scalpel pixels has it hidden.
+    pub min_visible_fraction: f64,
+    /// Scalpel leaves at which the leaf count stops lowering the confidence.
+    pub full_leaves: usize,
+    /// Levenberg–Marquardt iterations per fit.
+    pub max_iterations: usize,
+    /// The pose filter.
+    pub filter: OneEuroParams,
+}
+
+impl Default for TrackerParams {
+    fn default() -> Self {
+        TrackerParams {
+            min_confidence: 0.5,
+            hold_s: 0.5,
+            max_speed_m_s: 1.5,
+            max_angular_speed_rad_s: 20.0,
+            edge_on_deg: 10.0,
+            min_visible_fraction: 0.5,
+            full_leaves: 12,
+            max_iterations: 12,
+            filter: OneEuroParams::default(),
+        }
+    }
+}
+
+/// The blade's pose in world metres, in the form the simulator and `poses.jsonl` use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BladePose {
+    /// Tool → world.
+    pub tool_to_world: Isometry3<f64>,
+    /// A point on the blade plane (the blade's centre).
+    pub plane_point: Point3<f64>,
+    /// Unit normal of the blade plane.
+    pub plane_normal: Vector3<f64>,
+    /// Cutting edge, tip to heel.
+    pub edge: Vec<Point3<f64>>,
+    /// Tip.
+    pub tip: Point3<f64>,
+}
+
+impl BladePose {
+    /// The template placed by a tool → world transform.
+    pub fn new(template: &Template, tool_to_world: Isometry3<f64>) -> Self {
+        BladePose {
+            tool_to_world,
+            plane_point: tool_to_world * template.blade_centre,
+            plane_normal: tool_to_world * template.normal,
+            edge: template.edge.iter().map(|p| tool_to_world * p).collect(),
+            tip: tool_to_world * template.tip,
+        }
+    }
+
+    /// Whether every number is finite.
+    pub fn is_finite(&self) -> bool {
+        let finite = |p: &Point3<f64>| p.coords.iter().all(|c| c.is_finite());
+        finite(&self.plane_point)
+            && self.plane_normal.iter().all(|c| c.is_finite())
+            && self.edge.iter().all(finite)
+            && finite(&self.tip)
+            && self.tool_to_world.to_homogeneous().iter().all(|c| c.is_finite())
+    }
+}
+
+/// One camera's input: its calibration and its label mask.
+#[derive(Debug, Clone, Copy)]
+pub struct ViewInput<'a> {
+    /// The camera.
+    pub camera: &'a Camera,
+    /// Its label mask (0 background, 1 hand, 2 scalpel, 255 unknown).
+    pub mask: &'a GrayImage,
+}
+
+/// How a frame's estimate came about.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Diagnostics {
+    /// Views with a mask.
+    pub views_used: usize,
+    /// Views that see the blade's face (neither edge-on nor hidden).
+    pub views_seen: usize,
+    /// Views that see the blade within `edge_on_deg` of edge-on.
+    pub views_edge_on: usize,
+    /// Views where the hand hides the blade.
+    pub views_hidden: usize,
+    /// Scalpel leaves in the hull's largest scalpel component.
+    pub scalpel_leaves: usize,
+    /// Connected components of scalpel leaves.
+    pub components: usize,
+    /// Fraction of sampled scalpel pixels the fitted tool explains.
+    pub explained: f64,
+    /// Fraction of the fitted tool's interior that lands on foreground.
+    pub covered: f64,
+    /// RMS of the fit's residuals, pixels.
+    pub fit_rms_px: f64,
+    /// Levenberg–Marquardt iterations.
+    pub iterations: usize,
+    /// Started from the hull (no track, or the track's prediction fitted worse).
+    pub from_hull: bool,
+    /// Tip speed implied by the step from the last trusted pose, m/s.
+    pub speed_m_s: f64,
+    /// Angular speed implied by that step, rad/s.
+    pub angular_speed_rad_s: f64,
+    /// Time spent on the views' evidence (regions, distance transforms, outline samples), ms.
+    pub evidence_ms: f64,
+    /// Time spent fitting, ms.
+    pub fit_ms: f64,
+}
+
+/// The tracker's answer for one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseEstimate {
+    /// Frame number.
+    pub frame: u64,
+    /// Frame-set time, nanoseconds.
+    pub timestamp_ns: i64,
+    /// Whether this frame's pose is trusted (the simulator may cut with it).
+    pub valid: bool,
+    /// Whether `pose` is the last trusted pose held over a refused frame.
+    pub held: bool,
+    /// Confidence in [0, 1].
+    pub confidence: f64,
+    /// The trusted pose (filtered), or the held one; `None` for a refused frame with nothing held.
+    pub pose: Option<BladePose>,
+    /// This frame's raw fit, trusted or not (for diagnostics and logging).
+    pub fitted: Option<BladePose>,
+    /// Why the frame was refused.
+    pub reason: Option<String>,
+    /// How the estimate came about.
+    pub diagnostics: Diagnostics,
+}
+
+/// Tracks the blade over the frames of one sequence.
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    template: Template,
+    params: TrackerParams,
+    filter: OneEuro,
+    /// Time (s) and filtered pose of the last trusted frame.
+    trusted: Option<(f64, Isometry3<f64>)>,
+    /// Lens radii per view index (a root search, done once).
+    radii: Vec<Option<f64>>,
+}
+
+fn ramp(x: f64, lo: f64, hi: f64) -> f64 {
+    ((x - lo) / (hi - lo)).clamp(0.0, 1.0)
+}
+
+impl Tracker {
+    /// A tracker for a tool.
+    pub fn new(template: Template, params: TrackerParams) -> Self {
+        let filter = OneEuro::new(params.filter);
+        Tracker { template, params, filter, trusted: None, radii: Vec::new() }
+    }
+
+    /// The template.
+    pub fn template(&self) -> &Template {
+        &self.template
+    }
+
+    /// Estimates the blade's pose in one frame set from its hull and its views (one entry per
+    /// rig camera, `None` where the view is missing).
+    pub fn update(
+        &mut self,
+        frame: u64,
+        timestamp_ns: i64,
+        occ: &Occupancy,
+        views: &[Option<ViewInput>],
+    ) -> PoseEstimate {
+        let time_s = timestamp_ns as f64 * 1e-9;
+        if let Some((t, _)) = self.trusted
+            && !(time_s > t && time_s - t <= self.params.hold_s)
+        {
+            // Too long without a trusted pose (or time went backwards): start afresh.
+            self.trusted = None;
+            self.filter.reset();
+        }
+        let mut diag = Diagnostics { views_used: views.iter().flatten().count(), ..Diagnostics::default() };
+        let summary = summarize(occ, self.template.length);
+        let fitted = match self.judge_hull(summary.as_ref()) {
+            Err(reason) => return self.refuse(frame, timestamp_ns, 0.0, None, reason, diag),
+            Ok(hull) => {
+                diag.scalpel_leaves = hull.leaves;
+                diag.components = hull.components;
+                self.fit_frame(time_s, hull, views, &mut diag)
+            }
+        };
+        let Some((fitted, confidence, reason)) = fitted else {
+            return self.refuse(frame, timestamp_ns, 0.0, None, "no view sees the scalpel's region".to_owned(), diag);
+        };
+        let raw = BladePose::new(&self.template, fitted.pose);
+        if !raw.is_finite() {
+            return self.refuse(frame, timestamp_ns, 0.0, None, "the fit gave a non-finite pose".to_owned(), diag);
+        }
+        if let Some(reason) = reason {
+            return self.refuse(frame, timestamp_ns, confidence, Some(raw), reason, diag);
+        }
+        let centre = fitted.pose * self.template.blade_centre;
+        let (p, r) = self.filter.update(time_s, centre, fitted.pose.rotation);
+        let filtered = Isometry3::from_parts(Translation3::from(p.coords - r * self.template.blade_centre.coords), r);
+        self.trusted = Some((time_s, filtered));
+        PoseEstimate {
+            frame,
+            timestamp_ns,
+            valid: true,
+            held: false,
+            confidence,
+            pose: Some(BladePose::new(&self.template, filtered)),
+            fitted: Some(raw),
+            reason: None,
+            diagnostics: diag,
+        }
+    }
+
+    /// Refuses a hull that cannot hold this tool.
+    fn judge_hull<'h>(&self, summary: Option<&'h HullSummary>) -> Result<&'h HullSummary, String> {
+        let Some(hull) = summary else { return Err("no scalpel leaves in the hull".to_owned()) };
+        let second = hull.second_fraction * hull.leaves as f64;
+        if hull.components > 1 && hull.second_fraction >= SECOND_COMPONENT && second >= self.params.full_leaves as f64 {
+            return Err(format!(
+                "two scalpel-like components in the hull ({} leaves and {:.0}% of that)",
+                hull.leaves,
+                hull.second_fraction * 100.0
+            ));
+        }
+        let extent = hull.span.1 - hull.span.0;
+        let length = self.template.length;
+        if length > 2.5 * extent + 0.05 || extent > 2.0 * length + 0.02 {
+            return Err(format!(
+                "the tool does not match the hull: tool.json's tool is {length:.3} m long, the scalpel hull {extent:.3} m"
+            ));
+        }
+        Ok(hull)
+    }
+
+    /// Fits the frame; returns the fit, its confidence and the reason it is refused (if so).
+    fn fit_frame(
+        &mut self,
+        time_s: f64,
+        hull: &HullSummary,
+        views: &[Option<ViewInput>],
+        diag: &mut Diagnostics,
+    ) -> Option<(Fit, f64, Option<String>)> {
+        let prediction = self.predict(time_s);
+        let (lo, hi) = hull.bounds;
+        let pad = Vector3::repeat(0.03);
+        let mut around: Vec<Point3<f64>> = (0..8)
+            .map(|k| {
+                Point3::new(
+                    if k & 1 == 0 { lo.x - pad.x } else { hi.x + pad.x },
+                    if k & 2 == 0 { lo.y - pad.y } else { hi.y + pad.y },
+                    if k & 4 == 0 { lo.z - pad.z } else { hi.z + pad.z },
+                )
+            })
+            .collect();
+        if let Some(pred) = &prediction {
+            around.extend(self.template.blade.iter().chain(&self.template.body).map(|p| pred * p));
+        }
+        if self.radii.len() < views.len() {
+            self.radii.resize(views.len(), None);
+        }
+        let clock = std::time::Instant::now();
+        let mut evidence = Vec::new();
+        for (k, v) in views.iter().enumerate() {
+            let Some(v) = v else { continue };
+            let radius = *self.radii[k].get_or_insert_with(|| v.camera.distortion.monotonic_radius());
+            if let Some(e) = ViewEvidence::new(v.camera, radius, v.mask, &around, ROI_MARGIN_PX) {
+                evidence.push(e);
+            }
+        }
+        if evidence.is_empty() {
+            return None;
+        }
+        diag.evidence_ms = clock.elapsed().as_secs_f64() * 1e3;
+        let clock = std::time::Instant::now();
+        let it = self.params.max_iterations;
+        let tracked = prediction.map(|p| fit(&self.template, &evidence, &p, it));
+        let good = |f: &Fit| f.explained >= 0.98 && f.covered >= 0.98;
+        let best = match tracked {
+            Some(f) if good(&f) => f,
+            _ => {
+                diag.from_hull = true;
+                let mut starts: Vec<(f64, Isometry3<f64>)> = candidates(&self.template, hull)
+                    .into_iter()
+                    .map(|s| (cost(&self.template, &evidence, &s), s))
+                    .collect();
+                starts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let best = starts
+                    .iter()
+                    .take(STARTS_FITTED)
+                    .map(|(_, s)| fit(&self.template, &evidence, s, 3 * it))
+                    .chain(tracked)
+                    .min_by(|a, b| a.cost.total_cmp(&b.cost))?;
+                // The blade's silhouette nearly repeats itself turned over about its long axis
+                // (spine and edge swapped): fit that twin too and keep the better.
+                let twin = fit(&self.template, &evidence, &self.template.turned_over(&best.pose), 3 * it);
+                if twin.cost < best.cost { twin } else { best }
+            }
+        };
+        diag.fit_ms = clock.elapsed().as_secs_f64() * 1e3;
+        diag.explained = best.explained;
+        diag.covered = best.covered;
+        diag.fit_rms_px = best.rms_px;
+        diag.iterations = best.iterations;
+        self.look(&best.pose, &evidence, diag);
+        let (confidence, reason) = self.confidence(time_s, &best, hull, diag);
+        Some((best, confidence, reason))
+    }
+
+    /// Constant-velocity prediction from the last trusted pose.
+    fn predict(&self, time_s: f64) -> Option<Isometry3<f64>> {
+        let (t, pose) = self.trusted?;
+        let dt = time_s - t;
+        let (v, w) = self.filter.velocity().unwrap_or((Vector3::zeros(), Vector3::zeros()));
+        let centre = pose * self.template.blade_centre;
+        Some(moved(&pose, &centre, &(w * dt), &(v * dt)))
+    }
+
+    /// Per-view look at the fitted blade: edge-on, hidden by the hand, or seen.
+    fn look(&self, pose: &Isometry3<f64>, views: &[ViewEvidence], diag: &mut Diagnostics) {
+        let centre = pose * self.template.blade_centre;
+        let normal = pose * self.template.normal;
+        let sin_edge = self.params.edge_on_deg.to_radians().sin();
+        for v in views {
+            let sight = (centre - v.camera.centre()).normalize();
+            if normal.dot(&sight).abs() < sin_edge {
+                diag.views_edge_on += 1;
+                continue;
+            }
+            let (mut inside, mut scalpel) = (0usize, 0usize);
+            for p in &self.template.interior[..self.template.blade_interior] {
+                if let Some(l) = v.project(&(pose * p)).and_then(|uv| v.label_at(&uv)) {
+                    inside += 1;
+                    scalpel += usize::from(l == label::SCALPEL);
+                }
+            }
+            if inside == 0 || (scalpel as f64) < self.params.min_visible_fraction * inside as f64 {
+                diag.views_hidden += 1;
+            } else {
+                diag.views_seen += 1;
+            }
+        }
+    }
+
+    /// Confidence of a fit and, below the threshold, the reason (the weakest factor).
+    fn confidence(&self, time_s: f64, f: &Fit, hull: &HullSummary, diag: &mut Diagnostics) -> (f64, Option<String>) {
+        let agreement = f.explained.min(f.covered);
+        let factors = [
+            (
+                ramp(agreement, 0.94, 0.98),
+                format!(
+                    "the fitted tool disagrees with the silhouettes (explains {:.0}% of the scalpel pixels, {:.0}% of it lands on foreground)",
+                    f.explained * 100.0,
+                    f.covered * 100.0
+                ),
+            ),
+            (
+                ramp(diag.views_seen as f64, 1.0, 2.5),
+                format!(
+                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, of {}",
+                    diag.views_seen, diag.views_edge_on, diag.views_hidden, diag.views_used
+                ),
+            ),
+            (
+                ramp(hull.leaves as f64, 1.0, self.params.full_leaves as f64),
+                format!("too few scalpel leaves in the hull ({})", hull.leaves),
+            ),
+            self.jump(time_s, &f.pose, diag),
+        ];
+        let confidence = factors.iter().map(|(c, _)| c).product::<f64>();
+        if confidence >= self.params.min_confidence {
+            return (confidence, None);
+        }
+        let weakest = factors.into_iter().min_by(|a, b| a.0.total_cmp(&b.0)).map(|(_, r)| r);
+        (confidence, weakest)
+    }
+
+    /// 1 for a plausible step from the last trusted pose, 0 for a jump.
+    fn jump(&self, time_s: f64, pose: &Isometry3<f64>, diag: &mut Diagnostics) -> (f64, String) {
+        let Some((t, last)) = self.trusted else { return (1.0, String::new()) };
+        let dt = (time_s - t).max(1e-6);
+        let tip = (pose * self.template.tip - last * self.template.tip).norm();
+        let angle = (pose.rotation * last.rotation.inverse()).angle();
+        diag.speed_m_s = tip / dt;
+        diag.angular_speed_rad_s = angle / dt;
+        let plausible = diag.speed_m_s <= self.params.max_speed_m_s
+            && diag.angular_speed_rad_s <= self.params.max_angular_speed_rad_s;
+        (
+            if plausible { 1.0 } else { 0.0 },
+            format!(
+                "implausible jump from the last trusted pose ({:.2} m/s at the tip, {:.1} rad/s)",
+                diag.speed_m_s, diag.angular_speed_rad_s
+            ),
+        )
+    }
+
+    fn refuse(
+        &mut self,
+        frame: u64,
+        timestamp_ns: i64,
+        confidence: f64,
+        fitted: Option<BladePose>,
+        reason: String,
+        diagnostics: Diagnostics,
+    ) -> PoseEstimate {
+        let held = self.trusted.map(|(_, pose)| BladePose::new(&self.template, pose));
+        PoseEstimate {
+            frame,
+            timestamp_ns,
+            valid: false,
+            held: held.is_some(),
+            confidence: if confidence.is_finite() { confidence.clamp(0.0, 1.0) } else { 0.0 },
+            pose: held,
+            fitted,
+            reason: Some(reason),
+            diagnostics,
+        }
+    }
+}
+
+/// The rotation and translation of a 4x4 homogeneous tool → world matrix, if it is one.
+pub fn isometry_from_matrix(m: &nalgebra::Matrix4<f64>) -> Option<Isometry3<f64>> {
+    if !m.iter().all(|c| c.is_finite()) {
+        return None;
+    }
+    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let rot = nalgebra::Rotation3::from_matrix_eps(&r, 1e-9, 100, nalgebra::Rotation3::identity());
+    let t = Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
+    Some(Isometry3::from_parts(t, UnitQuaternion::from_rotation_matrix(&rot)))
+}
