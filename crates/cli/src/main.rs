@@ -7,6 +7,7 @@ mod chart;
 mod commands;
 mod frames;
 mod logging;
+mod pose_out;
 mod progress;
 mod report;
 

@@ -222,9 +222,22 @@ fn bench_hull_quick_compares_octree_and_dense_grid() {
         let tests = |r: &Vec<&str>| r[4].parse::<u64>().expect("tests");
         assert!(tests(octree) < tests(dense), "{octree:?} vs {dense:?}");
     }
-    for name in ["hull_speed.png", "hull_accuracy.png"] {
-        assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"));
+    for name in ["hull_speed.png", "hull_accuracy.png", "hull_robustness_noise.png", "hull_robustness_cameras.png"] {
+        assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
     }
+    // Robustness: the clean classic hull against itself is 1; noise and fewer cameras only lower it.
+    let csv = std::fs::read_to_string(dir.path().join("hull_robustness.csv")).expect("csv");
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let iou = |experiment: &str, votes: &str| -> Vec<f64> {
+        rows.iter().filter(|r| r[0] == experiment && r[1] == votes).map(|r| r[6].parse().expect("iou")).collect()
+    };
+    let noise = iou("noise", "1");
+    assert_eq!(noise.len(), 5, "{csv}");
+    assert_eq!(noise[0], 1.0, "{csv}");
+    assert!(noise.windows(2).all(|w| w[1] <= w[0]), "{noise:?}");
+    let cameras = iou("cameras", "1");
+    assert_eq!((cameras.len(), cameras[4]), (5, 1.0), "{csv}");
+    assert!(cameras.windows(2).all(|w| w[1] >= w[0]), "{cameras:?}");
 }
 
 #[test]
@@ -361,4 +374,248 @@ fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report
     assert!(stderr(&bad).contains("20:30") && stderr(&bad).contains("9 frames"), "{}", stderr(&bad));
     let bad = hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&out), "--masks", "magic"]);
     assert!(stderr(&bad).contains("magic"));
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("read_dir").flatten() {
+        let target = to.join(entry.file_name());
+        if entry.path().is_dir() {
+            copy_tree(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).expect("copy");
+        }
+    }
+}
+
+fn pose_lines(out: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(out.join("poses.jsonl"))
+        .expect("poses.jsonl")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON line"))
+        .collect()
+}
+
+#[test]
+fn reconstruct_writes_one_pose_line_per_frame_as_the_contract_says() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dataset = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small"));
+    let (out, report) = (dir.path().join("rec"), dir.path().join("rec.json"));
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let args = |ds: &Path| {
+        ["reconstruct", "--dataset", &path(ds), "--out", &path(&out), "--masks", "files", "--accuracy-every", "9"]
+            .map(str::to_owned)
+    };
+    let mut with_report: Vec<String> = args(dataset).to_vec();
+    with_report.extend(["--report".to_owned(), path(&report)]);
+    let o = hullcut(&with_report.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines = pose_lines(&out);
+    assert_eq!(lines.len(), 9);
+    for (k, l) in lines.iter().enumerate() {
+        assert_eq!(l["frame"], k as u64);
+        // Measured on cut-small (320x240, truth masks): all 9 trusted, 1.26° and 0.95 mm mean.
+        assert_eq!(l["valid"], true, "{l}");
+        assert_eq!(l["held"], false);
+        let c = l["confidence"].as_f64().expect("confidence");
+        assert!((0.0..=1.0).contains(&c));
+        let n: Vec<f64> = serde_json::from_value(l["plane_normal"].clone()).expect("normal");
+        assert!((n.iter().map(|x| x * x).sum::<f64>().sqrt() - 1.0).abs() < 1e-9);
+        let edge: Vec<[f64; 3]> = serde_json::from_value(l["edge"].clone()).expect("edge");
+        assert!(edge.len() >= 2);
+        let tip: [f64; 3] = serde_json::from_value(l["tip"].clone()).expect("tip");
+        assert_eq!(tip, edge[0], "the edge runs from the tip");
+        let _: [f64; 3] = serde_json::from_value(l["plane_point"].clone()).expect("plane point");
+    }
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    let p = &r["pose"];
+    assert_eq!(
+        (p["frames"].as_u64(), p["valid_frames"].as_u64(), p["trusted_wrong"].as_u64()),
+        (Some(9), Some(9), Some(0))
+    );
+    assert!(p["tip_mm"]["mean"].as_f64().expect("tip error") < 2.0, "{p}");
+    assert!(p["normal_deg"]["mean"].as_f64().expect("normal error") < 2.5, "{p}");
+    assert_eq!(p["per_frame"].as_array().expect("per frame").len(), 9);
+    assert!(r["timings"]["pose"]["count"].as_u64() == Some(9));
+
+    // Without tool.json every frame is refused with its reason, and no pose fields are written.
+    let bare = dir.path().join("bare");
+    copy_tree(dataset, &bare);
+    std::fs::remove_file(bare.join("tool.json")).expect("rm tool.json");
+    let o = hullcut(&args(&bare).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    for l in pose_lines(&out) {
+        assert_eq!((&l["valid"], &l["held"]), (&serde_json::json!(false), &serde_json::json!(false)));
+        assert!(l.get("tip").is_none() && l.get("edge").is_none(), "{l}");
+        assert!(l["reason"].as_str().expect("reason").contains("tool.json"), "{l}");
+    }
+}
+
+const CUT_SMALL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+
+/// A copy of datasets/cut-small under `dir`, to corrupt (the shipped dataset is never touched).
+fn cut_small_copy(dir: &Path) -> PathBuf {
+    let ds = dir.join("cut-small");
+    copy_tree(Path::new(CUT_SMALL), &ds);
+    ds
+}
+
+/// `hullcut reconstruct` of one frame from the masks, into `dir/rec`.
+fn reconstruct_frame(dataset: &Path, dir: &Path, extra: &[&str]) -> Output {
+    let (ds, out) = (dataset.to_str().expect("utf-8"), dir.join("rec"));
+    let args = ["reconstruct", "--dataset", ds, "--out", out.to_str().expect("utf-8"), "--frames", "1:2"];
+    hullcut(&[&args[..], &["--masks", "files"], extra].concat())
+}
+
+#[test]
+fn reconstruct_refuses_a_voxel_of_zero_or_beyond_the_workspace() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for voxel in ["0", "-0.01", "0.5", "NaN"] {
+        let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &[&format!("--voxel={voxel}")]);
+        assert_eq!(o.status.code(), Some(1), "--voxel {voxel}");
+        let e = stderr(&o);
+        assert!(e.contains(&format!("--voxel {voxel}")) && e.contains("0.4 m"), "--voxel {voxel}: {e}");
+    }
+    // The whole workspace as one leaf is allowed.
+    let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &["--voxel", "0.4"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn reconstruct_names_a_mask_with_a_label_it_does_not_know() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    let path = ds.join("masks/cam3/000001.png");
+    let mut mask = image::open(&path).expect("mask").into_luma8();
+    mask.put_pixel(17, 5, image::Luma([7]));
+    mask.save(&path).expect("save");
+    let o = reconstruct_frame(&ds, dir.path(), &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains(path.to_str().expect("utf-8")) && e.contains("cam3"), "{e}");
+    assert!(e.contains("(17, 5) holds 7") && e.contains("1 pixels"), "{e}");
+}
+
+#[test]
+fn reconstruct_names_a_mask_of_the_wrong_size() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    let path = ds.join("masks/cam2/000001.png");
+    image::GrayImage::new(160, 120).save(&path).expect("save");
+    let o = reconstruct_frame(&ds, dir.path(), &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains(path.to_str().expect("utf-8")) && e.contains("160x120") && e.contains("cam2"), "{e}");
+}
+
+#[test]
+fn reconstruct_names_a_rig_that_does_not_match_the_dataset() {
+    // reconstruct has no --rig flag: the rig is the dataset's rig.yaml, checked by Dataset::open.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    let rig = ds.join("rig.yaml");
+    let text = std::fs::read_to_string(&rig).expect("rig.yaml");
+    let renamed = text.replace("name: \"cam5\"", "name: \"cam9\"");
+    let start = text.find("camera_5:").expect("camera_5");
+    let removed = text[..start].replace("camera_count: 6", "camera_count: 5");
+    for (broken, needle) in [(renamed, "cam9"), (removed, "(5 cameras)")] {
+        std::fs::write(&rig, broken).expect("write");
+        let o = reconstruct_frame(&ds, dir.path(), &[]);
+        assert_eq!(o.status.code(), Some(1), "{needle}");
+        let e = stderr(&o);
+        assert!(e.contains(rig.to_str().expect("utf-8")) && e.contains(needle), "{needle}: {e}");
+    }
+}
+
+/// Sets to background every foreground pixel with a background pixel among its 8 neighbours.
+fn erode_one_pixel(mask: &image::GrayImage) -> image::GrayImage {
+    let (w, h) = (mask.width() as i64, mask.height() as i64);
+    let background =
+        |x: i64, y: i64| (0..w).contains(&x) && (0..h).contains(&y) && mask[(x as u32, y as u32)].0[0] == 0;
+    let mut out = mask.clone();
+    for y in 0..h {
+        for x in 0..w {
+            if (-1..=1).any(|dy| (-1..=1).any(|dx| background(x + dx, y + dy))) {
+                out.put_pixel(x as u32, y as u32, image::Luma([0]));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn reconstruct_names_the_camera_whose_masks_disagree() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    let report_of = |name: &str| -> serde_json::Value {
+        let report = dir.path().join(format!("{name}.json"));
+        let out = dir.path().join(name);
+        let o = hullcut(&[
+            "reconstruct",
+            "--dataset",
+            ds.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--frames",
+            "0:2",
+            "--masks",
+            "files",
+            "--accuracy-every",
+            "100",
+            "--report",
+            report.to_str().expect("utf-8"),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json")
+    };
+    let clean = report_of("clean");
+    let d = &clean["view_disagreement"];
+    let cameras: Vec<&str> = d["lone_refutations"]
+        .as_array()
+        .expect("per camera")
+        .iter()
+        .map(|c| c["camera"].as_str().expect("name"))
+        .collect();
+    assert_eq!(cameras, ["cam0", "cam1", "cam2", "cam3", "cam4", "cam5"]);
+    assert!(
+        d["lone_refutations"].as_array().expect("per camera").iter().all(|c| c["cells"].as_u64().expect("cells") > 0)
+    );
+    // On clean masks every camera refutes some cells alone, the most about twice the median
+    // (measured 1.9, cam2, frames 0-1).
+    let clean_ratio = d["most_over_median"].as_f64().expect("ratio");
+    assert!(clean_ratio < 2.5, "{d}");
+
+    // cam4's segmentation misses the outline: one pixel less all round, in every frame.
+    for frame in 0..2 {
+        let path = ds.join(format!("masks/cam4/{frame:06}.png"));
+        let mask = image::open(&path).expect("mask").into_luma8();
+        erode_one_pixel(&mask).save(&path).expect("save");
+    }
+    let eroded = report_of("eroded");
+    let d = &eroded["view_disagreement"];
+    assert_eq!(d["disagreed_most"], "cam4", "{d}");
+    // Measured 3.6x the median (frames 0-1; 3.4x over all nine frames, 6.7x eroded by 2 px).
+    let ratio = d["most_over_median"].as_f64().expect("ratio");
+    assert!(ratio > 2.8, "{d}");
+}
+
+#[test]
+fn bench_pose_quick_writes_errors_refusals_and_charts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "pose", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.path().join("pose.csv")).expect("csv");
+    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    for r in &rows {
+        // Truth masks, six views: never a trusted pose off by 5° or 5 mm.
+        assert_eq!(r[col("trusted_wrong")], "0", "{r:?}");
+    }
+    let six_views = rows.iter().find(|r| r[0] == "cameras" && r[col("cameras")] == "6").expect("six-camera row");
+    assert_eq!(six_views[col("invalid_rate")], "0.0000");
+    assert!(six_views[col("tip_mm_mean")].parse::<f64>().expect("tip") < 1.0, "{six_views:?}");
+    for name in ["pose_leaf.png", "pose_time.png", "pose_cameras.png", "pose_noise.png", "pose_invalid.png"] {
+        assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
+    }
 }

@@ -188,6 +188,37 @@ pub fn grid_iou(a: &DenseGrid, b: &DenseGrid, samples: usize) -> Option<f64> {
     (either > 0).then(|| both as f64 / either as f64)
 }
 
+/// IoU of two carvings of the same cube at the same leaf size (same `origin` and `resolution`),
+/// counted exactly leaf by leaf: the kept cells carrying the label (every kept cell for `None`),
+/// larger cells as the leaves they cover. None when the grids differ or both are empty.
+pub fn occupancy_iou(a: &crate::Occupancy, b: &crate::Occupancy, l: Option<u8>) -> Option<f64> {
+    if a.resolution != b.resolution || a.origin != b.origin || a.leaf_size != b.leaf_size {
+        return None;
+    }
+    let n = a.resolution;
+    let leaves = |occ: &crate::Occupancy| {
+        let mut bits = vec![0u64; (n * n * n).div_ceil(64)];
+        for c in occ.cells.iter().filter(|c| l.is_none_or(|l| c.has(l))) {
+            let lo = [0, 1, 2].map(|k| ((c.min[k] - occ.origin[k]) / occ.leaf_size).round() as usize);
+            let span = (c.size / occ.leaf_size).round() as usize;
+            for z in lo[2]..(lo[2] + span).min(n) {
+                for y in lo[1]..(lo[1] + span).min(n) {
+                    for x in lo[0]..(lo[0] + span).min(n) {
+                        let i = x + n * (y + n * z);
+                        bits[i / 64] |= 1 << (i % 64);
+                    }
+                }
+            }
+        }
+        bits
+    };
+    let (x, y) = (leaves(a), leaves(b));
+    let (both, either) = x.iter().zip(&y).fold((0u64, 0u64), |(i, u), (p, q)| {
+        (i + u64::from((p & q).count_ones()), u + u64::from((p | q).count_ones()))
+    });
+    (either > 0).then(|| both as f64 / either as f64)
+}
+
 /// Silhouette consistency of one view: the hull's kept leaves re-projected into the camera
 /// (each leaf as the pixel box around its eight projected corners) against the observed mask's
 /// foreground, as an IoU over pixels. None when both are empty or the view is missing.

@@ -5,7 +5,8 @@
 //!   four lookups); [`silhouettes`] builds them for a rig, checking sizes.
 //! - [`carve`] with [`HullParams`]: octree carving where each cell is tested against its whole
 //!   projected footprint in every view, k-of-N carving, occlusion-aware labels; returns an
-//!   [`Occupancy`] (kept cells with labels, counters).
+//!   [`Occupancy`] (kept cells with labels, counters, among them which view disagreed with all the
+//!   others: [`CarveStats::lone_refutations`]).
 //! - [`DenseGrid`]: one label's occupancy on the leaf grid and its closed surface
 //!   ([`DenseGrid::surface`], surface nets).
 //!

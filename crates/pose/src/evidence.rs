@@ -6,10 +6,13 @@
 use hullcut_dataset::label;
 use hullcut_rig::Camera;
 use image::GrayImage;
-use nalgebra::{Point2, Point3, Vector2};
+use nalgebra::{Matrix2, Matrix2x3, Point2, Point3, Vector2};
+
+/// A pixel's derivative with respect to a twist (rotation then translation), rows u and v.
+pub(crate) type Twist2 = [[f64; 6]; 2];
 
 /// Scalpel pixels kept per view (evenly strided); the fit's cost grows with them.
-const MAX_SAMPLES: usize = 512;
+const MAX_SAMPLES: usize = 192;
 /// Chamfer weights of the 3-4 distance transform (in thirds of a pixel).
 const STRAIGHT: u32 = 3;
 const DIAGONAL: u32 = 4;
@@ -91,23 +94,67 @@ impl<'a> ViewEvidence<'a> {
         project(self.camera, self.radius, p)
     }
 
+    /// World point → pixel and the pixel's derivative with respect to a twist of the tool (a
+    /// rotation `w` about `pivot`, then a translation `v`; columns w then v), or `None` where
+    /// [`ViewEvidence::project`] gives none.
+    pub fn project_with_jacobian(&self, p: &Point3<f64>, pivot: &Point3<f64>) -> Option<(Point2<f64>, Twist2)> {
+        let cam = self.camera;
+        let pc = cam.world_to_camera(p);
+        if pc.z <= 1e-3 {
+            return None;
+        }
+        let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
+        if xn.norm() >= self.radius {
+            return None;
+        }
+        let (xd, jd) = cam.distortion.distort_with_jacobian(xn);
+        let z = pc.z;
+        let dxn = Matrix2x3::new(1.0 / z, 0.0, -pc.x / (z * z), 0.0, 1.0 / z, -pc.y / (z * z));
+        let j_world = Matrix2::new(cam.fx, 0.0, 0.0, cam.fy) * jd * dxn * cam.rotation.matrix();
+        let r = p - pivot;
+        // d p = w × r + v = -[r]× w + v.
+        let j_w = j_world * -r.cross_matrix();
+        let mut j = [[0.0; 6]; 2];
+        for row in 0..2 {
+            for k in 0..3 {
+                j[row][k] = j_w[(row, k)];
+                j[row][k + 3] = j_world[(row, k)];
+            }
+        }
+        Some((cam.normalized_to_pixel(xd), j))
+    }
+
     /// How far a pixel position lies outside the foreground: the distance to the nearest foreground
-    /// pixel centre (bilinear inside the region; outside it, the distance to the region is added
-    /// to its border's value) less one pixel, since a point of the tool may project anywhere short
-    /// of the next background pixel's centre; 0 on foreground.
-    pub fn outside_foreground(&self, uv: &Point2<f64>) -> f64 {
+    /// pixel centre (bilinear inside the region; outside it, 0 on a foreground pixel, else the
+    /// distance to the region added to its border's value) less one pixel, since a point of the tool may project anywhere short
+    /// of the next background pixel's centre; 0 on foreground. With its gradient with respect to
+    /// the pixel position.
+    pub fn outside_foreground_with_gradient(&self, uv: &Point2<f64>) -> (f64, Vector2<f64>) {
         let x = uv.x - self.x0 as f64;
         let y = uv.y - self.y0 as f64;
         let xc = x.clamp(0.0, (self.w - 1) as f64);
         let yc = y.clamp(0.0, (self.h - 1) as f64);
-        let outside = Vector2::new(x - xc, y - yc).norm();
+        let off = Vector2::new(x - xc, y - yc);
+        let outside = off.norm();
+        // Beyond the region (where the hand may hide the tool) the label decides: foreground is
+        // 0, background gets the region border's distance plus the way to it.
+        if outside > 0.0 && self.label_at(uv).is_some_and(|l| l != label::BACKGROUND) {
+            return (0.0, Vector2::zeros());
+        }
         let (i, j) = (xc.floor() as usize, yc.floor() as usize);
         let (i1, j1) = ((i + 1).min(self.w - 1), (j + 1).min(self.h - 1));
         let (fx, fy) = (xc - i as f64, yc - j as f64);
         let at = |i: usize, j: usize| self.dt[j * self.w + i] as f64;
-        let top = at(i, j) * (1.0 - fx) + at(i1, j) * fx;
-        let bottom = at(i, j1) * (1.0 - fx) + at(i1, j1) * fx;
-        (top * (1.0 - fy) + bottom * fy + outside - 1.0).max(0.0)
+        let (a, b, c, d) = (at(i, j), at(i1, j), at(i, j1), at(i1, j1));
+        let value = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy + outside - 1.0;
+        if value <= 0.0 {
+            return (0.0, Vector2::zeros());
+        }
+        let mut g = Vector2::new((b - a) * (1.0 - fy) + (d - c) * fy, (c - a) * (1.0 - fx) + (d - b) * fx);
+        if outside > 0.0 {
+            g += off / outside;
+        }
+        (value, g)
     }
 
     /// Label of the pixel containing `uv`, or `None` outside the image.

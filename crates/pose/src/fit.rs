@@ -13,21 +13,21 @@
 //! its projected width in the views that see it face-on and its line in those that see it
 //! edge-on. Residuals are Huber-weighted (one bad pixel cannot pull far).
 
-use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3, Vector6};
 
-use crate::evidence::ViewEvidence;
-use crate::geometry::{convex_hull, signed_distance_convex};
+use crate::evidence::{Twist2, ViewEvidence};
+use crate::geometry::{convex_hull_indices, nearest_on_convex};
 use crate::template::Template;
 
 /// Huber threshold, pixels.
 const HUBER_PX: f64 = 2.0;
 /// A pixel counts as explained (a point as covered) within this distance, pixels.
 pub(crate) const AGREE_PX: f64 = 1.5;
+/// Steps smaller than these end the fit (radians, metres): a micrometre at the blade's size.
+const MIN_STEP_ROTATION: f64 = 2e-5;
+const MIN_STEP_TRANSLATION: f64 = 1e-6;
 /// Sine of the angle within which a blade counts as edge-on to a view (15 degrees).
 const EDGE_ON_SIN: f64 = 0.2588;
-/// Forward-difference steps: radians, metres.
-const STEP_ROTATION: f64 = 1e-4;
-const STEP_TRANSLATION: f64 = 1e-5;
 
 /// The result of a fit.
 #[derive(Debug, Clone, Copy)]
@@ -69,45 +69,156 @@ fn huber(r: f64) -> f64 {
     if a <= HUBER_PX { r } else { r.signum() * (2.0 * HUBER_PX * a - HUBER_PX * HUBER_PX).sqrt() }
 }
 
+/// The Huber-weighted residual's derivative with respect to the raw one.
+fn huber_slope(r: f64) -> f64 {
+    let a = r.abs();
+    if a <= HUBER_PX { 1.0 } else { HUBER_PX / (2.0 * HUBER_PX * a - HUBER_PX * HUBER_PX).sqrt() }
+}
+
+/// Projected vertices of one part of the tool in one view, with their twist derivatives.
+#[derive(Default)]
+struct Outline {
+    pixels: Vec<Point2<f64>>,
+    jacobians: Vec<Twist2>,
+    hull: Vec<usize>,
+    polygon: Vec<Point2<f64>>,
+}
+
+impl Outline {
+    fn project(&mut self, points: &[Point3<f64>], view: &ViewEvidence, pose: &Isometry3<f64>, pivot: &Point3<f64>) {
+        self.pixels.clear();
+        self.jacobians.clear();
+        for p in points {
+            if let Some((uv, j)) = view.project_with_jacobian(&(pose * p), pivot) {
+                self.pixels.push(uv);
+                self.jacobians.push(j);
+            }
+        }
+        convex_hull_indices(&self.pixels, &mut self.hull);
+        self.polygon.clear();
+        self.polygon.extend(self.hull.iter().map(|&i| self.pixels[i]));
+    }
+
+    /// Signed distance of `q` to the projected part and its twist derivative.
+    fn distance(&self, q: &Point2<f64>) -> Option<(f64, [f64; 6])> {
+        let near = nearest_on_convex(&self.polygon, q)?;
+        let n = self.polygon.len();
+        let (ja, jb) = (&self.jacobians[self.hull[near.edge]], &self.jacobians[self.hull[(near.edge + 1) % n]]);
+        // Moving the nearest boundary point c = a + t (b - a) by dc changes sd by -normal · dc.
+        let mut g = [0.0; 6];
+        for (k, gk) in g.iter_mut().enumerate() {
+            let dc = Vector2::new(
+                (1.0 - near.t) * ja[0][k] + near.t * jb[0][k],
+                (1.0 - near.t) * ja[1][k] + near.t * jb[1][k],
+            );
+            *gk = -near.normal.dot(&dc);
+        }
+        Some((near.sd, g))
+    }
+}
+
 /// Evaluates the residuals of a pose (robust, pixels) into `out` (always the same count for the
-/// same views), returning the raw tally.
-fn residuals(template: &Template, views: &[ViewEvidence], pose: &Isometry3<f64>, out: &mut Vec<f64>) -> Tally {
+/// same views) and, with `jacobian`, their derivatives with respect to a twist about the blade's
+/// centre (one row per residual); returns the raw tally.
+///
+/// The views are split in two halves evaluated on two threads (rayon).
+fn residuals(
+    template: &Template,
+    views: &[ViewEvidence],
+    pose: &Isometry3<f64>,
+    out: &mut Vec<f64>,
+    jacobian: Option<&mut Vec<[f64; 6]>>,
+) -> Tally {
+    let with_jacobian = jacobian.is_some();
+    let part = |views: &[ViewEvidence]| {
+        let (mut r, mut j) = (Vec::new(), Vec::new());
+        let t = residuals_of(template, views, pose, &mut r, with_jacobian.then_some(&mut j));
+        (r, j, t)
+    };
+    let mid = views.len() / 2;
+    let ((r0, j0, t0), (r1, j1, t1)) = rayon::join(|| part(&views[..mid]), || part(&views[mid..]));
     out.clear();
+    out.extend(r0);
+    out.extend(r1);
+    if let Some(j) = jacobian {
+        j.clear();
+        j.extend(j0);
+        j.extend(j1);
+    }
+    Tally {
+        samples: t0.samples + t1.samples,
+        explained: t0.explained + t1.explained,
+        points: t0.points + t1.points,
+        covered: t0.covered + t1.covered,
+        sum_sq: t0.sum_sq + t1.sum_sq,
+    }
+}
+
+/// [`residuals`] of some views, appended to `out` (and `jacobian`) on this thread.
+fn residuals_of(
+    template: &Template,
+    views: &[ViewEvidence],
+    pose: &Isometry3<f64>,
+    out: &mut Vec<f64>,
+    mut jacobian: Option<&mut Vec<[f64; 6]>>,
+) -> Tally {
+    let pivot = pose * template.blade_centre;
     let mut tally = Tally::default();
-    let mut blade_px = Vec::with_capacity(template.blade.len());
-    let mut body_px = Vec::with_capacity(template.body.len());
+    let (mut blade, mut body) = (Outline::default(), Outline::default());
     for view in views {
-        blade_px.clear();
-        body_px.clear();
-        blade_px.extend(template.blade.iter().filter_map(|p| view.project(&(pose * p))));
-        body_px.extend(template.body.iter().filter_map(|p| view.project(&(pose * p))));
-        let blade = convex_hull(&blade_px);
-        let body = convex_hull(&body_px);
+        blade.project(&template.blade, view, pose, &pivot);
+        body.project(&template.body, view, pose, &pivot);
         for s in &view.samples {
-            let sd = signed_distance_convex(&blade, s).min(signed_distance_convex(&body, s));
-            let d = if sd.is_finite() { sd } else { 1e3 };
+            let nearest = match (blade.distance(s), body.distance(s)) {
+                (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
+                (a, b) => a.or(b),
+            };
+            let (d, g) = nearest.unwrap_or((1e3, [0.0; 6]));
             tally.samples += 1;
             tally.explained += usize::from(d.abs() <= AGREE_PX);
             tally.sum_sq += d * d;
             out.push(huber(d));
+            if let Some(j) = jacobian.as_mut() {
+                let slope = huber_slope(d);
+                j.push(g.map(|x| x * slope));
+            }
         }
         // A blade seen nearly edge-on projects thinner than a pixel: its silhouette may be a
         // broken line or nothing, so its interior says nothing about where it is.
-        let sight = (pose * template.blade_centre - view.camera.centre()).normalize();
+        let sight = (pivot - view.camera.centre()).normalize();
         let thin = (pose * template.normal).dot(&sight).abs() < EDGE_ON_SIN;
         for (k, p) in template.interior.iter().enumerate() {
             let skip = thin && k < template.blade_interior;
-            let d = match view.project(&(pose * p)).filter(|_| !skip) {
-                Some(uv) => {
-                    let d = view.outside_foreground(&uv);
-                    tally.points += 1;
-                    tally.covered += usize::from(d <= AGREE_PX);
-                    tally.sum_sq += d * d;
+            if skip {
+                out.push(0.0);
+                if let Some(j) = jacobian.as_mut() {
+                    j.push([0.0; 6]);
+                }
+                continue;
+            }
+            let world = pose * p;
+            let d = match jacobian.as_mut() {
+                None => view.project(&world).map(|uv| view.outside_foreground_with_gradient(&uv).0),
+                Some(j) => {
+                    let projected = view.project_with_jacobian(&world, &pivot);
+                    let (d, g) = match projected {
+                        Some((uv, jp)) => {
+                            let (d, grad) = view.outside_foreground_with_gradient(&uv);
+                            (Some(d), std::array::from_fn(|k| grad.x * jp[0][k] + grad.y * jp[1][k]))
+                        }
+                        None => (None, [0.0; 6]),
+                    };
+                    let slope = huber_slope(d.unwrap_or(0.0));
+                    j.push(g.map(|x: f64| x * slope));
                     d
                 }
-                None => 0.0,
             };
-            out.push(huber(d));
+            if let Some(d) = d {
+                tally.points += 1;
+                tally.covered += usize::from(d <= AGREE_PX);
+                tally.sum_sq += d * d;
+            }
+            out.push(huber(d.unwrap_or(0.0)));
         }
     }
     tally
@@ -120,7 +231,7 @@ fn fraction(k: usize, n: usize) -> f64 {
 /// Cost of a pose without fitting.
 pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3<f64>) -> f64 {
     let mut r = Vec::new();
-    residuals(template, views, pose, &mut r);
+    residuals(template, views, pose, &mut r, None);
     r.iter().map(|x| x * x).sum()
 }
 
@@ -128,37 +239,22 @@ pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3
 pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3<f64>, max_iterations: usize) -> Fit {
     let mut pose = *start;
     let mut r = Vec::new();
-    let mut tally = residuals(template, views, &pose, &mut r);
+    let mut tally = residuals(template, views, &pose, &mut r, None);
     let mut cost: f64 = r.iter().map(|x| x * x).sum();
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let mut rp = Vec::new();
-    let mut jac: Vec<Vec<f64>> = vec![Vec::new(); 6];
+    let mut jac: Vec<[f64; 6]> = Vec::new();
     while iterations < max_iterations && !r.is_empty() {
         iterations += 1;
         let pivot = pose * template.blade_centre;
-        for (k, col) in jac.iter_mut().enumerate() {
-            let mut w = Vector3::zeros();
-            let mut v = Vector3::zeros();
-            let h = if k < 3 { STEP_ROTATION } else { STEP_TRANSLATION };
-            if k < 3 {
-                w[k] = h;
-            } else {
-                v[k - 3] = h;
-            }
-            residuals(template, views, &moved(&pose, &pivot, &w, &v), &mut rp);
-            col.clear();
-            col.extend(rp.iter().zip(&r).map(|(a, b)| (a - b) / h));
-        }
+        residuals(template, views, &pose, &mut rp, Some(&mut jac));
         let mut a = Matrix6::<f64>::zeros();
         let mut g = Vector6::<f64>::zeros();
-        for i in 0..6 {
-            g[i] = jac[i].iter().zip(&r).map(|(j, r)| j * r).sum();
-            for k in i..6 {
-                let s: f64 = jac[i].iter().zip(&jac[k]).map(|(a, b)| a * b).sum();
-                a[(i, k)] = s;
-                a[(k, i)] = s;
-            }
+        for (row, res) in jac.iter().zip(&r) {
+            let row = Vector6::from_row_slice(row);
+            g += row * *res;
+            a += row * row.transpose();
         }
         let mut improved = false;
         for _ in 0..6 {
@@ -173,10 +269,10 @@ pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3
             let w = Vector3::new(step[0], step[1], step[2]);
             let v = Vector3::new(step[3], step[4], step[5]);
             let candidate = moved(&pose, &pivot, &w, &v);
-            let t = residuals(template, views, &candidate, &mut rp);
+            let t = residuals(template, views, &candidate, &mut rp, None);
             let c: f64 = rp.iter().map(|x| x * x).sum();
             if c < cost {
-                let small = w.norm() < 1e-6 && v.norm() < 1e-7;
+                let small = w.norm() < MIN_STEP_ROTATION && v.norm() < MIN_STEP_TRANSLATION;
                 pose = candidate;
                 std::mem::swap(&mut r, &mut rp);
                 tally = t;

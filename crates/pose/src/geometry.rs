@@ -1,46 +1,66 @@
 //! Small 2-D geometry: convex hulls and distances to convex polygons.
 
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector2};
 
 /// Convex hull of points (Andrew's monotone chain), counter-clockwise, without repeated or
 /// collinear points. Fewer than three distinct points give what there is.
 pub(crate) fn convex_hull(points: &[Point2<f64>]) -> Vec<Point2<f64>> {
-    let mut p: Vec<Point2<f64>> = points.iter().copied().filter(|q| q.x.is_finite() && q.y.is_finite()).collect();
-    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
+    let mut order = Vec::new();
+    convex_hull_indices(points, &mut order);
+    order.iter().map(|&i| points[i]).collect()
+}
+
+/// [`convex_hull`] as indices into `points`, written into `hull` (reused between calls).
+pub(crate) fn convex_hull_indices(points: &[Point2<f64>], hull: &mut Vec<usize>) {
+    hull.clear();
+    let mut idx: Vec<usize> =
+        (0..points.len()).filter(|&i| points[i].x.is_finite() && points[i].y.is_finite()).collect();
+    idx.sort_by(|&a, &b| points[a].x.total_cmp(&points[b].x).then(points[a].y.total_cmp(&points[b].y)));
+    idx.dedup_by(|a, b| points[*a] == points[*b]);
+    if idx.len() < 3 {
+        hull.extend_from_slice(&idx);
+        return;
     }
-    let cross = |o: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>| (a - o).perp(&(b - o));
-    let mut hull: Vec<Point2<f64>> = Vec::with_capacity(2 * p.len());
+    let cross = |o: usize, a: usize, b: usize| (points[a] - points[o]).perp(&(points[b] - points[o]));
     // Lower chain left to right, then upper chain right to left; the upper chain never pops the
     // lower one's points.
-    for (pass, chain) in [p.clone(), p.iter().rev().skip(1).copied().collect()].iter().enumerate() {
+    for pass in 0..2 {
         let floor = if pass == 0 { 2 } else { hull.len() + 1 };
-        for q in chain {
-            while hull.len() >= floor && cross(&hull[hull.len() - 2], &hull[hull.len() - 1], q) <= 0.0 {
+        let chain: Box<dyn Iterator<Item = &usize>> =
+            if pass == 0 { Box::new(idx.iter()) } else { Box::new(idx.iter().rev().skip(1)) };
+        for &q in chain {
+            while hull.len() >= floor && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
                 hull.pop();
             }
-            hull.push(*q);
+            hull.push(q);
         }
     }
     hull.pop();
-    hull
 }
 
-/// Signed distance from `q` to a convex polygon given counter-clockwise: the distance outside,
-/// minus the depth inside. A polygon of one or two points is a point or a segment (never inside).
-pub(crate) fn signed_distance_convex(polygon: &[Point2<f64>], q: &Point2<f64>) -> f64 {
+/// The nearest boundary feature of a convex polygon to a point.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Nearest {
+    /// Signed distance: outside positive, inside the negative depth.
+    pub sd: f64,
+    /// Edge from polygon vertex `edge` to `edge + 1` (cyclic).
+    pub edge: usize,
+    /// Position of the nearest point along that edge, 0 at its start, 1 at its end.
+    pub t: f64,
+    /// Unit direction in which `sd` grows fastest as the point moves (the outward normal of the
+    /// edge inside, the direction from the nearest point outside).
+    pub normal: Vector2<f64>,
+}
+
+/// The nearest feature of a convex polygon (counter-clockwise, at least two points) to `q`.
+pub(crate) fn nearest_on_convex(polygon: &[Point2<f64>], q: &Point2<f64>) -> Option<Nearest> {
     let n = polygon.len();
-    if n == 0 {
-        return f64::INFINITY;
-    }
-    if n == 1 {
-        return (q - polygon[0]).norm();
+    if n < 2 {
+        return None;
     }
     let mut inside = n >= 3;
-    let mut outside_distance = f64::INFINITY;
-    let mut depth = f64::INFINITY;
+    let mut out = Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() };
+    let mut depth = Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() };
     for i in 0..n {
         let (a, b) = (polygon[i], polygon[(i + 1) % n]);
         let ab = b - a;
@@ -49,15 +69,23 @@ pub(crate) fn signed_distance_convex(polygon: &[Point2<f64>], q: &Point2<f64>) -
         if len2 == 0.0 {
             continue;
         }
-        let side = ab.perp(&aq) / len2.sqrt();
+        let len = len2.sqrt();
+        let side = ab.perp(&aq) / len;
         if side < 0.0 {
             inside = false;
         }
-        depth = depth.min(side);
         let t = (aq.dot(&ab) / len2).clamp(0.0, 1.0);
-        outside_distance = outside_distance.min((aq - ab * t).norm());
+        if side < depth.sd {
+            depth = Nearest { sd: side, edge: i, t, normal: Vector2::new(ab.y, -ab.x) / len };
+        }
+        let d = aq - ab * t;
+        let dist = d.norm();
+        if dist < out.sd {
+            let normal = if dist > 1e-12 { d / dist } else { Vector2::new(ab.y, -ab.x) / len };
+            out = Nearest { sd: dist, edge: i, t, normal };
+        }
     }
-    if inside { -depth } else { outside_distance }
+    Some(if inside { Nearest { sd: -depth.sd, ..depth } } else { out })
 }
 
 #[cfg(test)]
@@ -71,8 +99,11 @@ mod tests {
         let h = convex_hull(&pts);
         assert_eq!(h.len(), 4);
         assert!(crate::template::polygon_area(&h) > 0.99);
-        assert!((signed_distance_convex(&h, &Point2::new(0.5, 0.4)) + 0.4).abs() < 1e-12);
-        assert!((signed_distance_convex(&h, &Point2::new(2.0, 0.5)) - 1.0).abs() < 1e-12);
-        assert!((signed_distance_convex(&h, &Point2::new(2.0, 2.0)) - 2f64.sqrt()).abs() < 1e-12);
+        let sd = |x: f64, y: f64| nearest_on_convex(&h, &Point2::new(x, y)).expect("a polygon");
+        let inside = sd(0.5, 0.4);
+        assert!((inside.sd + 0.4).abs() < 1e-12 && (inside.normal - Vector2::new(0.0, -1.0)).norm() < 1e-12);
+        let beside = sd(2.0, 0.5);
+        assert!((beside.sd - 1.0).abs() < 1e-12 && (beside.t - 0.5).abs() < 1e-12);
+        assert!((sd(2.0, 2.0).sd - 2f64.sqrt()).abs() < 1e-12);
     }
 }

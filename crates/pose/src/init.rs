@@ -32,9 +32,8 @@ pub(crate) struct HullSummary {
     /// Centroid of the hand cells within the tool's reach, if any: the hand holds the handle, so
     /// the blade points away from it.
     pub hand_centroid: Option<Point3<f64>>,
-    /// Bounding box (corners) of every kept cell, whatever its label, within the reach of the
-    /// scalpel's centroid: the tool lies inside the hull, and where the hand hides it, inside
-    /// the hand's cells. The views' regions of interest cover it.
+    /// Bounding box (corners) of the scalpel's leaves (the components taken as the tool), for
+    /// the views' regions of interest.
     pub bounds: (Point3<f64>, Point3<f64>),
 }
 
@@ -64,7 +63,23 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
     if leaves.is_empty() {
         return None;
     }
-    let index: HashMap<[i32; 3], usize> = leaves.iter().enumerate().map(|(i, k)| (*k, i)).collect();
+    // Leaf indices on a dense grid over the leaves' bounding box (one slot per leaf position,
+    // u32::MAX where empty): neighbour lookups are array reads.
+    let (mut lo, mut hi) = ([i32::MAX; 3], [i32::MIN; 3]);
+    for k in &leaves {
+        for a in 0..3 {
+            lo[a] = lo[a].min(k[a]);
+            hi[a] = hi[a].max(k[a]);
+        }
+    }
+    let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
+    let slot = |k: &[i32; 3]| {
+        ((k[2] - lo[2]) as usize * dims[1] + (k[1] - lo[1]) as usize) * dims[0] + (k[0] - lo[0]) as usize
+    };
+    let mut grid = vec![u32::MAX; dims[0] * dims[1] * dims[2]];
+    for (i, k) in leaves.iter().enumerate() {
+        grid[slot(k)] = i as u32;
+    }
     let mut parent: Vec<usize> = (0..leaves.len()).collect();
     fn find(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
@@ -74,13 +89,15 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
         i
     }
     for (i, k) in leaves.iter().enumerate() {
-        for d in 0..27 {
-            let off = [d % 3 - 1, (d / 3) % 3 - 1, d / 9 - 1];
-            if off == [0, 0, 0] {
+        // Half of the 26 neighbours suffice: each pair is met from one side.
+        for d in 14..27 {
+            let n = [k[0] + d % 3 - 1, k[1] + (d / 3) % 3 - 1, k[2] + d / 9 - 1];
+            if (0..3).any(|a| n[a] < lo[a] || n[a] > hi[a]) {
                 continue;
             }
-            if let Some(&j) = index.get(&[k[0] + off[0], k[1] + off[1], k[2] + off[2]]) {
-                let (a, b) = (find(&mut parent, i), find(&mut parent, j));
+            let j = grid[slot(&n)];
+            if j != u32::MAX {
+                let (a, b) = (find(&mut parent, i), find(&mut parent, j as usize));
                 if a != b {
                     parent[a] = b;
                 }
@@ -119,10 +136,13 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
     }
     let Line { centroid, axis, span: (lo, hi), .. } = line;
     let (mut bmin, mut bmax) = (centroid, centroid);
+    for p in &points {
+        bmin = bmin.inf(p);
+        bmax = bmax.sup(p);
+    }
+    let half = Vector3::repeat(leaf / 2.0);
     let (mut hand_sum, mut hand_volume) = (Vector3::zeros(), 0.0);
     for c in occ.cells.iter().filter(|c| (c.centre() - centroid).norm() <= reach + c.size) {
-        bmin = bmin.inf(&c.min);
-        bmax = bmax.sup(&(c.min + Vector3::repeat(c.size)));
         if c.has(label::HAND) {
             let v = c.size.powi(3);
             hand_sum += c.centre().coords * v;
@@ -138,7 +158,7 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
         axis,
         span: (lo - leaf / 2.0, hi + leaf / 2.0),
         hand_centroid,
-        bounds: (bmin, bmax),
+        bounds: (bmin - half, bmax + half),
     })
 }
 

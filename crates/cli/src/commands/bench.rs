@@ -13,12 +13,23 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim` and `hull` (the others arrive with their stages).
+/// Targets: `sim`, `hull` and `pose` (the pipeline's arrives with it).
 /// `hull` measures
 ///   hull.csv, hull_speed.png, hull_accuracy.png
 ///                     carving time of one rendered cut-scene frame (6 x 640x480 truth masks)
 ///                     against resolution, octree against a dense grid (every leaf tested), and
-///                     IoU with the exact visual hull (512³) against time.
+///                     IoU with the exact visual hull (512³) against time;
+///   hull_robustness.csv, hull_robustness_noise.png, hull_robustness_cameras.png
+///                     where carving breaks (128³): IoU with the clean six-view hull against
+///                     salt-and-pepper noise in every view (0-5% of the pixels flipped) and
+///                     against the number of cameras (the first 2-6), for carve_votes 1 and 2.
+/// `pose` measures (rendered static, cut and hard scenes, 6 x 640x480 truth masks)
+///   pose.csv, pose_leaf.png, pose_time.png
+///                     the blade pose's error (normal, tip; trusted frames) against leaf size
+///                     (6.3, 3.1, 1.6 mm) and against time per frame (carve + pose);
+///   pose_cameras.png, pose_noise.png, pose_invalid.png
+///                     its error and refusal rate against the number of cameras (the first 2-6)
+///                     and against salt-and-pepper noise in every view (cut scene).
 /// `sim` measures
 ///   scaling.csv/png   wall time per simulated second against lattice nodes, for all-TLED,
 ///                     all-FLSM and hybrid (ratio 0.4) models of the seed's liver material;
@@ -50,6 +61,8 @@ enum Target {
     Sim,
     /// The visual hull.
     Hull,
+    /// The blade pose.
+    Pose,
 }
 
 /// Runs the command.
@@ -63,6 +76,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             stability_edge(&args.out, quick)?;
         }
         Target::Hull => super::bench_hull::run(&args.out, quick)?,
+        Target::Pose => super::bench_pose::run(&args.out, quick)?,
     }
     Ok(())
 }

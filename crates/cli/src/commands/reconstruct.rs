@@ -1,5 +1,7 @@
 //! `hullcut reconstruct`: visual hulls of hand and scalpel for every frame set of a dataset.
 
+mod checks;
+
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -10,10 +12,13 @@ use hullcut_hull::accuracy::{
     grid_iou, outer_surface_samples, sample_surface, silhouette_consistency, surface_distance, volumetric_iou,
 };
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
+use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
 use serde::Serialize;
 
+use self::checks::ViewDisagreement;
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
+use crate::pose_out::{PoseReport, PoseWriter, log_blade};
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 
@@ -27,13 +32,24 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// tool). Surfaces are closed meshes by surface nets. Where the dataset has truth, the report
 /// gives volumetric IoU against the true shapes and against the exact visual hull (the best any
 /// silhouette method reaches from these views: truth masks carved at a quarter of the voxel), and
-/// Chamfer and Hausdorff distances to the true surfaces. Blade poses (OUT/poses.jsonl) come with
-/// the pose stage.
+/// Chamfer and Hausdorff distances to the true surfaces. Per camera, the report counts the cells
+/// that camera alone refuted while every other view saw foreground, and names the camera that
+/// disagreed most (a bad mask or calibration shows as several times the others' count). A mask
+/// pixel outside the labels 0, 1, 2, 255 is an error naming the mask file.
+///
+/// The blade's pose: the dataset's tool.json (the instrument's known shape) is fitted to the
+/// scalpel silhouettes, starting from the scalpel hull or from the track, tracked with a One Euro
+/// filter; a frame whose confidence is too low (fit disagrees with the silhouettes, blade seen by
+/// too few views, too few scalpel leaves, implausible jump) is refused with a reason and the last
+/// trusted pose is held for up to 0.5 s. Without a tool.json every frame is refused. Where the
+/// dataset has true poses, the report gives normal, edge and tip errors per frame and aggregated.
 ///
 /// Writes: OUT/hull/LABEL/NNNNNN.ply (closed world-frame meshes, LABEL hand or scalpel; a label with
-/// nothing carved writes no file and is counted); REPORT (JSON) with --report; an .rrd (images,
-/// masks, leaves as points and meshes under world/hull/LABEL, the true tool, timings and accuracy
-/// as scalars) with --rrd.
+/// nothing carved writes no file and is counted); OUT/poses.jsonl (one line per frame: valid, held,
+/// confidence, plane_point, plane_normal, edge, tip in world metres, or the reason it was refused);
+/// REPORT (JSON) with --report; an .rrd (images, masks, leaves as points and meshes under
+/// world/hull/LABEL, the blade's estimate and truth under world/tool/{estimate,truth}, timings,
+/// confidence and accuracy as scalars) with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -43,7 +59,8 @@ pub struct Args {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Leaf (voxel) size, metres; the effective one is 0.4 m / 2^n, not larger.
+    /// Leaf (voxel) size, metres, above 0 and at most the workspace's 0.4 m side; the effective one
+    /// is 0.4 m / 2^n, not larger.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
     /// Frames: A:B (half-open) or N (the first N).
@@ -111,6 +128,10 @@ struct Timings {
     segment: Option<StageTiming>,
     carve: StageTiming,
     surface: StageTiming,
+    pose: StageTiming,
+    /// The pose's parts: the views' evidence (regions, distance transforms, outlines) and the fit.
+    pose_evidence: StageTiming,
+    pose_fit: StageTiming,
     accuracy: StageTiming,
     total: StageTiming,
 }
@@ -145,6 +166,8 @@ struct Report<'a> {
     counters: Counters,
     accuracy: Vec<LabelAccuracy>,
     silhouette_consistency: Vec<Consistency>,
+    view_disagreement: ViewDisagreement,
+    pose: PoseReport,
     timings: Timings,
 }
 
@@ -157,6 +180,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.accuracy_every == 0 || args.rrd_every == 0 {
         bail!("--accuracy-every and --rrd-every must be at least 1");
     }
+    checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
     let ds = Dataset::open(&args.dataset)?;
     let use_files = match args.masks.as_str() {
         "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", args.dataset.display()),
@@ -170,6 +194,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };
     let tool = ds.tool()?;
     let poses = ds.truth_poses()?.unwrap_or_default();
+    let template =
+        tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
+    let mut tracker = template.clone().map(|t| Tracker::new(t, TrackerParams::default()));
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let mut pose_writer = PoseWriter::create(&args.out.join("poses.jsonl"))?;
+    let mut pose_report = PoseReport::new(template.is_some());
     let rec = match &args.rrd {
         Some(path) => {
             let rec = hullcut_viz::open_recording("hullcut-reconstruct", &hullcut_viz::Sink::File(path.clone()))?;
@@ -191,11 +221,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         label::NAMED.iter().map(|&(_, name)| LabelAccuracy { label: name, ..LabelAccuracy::default() }).collect();
     let mut consistency: Vec<Consistency> =
         ds.meta().cameras.iter().map(|c| Consistency { camera: c.clone(), ..Consistency::default() }).collect();
+    let mut disagreement = ViewDisagreement::new(&ds.meta().cameras);
     let mut resolution = 0;
     for &frame in &frames {
         let t_frame = Instant::now();
         let clock = Instant::now();
         let mut set = ds.read_frame_set(frame, use_files || ds.has_masks())?;
+        checks::labels(&ds, &set)?;
         t.read.push(clock.elapsed());
         // Masks read with the images are the truth. Segmenting moves them aside (the segmented masks
         // take their place, nothing is copied); with mask files they are what is carved.
@@ -221,6 +253,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         counters.kept_against_refutation += occ.stats.kept_against_refutation;
         counters.unlabelled_cells += occ.stats.unlabelled_cells;
         counters.footprint_tests += occ.stats.footprint_tests;
+        disagreement.add(&occ.stats);
 
         let clock = Instant::now();
         let mut grids = Vec::new();
@@ -238,6 +271,45 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             grids.push((l, name, grid, mesh));
         }
         t.surface.push(clock.elapsed());
+
+        let clock = Instant::now();
+        let inputs: Vec<Option<ViewInput>> = ds
+            .rig()
+            .cameras
+            .iter()
+            .zip(&masks)
+            .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
+            .collect();
+        let estimate = match &mut tracker {
+            Some(tracker) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
+            None => hullcut_pose::PoseEstimate {
+                frame,
+                timestamp_ns: set.timestamp_ns,
+                valid: false,
+                held: false,
+                confidence: 0.0,
+                pose: None,
+                fitted: None,
+                reason: Some("the dataset has no tool.json: the pose needs the tool's geometry".to_owned()),
+                diagnostics: hullcut_pose::Diagnostics::default(),
+            },
+        };
+        t.pose.push(clock.elapsed());
+        t.pose_evidence.push(Duration::from_secs_f64(estimate.diagnostics.evidence_ms * 1e-3));
+        t.pose_fit.push(Duration::from_secs_f64(estimate.diagnostics.fit_ms * 1e-3));
+        pose_writer.write(&estimate)?;
+        let truth_iso = poses.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
+        if let Some(template) = &template {
+            let error = |p: Option<&hullcut_pose::BladePose>| {
+                p.zip(truth_iso.as_ref()).map(|(p, truth)| pose_error(p, template, truth))
+            };
+            if truth_iso.is_some() {
+                pose_report.push(&estimate, error(estimate.pose.as_ref()), error(estimate.fitted.as_ref()));
+            }
+        }
+        if truth_iso.is_none() {
+            pose_report.push(&estimate, None, None);
+        }
 
         if frame.is_multiple_of(args.accuracy_every) {
             let clock = Instant::now();
@@ -283,11 +355,23 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             if let (Some(tool), Some(pose)) = (&tool, poses.iter().find(|p| p.frame == frame)) {
                 log_tool(rec, "truth", tool, &pose.tool_to_world)?;
             }
+            if let (Some(template), Some(truth)) = (&template, &truth_iso) {
+                log_blade(rec, "truth", &hullcut_pose::BladePose::new(template, *truth))?;
+            }
+            match estimate.pose.as_ref().filter(|p| p.is_finite()) {
+                Some(p) => log_blade(rec, "estimate", p)?,
+                None => hullcut_viz::log_clear(rec, "world/tool/estimate")?,
+            }
+            hullcut_viz::log_scalar(rec, "metrics/pose/confidence", estimate.confidence)?;
+            hullcut_viz::log_scalar(rec, "metrics/pose/valid", f64::from(u8::from(estimate.valid)))?;
+            hullcut_viz::log_scalar(rec, "metrics/time/pose", t.pose.last().map_or(0.0, |d| d.as_secs_f64() * 1e3))?;
         }
         t.total.push(t_frame.elapsed());
         pb.inc(1);
     }
     pb.finish_and_clear();
+    pose_writer.finish()?;
+    pose_report.finish();
     if let Some((rec, _)) = &rec {
         hullcut_viz::flush(rec)?;
     }
@@ -326,6 +410,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             a.frames
         );
     }
+    println!("{}", pose_report.summary());
+    disagreement.finish();
+    if let Some(line) = disagreement.summary() {
+        println!("{line}");
+    }
     if let Some(path) = &args.report {
         let report = Report {
             schema_version: SCHEMA_VERSION,
@@ -343,11 +432,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             counters,
             accuracy,
             silhouette_consistency: consistency,
+            view_disagreement: disagreement,
+            pose: pose_report,
             timings: Timings {
                 read: StageTiming::from_durations(&t.read),
                 segment: (!t.segment.is_empty()).then(|| StageTiming::from_durations(&t.segment)),
                 carve: carve_t,
                 surface: StageTiming::from_durations(&t.surface),
+                pose: StageTiming::from_durations(&t.pose),
+                pose_evidence: StageTiming::from_durations(&t.pose_evidence),
+                pose_fit: StageTiming::from_durations(&t.pose_fit),
                 accuracy: StageTiming::from_durations(&t.accuracy),
                 total: StageTiming::from_durations(&[t_start.elapsed()]),
             },
@@ -363,6 +457,9 @@ struct StageTimes {
     segment: Vec<Duration>,
     carve: Vec<Duration>,
     surface: Vec<Duration>,
+    pose: Vec<Duration>,
+    pose_evidence: Vec<Duration>,
+    pose_fit: Vec<Duration>,
     accuracy: Vec<Duration>,
     total: Vec<Duration>,
 }

@@ -1,6 +1,8 @@
 //! Carving checked on rendered silhouettes of shapes with known geometry (the default rig, exact
 //! masks from the synthetic renderer).
 
+mod robustness;
+
 use hullcut_dataset::{Mesh, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, carve, is_watertight, silhouettes};
 use hullcut_rig::{Rig, default_rig};
@@ -124,6 +126,8 @@ fn one_bad_silhouette_deletes_the_object_unless_k_of_n_protects_it() {
     let robust = carve(&views(&rig, &masks), &params).expect("carve");
     assert_contains_all(&robust, &inside_sphere(), Some(label::HAND));
     assert!(robust.stats.kept_against_refutation > 0);
+    // The empty view refutes, alone, every cell the others see.
+    assert_eq!(robust.stats.most_disagreeing_view(), Some(2), "{:?}", robust.stats.lone_refutations);
 }
 
 #[test]

@@ -1,0 +1,259 @@
+//! The pose stage's outputs: `poses.jsonl` lines (DESIGN's contract), accuracy against truth for
+//! the report, and the rerun entities `world/tool/{estimate,truth}`.
+
+use std::io::Write as _;
+use std::path::Path;
+
+use anyhow::Context as _;
+use hullcut_pose::{BladePose, PoseError, PoseEstimate};
+use hullcut_viz::RecordingStream;
+use nalgebra::{Point3, Vector3};
+use serde::Serialize;
+
+/// Errors above these count as wrong in the report (the refusal line), degrees and mm.
+pub const WRONG_DEG: f64 = 5.0;
+/// See [`WRONG_DEG`].
+pub const WRONG_MM: f64 = 5.0;
+
+fn array(p: &Point3<f64>) -> [f64; 3] {
+    [p.x, p.y, p.z]
+}
+
+fn vector(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// One line of `poses.jsonl`.
+#[derive(Debug, Serialize)]
+pub struct PoseLine {
+    frame: u64,
+    timestamp_ns: i64,
+    valid: bool,
+    held: bool,
+    confidence: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    plane_point: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    plane_normal: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    edge: Option<Vec<[f64; 3]>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tip: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+}
+
+impl PoseLine {
+    /// The line of an estimate. A pose with a non-finite number is never written: the line then
+    /// carries no pose fields and says why.
+    pub fn new(e: &PoseEstimate) -> Self {
+        let pose = e.pose.as_ref().filter(|p| p.is_finite());
+        let reason = match (&e.reason, e.pose.is_some() && pose.is_none()) {
+            (_, true) => Some("the pose had a non-finite number and is not written".to_owned()),
+            (r, false) => r.clone(),
+        };
+        PoseLine {
+            frame: e.frame,
+            timestamp_ns: e.timestamp_ns,
+            valid: e.valid && pose.is_some(),
+            held: e.held && pose.is_some(),
+            confidence: if e.confidence.is_finite() { e.confidence } else { 0.0 },
+            plane_point: pose.map(|p| array(&p.plane_point)),
+            plane_normal: pose.map(|p| vector(&p.plane_normal)),
+            edge: pose.map(|p| p.edge.iter().map(array).collect()),
+            tip: pose.map(|p| array(&p.tip)),
+            reason,
+        }
+    }
+}
+
+/// Writes `poses.jsonl` line by line.
+pub struct PoseWriter {
+    out: std::io::BufWriter<std::fs::File>,
+    path: std::path::PathBuf,
+}
+
+impl PoseWriter {
+    /// Creates (truncates) the file.
+    pub fn create(path: &Path) -> anyhow::Result<Self> {
+        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        Ok(PoseWriter { out: std::io::BufWriter::new(file), path: path.to_owned() })
+    }
+
+    /// Appends one frame's line.
+    pub fn write(&mut self, e: &PoseEstimate) -> anyhow::Result<()> {
+        let line = serde_json::to_string(&PoseLine::new(e)).context("serializing a pose")?;
+        writeln!(self.out, "{line}").with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    /// Flushes the file.
+    pub fn finish(mut self) -> anyhow::Result<()> {
+        self.out.flush().with_context(|| format!("writing {}", self.path.display()))
+    }
+}
+
+/// One frame's pose errors in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameError {
+    frame: u64,
+    valid: bool,
+    confidence: f64,
+    /// Errors of the pose handed out (trusted), or of the refused frame's own fit.
+    normal_deg: Option<f64>,
+    edge_mm: Option<f64>,
+    tip_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+    /// Fit agreement: outline points explained, interior points on foreground (fractions), RMS px.
+    explained: f64,
+    covered: f64,
+    fit_rms_px: f64,
+    /// Views seeing the blade's face, edge-on, hidden by the hand.
+    views_seen: usize,
+    views_edge_on: usize,
+    views_hidden: usize,
+    scalpel_leaves: usize,
+    from_hull: bool,
+    iterations: usize,
+}
+
+/// Mean, 95th percentile (nearest rank) and maximum.
+#[derive(Debug, Default, Clone, Copy, Serialize)]
+pub struct Spread {
+    mean: f64,
+    p95: f64,
+    max: f64,
+}
+
+impl Spread {
+    fn of(values: &[f64]) -> Option<Spread> {
+        if values.is_empty() {
+            return None;
+        }
+        let mut v = values.to_vec();
+        v.sort_by(f64::total_cmp);
+        let p95 = v[((v.len() as f64 * 0.95).ceil() as usize).clamp(1, v.len()) - 1];
+        Some(Spread { mean: v.iter().sum::<f64>() / v.len() as f64, p95, max: v[v.len() - 1] })
+    }
+}
+
+/// The pose section of the report.
+#[derive(Debug, Default, Serialize)]
+pub struct PoseReport {
+    /// Whether the dataset has a tool.json (without one every frame is refused).
+    pub tool: bool,
+    frames: usize,
+    valid_frames: usize,
+    held_frames: usize,
+    invalid_rate: f64,
+    /// Refusal reasons and how often each came.
+    reasons: Vec<(String, usize)>,
+    /// Over trusted frames with truth.
+    normal_deg: Option<Spread>,
+    edge_mm: Option<Spread>,
+    tip_mm: Option<Spread>,
+    /// Trusted frames whose error exceeds 5° or 5 mm (should be 0).
+    trusted_wrong: usize,
+    /// Refused frames whose own fit was within 5° and 5 mm (refused needlessly).
+    refused_right: usize,
+    per_frame: Vec<FrameError>,
+}
+
+impl PoseReport {
+    /// An empty report; `tool` says whether the dataset has a tool.json.
+    pub fn new(tool: bool) -> Self {
+        PoseReport { tool, ..PoseReport::default() }
+    }
+
+    /// Adds a frame; `error` is the trusted pose's error, `fitted_error` the frame's own fit's.
+    pub fn push(&mut self, e: &PoseEstimate, error: Option<PoseError>, fitted_error: Option<PoseError>) {
+        self.frames += 1;
+        self.valid_frames += usize::from(e.valid);
+        self.held_frames += usize::from(e.held);
+        if let Some(r) = &e.reason {
+            // Reasons with numbers vary frame to frame; count them by their words before the first '('.
+            let key = r.split(" (").next().unwrap_or(r).to_owned();
+            match self.reasons.iter_mut().find(|(k, _)| *k == key) {
+                Some((_, n)) => *n += 1,
+                None => self.reasons.push((key, 1)),
+            }
+        }
+        let shown = if e.valid { error } else { fitted_error };
+        if e.valid && error.is_some_and(|x| x.exceeds(WRONG_DEG, WRONG_MM)) {
+            self.trusted_wrong += 1;
+        }
+        if !e.valid && fitted_error.is_some_and(|x| !x.exceeds(WRONG_DEG, WRONG_MM)) {
+            self.refused_right += 1;
+        }
+        self.per_frame.push(FrameError {
+            frame: e.frame,
+            valid: e.valid,
+            confidence: e.confidence,
+            normal_deg: shown.map(|x| x.normal_deg),
+            edge_mm: shown.map(|x| x.edge_mm),
+            tip_mm: shown.map(|x| x.tip_mm),
+            reason: e.reason.clone(),
+            explained: e.diagnostics.explained,
+            covered: e.diagnostics.covered,
+            fit_rms_px: e.diagnostics.fit_rms_px,
+            views_seen: e.diagnostics.views_seen,
+            views_edge_on: e.diagnostics.views_edge_on,
+            views_hidden: e.diagnostics.views_hidden,
+            scalpel_leaves: e.diagnostics.scalpel_leaves,
+            from_hull: e.diagnostics.from_hull,
+            iterations: e.diagnostics.iterations,
+        });
+    }
+
+    /// Computes the aggregates.
+    pub fn finish(&mut self) {
+        self.invalid_rate =
+            if self.frames == 0 { 0.0 } else { (self.frames - self.valid_frames) as f64 / self.frames as f64 };
+        let trusted: Vec<&FrameError> = self.per_frame.iter().filter(|f| f.valid).collect();
+        let collect = |f: fn(&FrameError) -> Option<f64>| trusted.iter().filter_map(|x| f(x)).collect::<Vec<_>>();
+        self.normal_deg = Spread::of(&collect(|x| x.normal_deg));
+        self.edge_mm = Spread::of(&collect(|x| x.edge_mm));
+        self.tip_mm = Spread::of(&collect(|x| x.tip_mm));
+    }
+
+    /// A line for the terminal.
+    pub fn summary(&self) -> String {
+        let mut s =
+            format!("pose: {} of {} frames trusted ({} held)", self.valid_frames, self.frames, self.held_frames);
+        if let (Some(n), Some(t)) = (self.normal_deg, self.tip_mm) {
+            s += &format!(
+                "; normal {:.2}° mean, {:.2}° p95; tip {:.2} mm mean, {:.2} mm p95; {} trusted frames off by more than 5° or 5 mm",
+                n.mean, n.p95, t.mean, t.p95, self.trusted_wrong
+            );
+        }
+        if let Some((reason, n)) = self.reasons.iter().max_by_key(|(_, n)| *n) {
+            s += &format!("; most common refusal ({n}x): {reason}");
+        }
+        s
+    }
+}
+
+/// Logs a blade pose under `world/tool/<which>`: the plane as a small quad, the cutting edge as a
+/// line strip, the tip as a point.
+pub fn log_blade(rec: &RecordingStream, which: &str, pose: &BladePose) -> anyhow::Result<()> {
+    let f = |p: Point3<f64>| [p.x as f32, p.y as f32, p.z as f32];
+    let colour = if which == "truth" { [80, 220, 120, 255] } else { [255, 120, 40, 255] };
+    let base = format!("world/tool/{which}");
+    let along = pose.edge.first().zip(pose.edge.last()).map(|(a, b)| a - b).unwrap_or_else(Vector3::x);
+    let u = (along - pose.plane_normal * along.dot(&pose.plane_normal)).try_normalize(1e-12).unwrap_or_else(Vector3::x);
+    let w = pose.plane_normal.cross(&u);
+    let (hu, hw) = (0.02, 0.0075);
+    let c = pose.plane_point;
+    let quad = [c - u * hu - w * hw, c + u * hu - w * hw, c + u * hu + w * hw, c - u * hu + w * hw].map(f);
+    hullcut_viz::log_mesh3d(
+        rec,
+        &format!("{base}/plane"),
+        &quad,
+        &[[0, 1, 2], [0, 2, 3]],
+        [colour[0], colour[1], colour[2], 110],
+    )?;
+    let edge: Vec<[f32; 3]> = pose.edge.iter().copied().map(f).collect();
+    hullcut_viz::log_line_strips3d(rec, &format!("{base}/edge"), &[edge], colour, 0.0005)?;
+    hullcut_viz::log_points3d(rec, &format!("{base}/tip"), &[f(pose.tip)], colour, 0.0015)?;
+    Ok(())
+}
