@@ -26,7 +26,7 @@ use crate::progress::bar;
 /// `pose` measures (rendered static, cut and hard scenes, 6 x 640x480 truth masks)
 ///   pose.csv, pose_leaf.png, pose_time.png
 ///                     the blade pose's error (normal, tip; trusted frames) against leaf size
-///                     (6.3, 3.1, 1.6 mm) and against time per frame (carve + pose);
+///                     (6.3, 3.1, 1.6 mm) and against time per frame (silhouettes, carve, pose);
 ///   pose_cameras.png, pose_noise.png, pose_invalid.png
 ///                     its error and refusal rate against the number of cameras (the first 2-6)
 ///                     and against salt-and-pepper noise in every view (cut scene).
