@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod body;
+pub mod collide;
 pub mod dynamics;
 pub mod embed;
 mod error;
@@ -18,10 +19,12 @@ pub mod mesh;
 pub mod scenario;
 pub mod simulation;
 pub mod stability;
+pub mod sweep;
 pub mod tled;
 mod tled_batch;
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
+pub use collide::{CELL_EDGES, Cuts, EdgeCut, SpatialHash, cut_edges, segment_triangle};
 pub use embed::{EmbedError, Embedding};
 pub use error::SimError;
 pub use flsm::{Flsm, FlsmParams};
@@ -30,4 +33,5 @@ pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use scenario::Scenario;
 pub use simulation::{NodeRole, Simulation};
+pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};

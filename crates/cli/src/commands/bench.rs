@@ -37,7 +37,10 @@ use crate::progress::bar;
 ///                     against milliseconds of compute per 60 Hz frame, on the built-in organ
 ///                     (the seed paper's Table I setting);
 ///   stability.csv/png the measured stability edge (bisection) against the power-iteration
-///                     estimate and L/c, for several Poisson ratios.
+///                     estimate and L/c, for several Poisson ratios;
+///   collision.csv     per 60 Hz frame of a blade stroke through the paper-size organ: the
+///                     spatial hash of the lattice's cells, and the lattice edges the swept
+///                     blade surface crosses (time, triangles, candidate pairs, edges, cells).
 /// Timings are wall clock on this machine: run on an idle machine, and compare ratios within one run.
 /// HULLCUT_BENCH_QUICK=1 (or --quick) shrinks every size so CI can smoke-run it.
 ///
@@ -74,6 +77,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             scaling(&args.out, quick)?;
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
+            collision(&args.out)?;
         }
         Target::Hull => super::bench_hull::run(&args.out, quick)?,
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
@@ -138,6 +142,64 @@ fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
         &series,
     )?;
     println!("wrote {}", out.join("scaling.png").display());
+    Ok(())
+}
+
+/// Collision of a blade stroke with the paper-size organ (rest positions), frame by frame.
+fn collision(out: &Path) -> anyhow::Result<()> {
+    let scenario = organ(0.0062, 1.0, 0.01)?;
+    let sim = Simulation::from_scenario(&scenario)?;
+    let lattice = &sim.lattice;
+    let positions = &lattice.rest;
+    // A 38 mm cutting edge (17 points) in the xz plane, its tip 30° down, stroking along x across
+    // the organ in one second while pressing 1.5 cm into its top over the first half (4-5 mm
+    // per 60 Hz frame): the swept surface is a vertical band through the organ.
+    let (c30, s30) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let edge: Vec<Point3<f64>> =
+        (0..17).map(|k| 0.038 * k as f64 / 16.0).map(|d| Point3::new(-d * c30, 0.0, d * s30)).collect();
+    let (lo, hi) = lattice
+        .rest
+        .iter()
+        .fold((Point3::from(Vector3::repeat(f64::MAX)), Point3::from(Vector3::repeat(f64::MIN))), |(a, b), p| {
+            (a.inf(p), b.sup(p))
+        });
+    let frames = 60;
+    let pose = |f: usize| {
+        let s = f as f64 / frames as f64;
+        let x = lo.x - 0.04 + (hi.x - lo.x + 0.04) * s;
+        let z = hi.z + 0.002 - 0.015 * (2.0 * s).min(1.0);
+        nalgebra::Isometry3::translation(x, 0.5 * (lo.y + hi.y), z)
+    };
+    let mut csv = String::from("frame,nodes,hash_ms,cut_ms,triangles,pairs_tested,edges_cut,cells_cut\n");
+    let mut total = Vec::new();
+    for f in 1..=frames {
+        let t0 = Instant::now();
+        let hash = hullcut_sim::SpatialHash::new(lattice, positions, lattice.cell);
+        let hash_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = Instant::now();
+        let surface = hullcut_sim::SweptSurface::between(&edge, &pose(f - 1), &pose(f), lattice.cell / 2.0, 0.1)
+            .context("a swept surface")?;
+        let cuts = hullcut_sim::cut_edges(lattice, positions, &hash, &surface);
+        let cut_ms = t1.elapsed().as_secs_f64() * 1e3;
+        total.push(hash_ms + cut_ms);
+        let _ = writeln!(
+            csv,
+            "{f},{},{hash_ms:.4},{cut_ms:.4},{},{},{},{}",
+            lattice.node_count(),
+            surface.triangles.len(),
+            cuts.pairs_tested,
+            cuts.edges.len(),
+            cuts.cells.len()
+        );
+    }
+    write(&out.join("collision.csv"), &csv)?;
+    total.sort_by(f64::total_cmp);
+    println!(
+        "collision: {} nodes, hash + swept-surface cut {:.3} ms per frame (median), {:.3} ms (max)",
+        lattice.node_count(),
+        total[total.len() / 2],
+        total[total.len() - 1]
+    );
     Ok(())
 }
 

@@ -1,0 +1,278 @@
+//! Which lattice edges a swept blade surface cuts: spatial hashing of the lattice's cells at their
+//! current (deformed) positions (Teschner et al. 2003) against the surface's triangles, then an
+//! exact segment–triangle test of the candidate cells' edges.
+//!
+//! This is the geometric query the virtual node algorithm builds on: a lattice edge crossed by the
+//! blade separates its two nodes, and a cell with crossed edges is (partly) cut. The parameter of
+//! each crossing along its edge is kept, so the cut can be placed in the material (rest) frame.
+
+use nalgebra::{Point3, Vector3};
+
+use crate::lattice::Lattice;
+use crate::sweep::SweptSurface;
+
+/// Teschner et al.'s three large primes for hashing grid coordinates.
+const PRIMES: [i64; 3] = [73_856_093, 19_349_663, 83_492_791];
+/// Barycentric and segment-parameter tolerance: a segment through the shared edge of two triangles
+/// hits at least one, and a node lying on the surface is found from both its edges.
+const BARY_EPS: f64 = 1e-12;
+
+/// The twelve edges of a cell as pairs of corners (see [`crate::CORNERS`]): four along x, y, z.
+pub const CELL_EDGES: [[usize; 2]; 12] =
+    [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]];
+
+/// A hash table of the lattice's cells by the grid cells their current bounding boxes overlap.
+#[derive(Debug, Clone)]
+pub struct SpatialHash {
+    size: f64,
+    buckets: Vec<Vec<u32>>,
+}
+
+fn grid(p: &Point3<f64>, size: f64) -> [i64; 3] {
+    [(p.x / size).floor() as i64, (p.y / size).floor() as i64, (p.z / size).floor() as i64]
+}
+
+impl SpatialHash {
+    /// Hashes every cell of `lattice` with its nodes at `positions` (one per lattice node) into a
+    /// table of grid cells of side `size` (the lattice's cell side is a good choice).
+    pub fn new(lattice: &Lattice, positions: &[Point3<f64>], size: f64) -> Self {
+        let n = (2 * lattice.cells.len()).next_power_of_two().max(64);
+        let mut hash = SpatialHash { size, buckets: vec![Vec::new(); n] };
+        for (c, cell) in lattice.cells.iter().enumerate() {
+            let (lo, hi) = bounds(cell.nodes.iter().map(|&i| positions[i as usize]));
+            hash.each_bucket(&lo, &hi, |b| b.push(c as u32));
+        }
+        hash
+    }
+
+    fn bucket(&self, g: [i64; 3]) -> usize {
+        let h = (g[0].wrapping_mul(PRIMES[0])) ^ (g[1].wrapping_mul(PRIMES[1])) ^ (g[2].wrapping_mul(PRIMES[2]));
+        (h as u64 as usize) & (self.buckets.len() - 1)
+    }
+
+    fn each_bucket(&mut self, lo: &Point3<f64>, hi: &Point3<f64>, mut f: impl FnMut(&mut Vec<u32>)) {
+        let (a, b) = (grid(lo, self.size), grid(hi, self.size));
+        for i in a[0]..=b[0] {
+            for j in a[1]..=b[1] {
+                for k in a[2]..=b[2] {
+                    let idx = self.bucket([i, j, k]);
+                    f(&mut self.buckets[idx]);
+                }
+            }
+        }
+    }
+
+    /// Cells whose buckets overlap the box (a superset of the cells overlapping it; sorted, no
+    /// repeats), appended to `out` after clearing it.
+    pub fn candidates(&self, lo: &Point3<f64>, hi: &Point3<f64>, out: &mut Vec<u32>) {
+        out.clear();
+        let (a, b) = (grid(lo, self.size), grid(hi, self.size));
+        for i in a[0]..=b[0] {
+            for j in a[1]..=b[1] {
+                for k in a[2]..=b[2] {
+                    out.extend_from_slice(&self.buckets[self.bucket([i, j, k])]);
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
+}
+
+fn bounds(points: impl Iterator<Item = Point3<f64>>) -> (Point3<f64>, Point3<f64>) {
+    let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
+    let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+    for p in points {
+        lo = lo.inf(&p);
+        hi = hi.sup(&p);
+    }
+    (lo, hi)
+}
+
+/// A lattice edge crossed by the swept surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeCut {
+    /// The edge's nodes, `a < b`.
+    pub a: u32,
+    /// See `a`.
+    pub b: u32,
+    /// Where it is crossed, from `a` (0) to `b` (1).
+    pub t: f64,
+    /// The swept triangle that crosses it.
+    pub triangle: u32,
+}
+
+/// What a swept surface does to a lattice.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cuts {
+    /// Crossed edges, sorted by `(a, b)`, each once (its first crossing from `a`).
+    pub edges: Vec<EdgeCut>,
+    /// Cells with at least one crossed edge, sorted.
+    pub cells: Vec<u32>,
+    /// Cell–triangle candidate pairs tested (the hash's work).
+    pub pairs_tested: usize,
+}
+
+/// Where segment `p + t (q - p)` crosses triangle `tri`, as `t` in [0, 1] (Möller–Trumbore), or
+/// `None` (no crossing, or a segment in the triangle's plane).
+pub fn segment_triangle(p: &Point3<f64>, q: &Point3<f64>, tri: &[Point3<f64>; 3]) -> Option<f64> {
+    let d = q - p;
+    let e1 = tri[1] - tri[0];
+    let e2 = tri[2] - tri[0];
+    let h = d.cross(&e2);
+    let det = e1.dot(&h);
+    let scale = d.norm() * e1.norm() * e2.norm();
+    if det.abs() <= 1e-12 * scale {
+        return None;
+    }
+    let s = p - tri[0];
+    let u = s.dot(&h) / det;
+    if !(-BARY_EPS..=1.0 + BARY_EPS).contains(&u) {
+        return None;
+    }
+    let qv = s.cross(&e1);
+    let v = d.dot(&qv) / det;
+    if v < -BARY_EPS || u + v > 1.0 + BARY_EPS {
+        return None;
+    }
+    let t = e2.dot(&qv) / det;
+    (-BARY_EPS..=1.0 + BARY_EPS).contains(&t).then_some(t.clamp(0.0, 1.0))
+}
+
+/// The lattice edges and cells `surface` cuts, with the lattice's nodes at `positions`.
+pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &SpatialHash, surface: &SweptSurface) -> Cuts {
+    let mut found: Vec<EdgeCut> = Vec::new();
+    let mut candidates = Vec::new();
+    let mut pairs_tested = 0;
+    for t in 0..surface.triangles.len() {
+        let tri = surface.triangle(t);
+        let (lo, hi) = bounds(tri.iter().copied());
+        hash.candidates(&lo, &hi, &mut candidates);
+        for &c in &candidates {
+            let cell = &lattice.cells[c as usize];
+            let (clo, chi) = bounds(cell.nodes.iter().map(|&i| positions[i as usize]));
+            if (0..3).any(|a| chi[a] < lo[a] || clo[a] > hi[a]) {
+                continue;
+            }
+            pairs_tested += 1;
+            for [i, j] in CELL_EDGES {
+                let (a, b) = (cell.nodes[i].min(cell.nodes[j]), cell.nodes[i].max(cell.nodes[j]));
+                if let Some(s) = segment_triangle(&positions[a as usize], &positions[b as usize], &tri) {
+                    found.push(EdgeCut { a, b, t: s, triangle: t as u32 });
+                }
+            }
+        }
+    }
+    found.sort_by(|x, y| (x.a, x.b).cmp(&(y.a, y.b)).then(x.t.total_cmp(&y.t)));
+    found.dedup_by(|x, y| (x.a, x.b) == (y.a, y.b));
+    let mut cells = Vec::new();
+    for (c, cell) in lattice.cells.iter().enumerate() {
+        let crossed = CELL_EDGES.iter().any(|&[i, j]| {
+            let key = (cell.nodes[i].min(cell.nodes[j]), cell.nodes[i].max(cell.nodes[j]));
+            found.binary_search_by(|e| (e.a, e.b).cmp(&key)).is_ok()
+        });
+        if crossed {
+            cells.push(c as u32);
+        }
+    }
+    Cuts { edges: found, cells, pairs_tested }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+    use super::*;
+
+    /// A 6 x 6 x 6 block of 1 cm cells from the origin.
+    fn block() -> Lattice {
+        Lattice::block(Point3::origin(), 0.01, [6, 6, 6])
+    }
+
+    /// A blade edge along x (tool frame), 8 cm long from x = -1 cm.
+    fn edge() -> Vec<Point3<f64>> {
+        (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect()
+    }
+
+    fn cut(lattice: &Lattice, positions: &[Point3<f64>], from: Isometry3<f64>, to: Isometry3<f64>) -> Cuts {
+        let hash = SpatialHash::new(lattice, positions, lattice.cell);
+        let s = SweptSurface::between(&edge(), &from, &to, 0.005, 0.1).expect("surface");
+        cut_edges(lattice, positions, &hash, &s)
+    }
+
+    #[test]
+    fn a_straight_stroke_down_through_a_block_cuts_one_layer_of_edges() {
+        let l = block();
+        // The edge at y = 2.5 cm, from above the block to below it.
+        let c = cut(&l, &l.rest, Isometry3::translation(0.0, 0.025, 0.08), Isometry3::translation(0.0, 0.025, -0.01));
+        // Every y-edge between j = 2 and j = 3: 7 x 7 of them, crossed half-way; the cells with
+        // j = 2 are cut, 36 of them.
+        assert_eq!(c.edges.len(), 49);
+        for e in &c.edges {
+            let (pa, pb) = (l.rest[e.a as usize], l.rest[e.b as usize]);
+            assert!((pa.y - 0.02).abs() < 1e-12 && (pb.y - 0.03).abs() < 1e-12, "{pa} {pb}");
+            assert!((e.t - 0.5).abs() < 1e-9);
+        }
+        assert_eq!(c.cells.len(), 36);
+        assert!(c.cells.iter().all(|&k| l.cells[k as usize].ijk[1] == 2));
+    }
+
+    #[test]
+    fn a_fast_sideways_stroke_does_not_tunnel() {
+        let l = block();
+        // The blade edge upright (along z), crossing the whole block in x in one frame.
+        let upright = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -std::f64::consts::FRAC_PI_2);
+        let from = Isometry3::from_parts(Translation3::new(-0.02, 0.035, -0.005), upright);
+        let to = Isometry3::from_parts(Translation3::new(0.09, 0.035, -0.005), upright);
+        let c = cut(&l, &l.rest, from, to);
+        assert_eq!(c.edges.len(), 49, "the plane y = 3.5 cm crosses every y-edge between j = 3 and 4");
+        assert_eq!(c.cells.len(), 36);
+    }
+
+    #[test]
+    fn a_partial_stroke_cuts_only_where_the_edge_went_and_a_deformed_lattice_is_cut_where_it_is() {
+        let l = block();
+        // The edge's end at x = 7 cm: shorten the stroke so the edge reaches only z = 3.5 cm.
+        let c = cut(&l, &l.rest, Isometry3::translation(0.0, 0.025, 0.08), Isometry3::translation(0.0, 0.025, 0.035));
+        // y-edges at z = 4, 5, 6 cm (k = 4..6), 7 along x each.
+        assert_eq!(c.edges.len(), 21);
+        assert!(c.edges.iter().all(|e| l.rest[e.a as usize].z > 0.035));
+        // Cells with j = 2 and k >= 3 have a crossed edge (k = 3 through its top face).
+        assert_eq!(c.cells.len(), 6 * 3);
+
+        // Moving the whole lattice and the stroke together changes nothing.
+        let shift = Vector3::new(0.3, -0.2, 0.1);
+        let moved: Vec<Point3<f64>> = l.rest.iter().map(|p| p + shift).collect();
+        let t = |z: f64| Isometry3::translation(shift.x, 0.025 + shift.y, z + shift.z);
+        let c2 = cut(&l, &moved, t(0.08), t(0.035));
+        assert_eq!(
+            c2.edges.iter().map(|e| (e.a, e.b)).collect::<Vec<_>>(),
+            c.edges.iter().map(|e| (e.a, e.b)).collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn a_stroke_through_a_row_of_nodes_cuts_the_edges_that_end_there() {
+        let l = block();
+        // The plane y = 2 cm passes through nodes: y-edges ending there are crossed at t = 0 or 1.
+        let c = cut(&l, &l.rest, Isometry3::translation(0.0, 0.02, 0.08), Isometry3::translation(0.0, 0.02, -0.01));
+        assert!(!c.edges.is_empty());
+        for e in &c.edges {
+            assert!(e.t < 1e-9 || e.t > 1.0 - 1e-9, "{e:?}");
+        }
+        // Both layers of y-edges touching the plane are found (j = 1..2 ending at it, j = 2..3
+        // starting at it): 2 x 49.
+        assert_eq!(c.edges.len(), 98);
+    }
+
+    #[test]
+    fn segments_and_triangles() {
+        let tri = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0)];
+        let t = segment_triangle(&Point3::new(0.2, 0.2, -1.0), &Point3::new(0.2, 0.2, 1.0), &tri);
+        assert!((t.expect("hit") - 0.5).abs() < 1e-15);
+        assert!(segment_triangle(&Point3::new(0.8, 0.8, -1.0), &Point3::new(0.8, 0.8, 1.0), &tri).is_none());
+        assert!(segment_triangle(&Point3::new(0.2, 0.2, 0.5), &Point3::new(0.2, 0.2, 1.0), &tri).is_none());
+        // In the plane: not a crossing.
+        assert!(segment_triangle(&Point3::new(-1.0, 0.2, 0.0), &Point3::new(1.0, 0.2, 0.0), &tri).is_none());
+    }
+}

@@ -1,0 +1,115 @@
+//! The surface a blade's cutting edge sweeps between two trusted poses.
+//!
+//! The edge (a polyline in the tool frame, tip to heel) is carried from one pose to the next along
+//! the rigid motion between them: translation interpolated linearly, rotation by slerp. Rows of
+//! the edge at intermediate times, as many as it takes for no point of the edge to move more than
+//! `max_chord` between rows and the rotation to turn by no more than `max_angle`, are joined into a
+//! triangulated ruled surface. However fast the stroke, the surface spans the whole motion
+//! between the two frames: nothing between them is skipped (no tunnelling). A pose that was not
+//! trusted is never given to it: the caller sweeps only between trusted poses.
+
+use nalgebra::{Isometry3, Point3, Translation3};
+
+/// Largest number of rows a sweep is divided into (a safety bound for absurd inputs).
+const MAX_ROWS: usize = 1024;
+
+/// A triangulated swept surface.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweptSurface {
+    /// Vertices: `rows` copies of the edge, row by row (row 0 at the first pose).
+    pub vertices: Vec<Point3<f64>>,
+    /// Triangles (vertex indices), two per quad between consecutive rows and edge points.
+    pub triangles: Vec<[u32; 3]>,
+    /// Rows of the edge (at least 2).
+    pub rows: usize,
+}
+
+impl SweptSurface {
+    /// The surface `edge` (tool frame, at least two points) sweeps from pose `from` to pose `to`,
+    /// divided so that no edge point moves more than `max_chord` metres and the tool turns no more
+    /// than `max_angle` radians between rows. `None` for an edge of fewer than two points, a
+    /// non-finite pose or non-positive limits.
+    pub fn between(
+        edge: &[Point3<f64>],
+        from: &Isometry3<f64>,
+        to: &Isometry3<f64>,
+        max_chord: f64,
+        max_angle: f64,
+    ) -> Option<Self> {
+        let finite = |p: &Isometry3<f64>| p.to_homogeneous().iter().all(|c| c.is_finite());
+        if !(edge.len() >= 2 && finite(from) && finite(to) && max_chord > 0.0 && max_angle > 0.0) {
+            return None;
+        }
+        let travel = edge.iter().map(|p| (to * p - from * p).norm()).fold(0.0, f64::max);
+        let angle = from.rotation.angle_to(&to.rotation);
+        let steps = ((travel / max_chord).ceil().max((angle / max_angle).ceil()) as usize).clamp(1, MAX_ROWS - 1);
+        let rows = steps + 1;
+        let mut vertices = Vec::with_capacity(rows * edge.len());
+        for r in 0..rows {
+            let s = r as f64 / steps as f64;
+            let pose = interpolate(from, to, s);
+            vertices.extend(edge.iter().map(|p| pose * p));
+        }
+        let n = edge.len() as u32;
+        let mut triangles = Vec::with_capacity(2 * steps * (edge.len() - 1));
+        for r in 0..steps as u32 {
+            for k in 0..n - 1 {
+                let (a, b, c, d) = (r * n + k, r * n + k + 1, (r + 1) * n + k, (r + 1) * n + k + 1);
+                triangles.push([a, b, d]);
+                triangles.push([a, d, c]);
+            }
+        }
+        Some(SweptSurface { vertices, triangles, rows })
+    }
+
+    /// The corners of triangle `t`.
+    pub fn triangle(&self, t: usize) -> [Point3<f64>; 3] {
+        self.triangles[t].map(|i| self.vertices[i as usize])
+    }
+}
+
+/// The pose a fraction `s` of the way from `a` to `b` (translation lerp, rotation slerp).
+pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<f64> {
+    let t = a.translation.vector.lerp(&b.translation.vector, s);
+    let r = a.rotation.try_slerp(&b.rotation, s, 1e-12).unwrap_or(if s < 0.5 { a.rotation } else { b.rotation });
+    Isometry3::from_parts(Translation3::from(t), r)
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    use super::*;
+
+    fn edge() -> Vec<Point3<f64>> {
+        (0..5).map(|k| Point3::new(0.01 * k as f64, 0.0, 0.0)).collect()
+    }
+
+    #[test]
+    fn a_straight_stroke_is_one_strip_and_a_fast_one_is_divided() {
+        let from = Isometry3::translation(0.0, 0.0, 0.1);
+        let to = Isometry3::translation(0.0, 0.0, 0.05);
+        let slow = SweptSurface::between(&edge(), &from, &to, 0.1, 0.5).expect("surface");
+        assert_eq!((slow.rows, slow.triangles.len()), (2, 8));
+        let fast = SweptSurface::between(&edge(), &from, &to, 0.004, 0.5).expect("surface");
+        assert_eq!(fast.rows, 14, "5 cm in steps of at most 4 mm");
+        // The rows lie on the path: the last row is the edge at the second pose.
+        assert!((fast.vertices[13 * 5 + 4] - to * edge()[4]).norm() < 1e-15);
+    }
+
+    #[test]
+    fn a_turn_is_followed_by_slerp() {
+        let from = Isometry3::identity();
+        let to =
+            Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.0));
+        let s = SweptSurface::between(&edge(), &from, &to, 1.0, 0.1).expect("surface");
+        assert_eq!(s.rows, 11);
+        // Every vertex stays at its distance from the axis of rotation.
+        for (k, v) in s.vertices.iter().enumerate() {
+            assert!((v.coords.norm() - edge()[k % 5].coords.norm()).abs() < 1e-12);
+        }
+        assert!(SweptSurface::between(&edge()[..1], &from, &to, 1.0, 0.1).is_none());
+        let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
+        assert!(SweptSurface::between(&edge(), &from, &nan, 1.0, 0.1).is_none());
+    }
+}
