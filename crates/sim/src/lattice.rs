@@ -91,6 +91,20 @@ impl Lattice {
         Self::from_fractions(min, cell, n, &vec![1.0; n[0] * n[1] * n[2]], 0.0)
     }
 
+    /// This lattice's grid with other cells over its nodes and extra nodes appended (each a copy
+    /// of an existing node: same rest position and grid index). Cut lattices are made this way:
+    /// cell copies over real and virtual nodes. [`Lattice::node_at`] still finds the original
+    /// nodes only.
+    pub fn with_cells(&self, cells: Vec<Cell>, copies_of: &[u32]) -> Lattice {
+        let mut out = self.clone();
+        out.cells = cells;
+        for &n in copies_of {
+            out.rest.push(self.rest[n as usize]);
+            out.node_ijk.push(self.node_ijk[n as usize]);
+        }
+        out
+    }
+
     /// Number of nodes.
     pub fn node_count(&self) -> usize {
         self.rest.len()

@@ -4,6 +4,11 @@
 //! [`Simulation::advance`]; the building blocks [`Lattice`], [`body::voxelize`], [`Tled`],
 //! [`flsm::Flsm`], [`stability::estimate`], [`dynamics::Integrator`] and [`embed::Embedding`].
 //!
+//! Cutting (in progress): [`SweptSurface`] (the blade edge's sweep between two trusted poses),
+//! [`cut_edges`] with a [`SpatialHash`] (the lattice edges it crosses), and [`CutTopology`] (the
+//! virtual node algorithm's cell copies and virtual nodes, and the cut lattice that TLED runs on).
+//! Not yet: the cut organ's embedded surface with cut faces, and cutting inside [`Simulation`].
+//!
 //! No feature flags yet (the `gpu` feature comes with the wgpu backend).
 #![warn(missing_docs)]
 
@@ -22,6 +27,7 @@ pub mod stability;
 pub mod sweep;
 pub mod tled;
 mod tled_batch;
+pub mod vna;
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
 pub use collide::{CELL_EDGES, Cuts, EdgeCut, SpatialHash, cut_edges, segment_triangle};
@@ -35,3 +41,4 @@ pub use scenario::Scenario;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};
+pub use vna::{CellCopy, CutTopology};
