@@ -1,7 +1,7 @@
-//! What one camera's label mask says about the tool, restricted to a region of interest around
-//! it: a distance transform of the foreground (where the tool may be: scalpel, hand or unknown
-//! pixels, since the hand may hide it) and a sample of the scalpel pixels (what the tool must
-//! explain).
+//! What one camera's label mask says about the tool: points on the scalpel's outline against the
+//! background (what the tool must explain), sampled in a region of interest around it, and the
+//! distance from any point to the nearest foreground pixel (where the tool may be: scalpel, hand
+//! or unknown pixels, since the hand may hide it), searched locally where it is asked for.
 
 use hullcut_dataset::label;
 use hullcut_rig::Camera;
@@ -13,11 +13,8 @@ pub(crate) type Twist2 = [[f64; 6]; 2];
 
 /// Scalpel pixels kept per view (evenly strided); the fit's cost grows with them.
 const MAX_SAMPLES: usize = 192;
-/// Chamfer weights of the 3-4 distance transform (in thirds of a pixel).
-const STRAIGHT: u32 = 3;
-const DIAGONAL: u32 = 4;
-/// Distance given to pixels with no foreground anywhere in the region, pixels.
-const FAR_PX: f32 = 1000.0;
+/// How far the nearest foreground pixel is searched for, pixels.
+const SEARCH_PX: i64 = 8;
 
 /// One view's evidence.
 #[derive(Debug, Clone)]
@@ -26,11 +23,6 @@ pub struct ViewEvidence<'a> {
     pub camera: &'a Camera,
     radius: f64,
     mask: &'a GrayImage,
-    x0: usize,
-    y0: usize,
-    w: usize,
-    h: usize,
-    dt: Vec<f32>,
     /// Points on the scalpel silhouette's outline against the background, in the region: the
     /// midpoints between scalpel pixels and their background 4-neighbours (at most
     /// [`MAX_SAMPLES`], evenly strided).
@@ -69,24 +61,18 @@ impl<'a> ViewEvidence<'a> {
         let (w, h) = (x1 as usize - x0 + 1, y1 as usize - y0 + 1);
         let raw = mask.as_raw();
         let stride = mask.width() as usize;
-        let mut dist = vec![u32::MAX / 2; w * h];
         let mut scalpel = Vec::new();
         for j in 0..h {
             let row = &raw[(y0 + j) * stride + x0..(y0 + j) * stride + x0 + w];
             for (i, &l) in row.iter().enumerate() {
-                if l != label::BACKGROUND {
-                    dist[j * w + i] = 0;
-                }
                 if l == label::SCALPEL {
                     outline_points(raw, stride, mask.height() as usize, x0 + i, y0 + j, &mut scalpel);
                 }
             }
         }
-        chamfer(&mut dist, w, h);
-        let dt = dist.iter().map(|&d| if d >= u32::MAX / 4 { FAR_PX } else { d as f32 / STRAIGHT as f32 }).collect();
         let step = scalpel.len().div_ceil(MAX_SAMPLES).max(1);
         let samples = scalpel.into_iter().step_by(step).collect();
-        Some(ViewEvidence { camera, radius: monotonic_radius, mask, x0, y0, w, h, dt, samples })
+        Some(ViewEvidence { camera, radius: monotonic_radius, mask, samples })
     }
 
     /// World point → pixel, or `None` behind the camera or beyond the lens' invertible radius.
@@ -124,37 +110,45 @@ impl<'a> ViewEvidence<'a> {
         Some((cam.normalized_to_pixel(xd), j))
     }
 
-    /// How far a pixel position lies outside the foreground: the distance to the nearest foreground
-    /// pixel centre (bilinear inside the region; outside it, 0 on a foreground pixel, else the
-    /// distance to the region added to its border's value) less one pixel, since a point of the tool may project anywhere short
-    /// of the next background pixel's centre; 0 on foreground. With its gradient with respect to
-    /// the pixel position.
+    /// How far a pixel position lies outside the foreground: the distance to the nearest
+    /// foreground pixel centre (scalpel, hand or unknown), less one pixel, since a point of the
+    /// tool may project anywhere short of the next background pixel's centre; 0 on or next to
+    /// foreground. With its gradient with respect to the pixel position. The nearest pixel is
+    /// searched in growing square rings up to [`SEARCH_PX`]; beyond, the value is that radius
+    /// and the gradient 0.
     pub fn outside_foreground_with_gradient(&self, uv: &Point2<f64>) -> (f64, Vector2<f64>) {
-        let x = uv.x - self.x0 as f64;
-        let y = uv.y - self.y0 as f64;
-        let xc = x.clamp(0.0, (self.w - 1) as f64);
-        let yc = y.clamp(0.0, (self.h - 1) as f64);
-        let off = Vector2::new(x - xc, y - yc);
-        let outside = off.norm();
-        // Beyond the region (where the hand may hide the tool) the label decides: foreground is
-        // 0, background gets the region border's distance plus the way to it.
-        if outside > 0.0 && self.label_at(uv).is_some_and(|l| l != label::BACKGROUND) {
+        let (w, h) = (self.mask.width() as i64, self.mask.height() as i64);
+        let raw = self.mask.as_raw();
+        let foreground =
+            |i: i64, j: i64| i >= 0 && j >= 0 && i < w && j < h && raw[(j * w + i) as usize] != label::BACKGROUND;
+        let (ci, cj) = (uv.x.round() as i64, uv.y.round() as i64);
+        if foreground(ci, cj) {
             return (0.0, Vector2::zeros());
         }
-        let (i, j) = (xc.floor() as usize, yc.floor() as usize);
-        let (i1, j1) = ((i + 1).min(self.w - 1), (j + 1).min(self.h - 1));
-        let (fx, fy) = (xc - i as f64, yc - j as f64);
-        let at = |i: usize, j: usize| self.dt[j * self.w + i] as f64;
-        let (a, b, c, d) = (at(i, j), at(i1, j), at(i, j1), at(i1, j1));
-        let value = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy + outside - 1.0;
-        if value <= 0.0 {
-            return (0.0, Vector2::zeros());
+        let mut best: Option<(f64, Vector2<f64>)> = None;
+        for r in 1..=SEARCH_PX {
+            // Every pixel of ring r is at least r - 0.5 px from uv (in Chebyshev distance, so also
+            // in Euclidean): once the best is closer than that, no later ring can do better.
+            if best.is_some_and(|(d, _)| d <= r as f64 - 0.5) {
+                break;
+            }
+            for k in -r..=r {
+                for (i, j) in [(ci + k, cj - r), (ci + k, cj + r), (ci - r, cj + k), (ci + r, cj + k)] {
+                    if foreground(i, j) {
+                        let off = Vector2::new(uv.x - i as f64, uv.y - j as f64);
+                        let d = off.norm();
+                        if best.is_none_or(|(b, _)| d < b) {
+                            best = Some((d, off));
+                        }
+                    }
+                }
+            }
         }
-        let mut g = Vector2::new((b - a) * (1.0 - fy) + (d - c) * fy, (c - a) * (1.0 - fx) + (d - b) * fx);
-        if outside > 0.0 {
-            g += off / outside;
+        match best {
+            Some((d, off)) if d > 1.0 => (d - 1.0, off / d),
+            Some(_) => (0.0, Vector2::zeros()),
+            None => (SEARCH_PX as f64, Vector2::zeros()),
         }
-        (value, g)
     }
 
     /// Label of the pixel containing `uv`, or `None` outside the image.
@@ -199,69 +193,4 @@ pub(crate) fn project(camera: &Camera, radius: f64, p: &Point3<f64>) -> Option<P
         return None;
     }
     Some(camera.normalized_to_pixel(camera.distortion.distort(xn)))
-}
-
-/// Two-pass 3-4 chamfer distance transform in place (0 on foreground, in thirds of a pixel).
-fn chamfer(d: &mut [u32], w: usize, h: usize) {
-    for j in 0..h {
-        for i in 0..w {
-            let mut v = d[j * w + i];
-            if v == 0 {
-                continue;
-            }
-            if i > 0 {
-                v = v.min(d[j * w + i - 1] + STRAIGHT);
-            }
-            if j > 0 {
-                v = v.min(d[(j - 1) * w + i] + STRAIGHT);
-                if i > 0 {
-                    v = v.min(d[(j - 1) * w + i - 1] + DIAGONAL);
-                }
-                if i + 1 < w {
-                    v = v.min(d[(j - 1) * w + i + 1] + DIAGONAL);
-                }
-            }
-            d[j * w + i] = v;
-        }
-    }
-    for j in (0..h).rev() {
-        for i in (0..w).rev() {
-            let mut v = d[j * w + i];
-            if v == 0 {
-                continue;
-            }
-            if i + 1 < w {
-                v = v.min(d[j * w + i + 1] + STRAIGHT);
-            }
-            if j + 1 < h {
-                v = v.min(d[(j + 1) * w + i] + STRAIGHT);
-                if i + 1 < w {
-                    v = v.min(d[(j + 1) * w + i + 1] + DIAGONAL);
-                }
-                if i > 0 {
-                    v = v.min(d[(j + 1) * w + i - 1] + DIAGONAL);
-                }
-            }
-            d[j * w + i] = v;
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn chamfer_distances_are_close_to_euclidean() {
-        let (w, h) = (41, 41);
-        let mut d = vec![u32::MAX / 2; w * h];
-        d[20 * w + 20] = 0;
-        chamfer(&mut d, w, h);
-        for (i, j) in [(30, 20), (20, 5), (30, 30), (40, 33)] {
-            let exact = (((i as f64) - 20.0).powi(2) + ((j as f64) - 20.0).powi(2)).sqrt();
-            let got = d[j * w + i] as f64 / 3.0;
-            // The 3-4 chamfer metric is within 8% of the Euclidean distance.
-            assert!((got - exact).abs() <= 0.08 * exact + 1e-9, "({i},{j}): {got} vs {exact}");
-        }
-    }
 }
