@@ -4,16 +4,20 @@
 //! [`Simulation::advance`]; the building blocks [`Lattice`], [`body::voxelize`], [`Tled`],
 //! [`flsm::Flsm`], [`stability::estimate`], [`dynamics::Integrator`] and [`embed::Embedding`].
 //!
-//! Cutting (in progress): [`SweptSurface`] (the blade edge's sweep between two trusted poses),
-//! [`cut_edges`] with a [`SpatialHash`] (the lattice edges it crosses), and [`CutTopology`] (the
-//! virtual node algorithm's cell copies and virtual nodes, and the cut lattice that TLED runs on).
-//! Not yet: the cut organ's embedded surface with cut faces, and cutting inside [`Simulation`].
+//! Cutting: [`SweptSurface`] (the blade edge's sweep between two trusted poses), [`cut_edges`] with
+//! a [`SpatialHash`] (the lattice edges it crosses), [`CutTopology`] (the virtual node algorithm's
+//! cell copies and virtual nodes, and the cut lattice that TLED runs on),
+//! [`cut_surface::piece_surfaces`] (a closed surface per piece, cut faces included) and
+//! [`CutSim`], which puts them together with TLED under gravity. The scenario-driven
+//! [`Simulation`] (hybrid TLED/FLSM) does not cut yet.
 //!
 //! No feature flags yet (the `gpu` feature comes with the wgpu backend).
 #![warn(missing_docs)]
 
 pub mod body;
 pub mod collide;
+pub mod cut_surface;
+pub mod cutting;
 pub mod dynamics;
 pub mod embed;
 mod error;
@@ -31,6 +35,7 @@ pub mod vna;
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
 pub use collide::{CELL_EDGES, Cuts, EdgeCut, SpatialHash, cut_edges, segment_triangle};
+pub use cutting::{CutOutcome, CutSim, CutSimParams};
 pub use embed::{EmbedError, Embedding};
 pub use error::SimError;
 pub use flsm::{Flsm, FlsmParams};
@@ -41,4 +46,4 @@ pub use scenario::Scenario;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};
-pub use vna::{CellCopy, CutTopology};
+pub use vna::{CellCopy, CellSplit, CutTopology};

@@ -52,6 +52,8 @@ pub struct CutTopology {
     pub pieces: usize,
     /// For each copy, its piece.
     pub piece_of: Vec<u32>,
+    /// The copies of lattice cell `c` are `copies[first_copy[c]..first_copy[c + 1]]`.
+    pub first_copy: Vec<u32>,
 }
 
 struct UnionFind(Vec<usize>);
@@ -122,7 +124,7 @@ impl CutTopology {
         let base = lattice.node_count();
         // Copies and their corner masks.
         let mut copies = Vec::with_capacity(lattice.cells.len());
-        let mut first_copy = Vec::with_capacity(lattice.cells.len() + 1);
+        let mut first_copy: Vec<usize> = Vec::with_capacity(lattice.cells.len() + 1);
         for (c, cell) in lattice.cells.iter().enumerate() {
             first_copy.push(copies.len());
             let cut_edges: [bool; 12] = std::array::from_fn(|e| {
@@ -202,7 +204,20 @@ impl CutTopology {
                 *piece_ids.entry(r).or_insert(next)
             })
             .collect();
-        CutTopology { cut, copies, virtual_of, pieces: piece_ids.len(), piece_of }
+        let first_copy = first_copy.into_iter().map(|k| k as u32).collect();
+        CutTopology { cut, copies, virtual_of, pieces: piece_ids.len(), piece_of, first_copy }
+    }
+
+    /// The copies of lattice cell `c`, as indices into [`CutTopology::copies`].
+    pub fn copies_of(&self, c: usize) -> std::ops::Range<usize> {
+        self.first_copy[c] as usize..self.first_copy[c + 1] as usize
+    }
+
+    /// How cell `c`'s material is divided between its copies (in the order of
+    /// [`CutTopology::copies_of`]).
+    pub fn split(&self, lattice: &Lattice, c: usize) -> CellSplit {
+        let masks = self.copies_of(c).map(|k| self.copies[k].material).collect();
+        CellSplit::new(lattice, c, masks, &self.cut)
     }
 
     /// Rest position of any node (lattice or virtual).
@@ -248,45 +263,61 @@ impl CutTopology {
     }
 }
 
-/// How a cut cell's material is shared between its components. Two components: the cut is taken
-/// as the plane through the edge crossings (least squares), and samples of the cell on each side
-/// go to the component whose corners lie there. More components (crossing cuts): each sample goes
-/// to the component with the largest trilinear weight.
-fn shares(lattice: &Lattice, c: usize, masks: &[u8], cut: &BTreeMap<(u32, u32), f64>) -> Vec<f64> {
-    if masks.len() == 1 {
-        return vec![1.0];
-    }
-    let cell = &lattice.cells[c];
-    let corner = |k: usize| Vector3::new(CORNERS[k][0] as f64, CORNERS[k][1] as f64, CORNERS[k][2] as f64);
-    let mut crossings = Vec::new();
-    for [i, j] in CELL_EDGES {
-        let (a, b) = (cell.nodes[i], cell.nodes[j]);
-        if let Some(&t) = cut.get(&(a.min(b), a.max(b))) {
-            let t = if a <= b { t } else { 1.0 - t };
-            // Crossing in cell coordinates, from corner i toward corner j.
-            crossings.push(corner(i) + (corner(j) - corner(i)) * t);
+/// How a split cell's material is divided between its copies, in cell coordinates (the cube
+/// `[0, 1]³`, corner `c` at [`CORNERS`]`[c]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellSplit {
+    /// Corner masks of the cell's components, in the order of its copies.
+    pub masks: Vec<u8>,
+    /// For two components: the plane fitted through the edge crossings (least squares), as a point
+    /// and a unit normal pointing away from component 0's corners. `None` for crossing cuts (three
+    /// or more components) or too few crossings: a point then goes to the component with the
+    /// largest trilinear weight.
+    pub plane: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+impl CellSplit {
+    /// The split of lattice cell `c` into the components `masks`, given the crossed edges.
+    pub fn new(lattice: &Lattice, c: usize, masks: Vec<u8>, cut: &BTreeMap<(u32, u32), f64>) -> Self {
+        let cell = &lattice.cells[c];
+        let mut crossings = Vec::new();
+        for [i, j] in CELL_EDGES {
+            let (a, b) = (cell.nodes[i], cell.nodes[j]);
+            if let Some(&t) = cut.get(&(a.min(b), a.max(b))) {
+                let t = if a <= b { t } else { 1.0 - t };
+                // Crossing in cell coordinates, from corner i toward corner j.
+                crossings.push(corner(i) + (corner(j) - corner(i)) * t);
+            }
         }
+        let plane = (masks.len() == 2 && crossings.len() >= 3).then(|| {
+            let n = crossings.len() as f64;
+            let centroid = crossings.iter().sum::<Vector3<f64>>() / n;
+            let mut cov = Matrix3::zeros();
+            for x in &crossings {
+                let d = x - centroid;
+                cov += d * d.transpose();
+            }
+            let eig = cov.symmetric_eigen();
+            let normal = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+            let side0: f64 =
+                (0..8).filter(|k| masks[0] & (1 << k) != 0).map(|k| (corner(k) - centroid).dot(&normal)).sum();
+            (centroid, if side0 > 0.0 { -normal } else { normal })
+        });
+        CellSplit { masks, plane }
     }
-    let plane = (masks.len() == 2 && crossings.len() >= 3).then(|| {
-        let n = crossings.len() as f64;
-        let centroid = crossings.iter().sum::<Vector3<f64>>() / n;
-        let mut cov = Matrix3::zeros();
-        for x in &crossings {
-            let d = x - centroid;
-            cov += d * d.transpose();
+
+    /// The component a point of the cell (cell coordinates) belongs to, and its signed distance to
+    /// the cut in cell units: negative inside that component's side. Crossing cuts give a fixed
+    /// -0.5 (no plane to measure from).
+    pub fn component_at(&self, p: &Vector3<f64>) -> (usize, f64) {
+        if self.masks.len() == 1 {
+            return (0, f64::NEG_INFINITY);
         }
-        let eig = cov.symmetric_eigen();
-        let normal = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
-        // Orient the normal away from component 0's corners.
-        let side0: f64 = (0..8).filter(|k| masks[0] & (1 << k) != 0).map(|k| (corner(k) - centroid).dot(&normal)).sum();
-        (centroid, if side0 > 0.0 { -normal } else { normal })
-    });
-    let mut counts = vec![0usize; masks.len()];
-    let m = SHARE_SAMPLES;
-    for s in 0..m * m * m {
-        let p = Vector3::new((s % m) as f64 + 0.5, ((s / m) % m) as f64 + 0.5, (s / (m * m)) as f64 + 0.5) / m as f64;
-        let k = match plane {
-            Some((centroid, normal)) => usize::from((p - centroid).dot(&normal) > 0.0),
+        match self.plane {
+            Some((centroid, normal)) => {
+                let d = (p - centroid).dot(&normal);
+                if d > 0.0 { (1, -d) } else { (0, d) }
+            }
             None => {
                 let weight = |mask: u8| -> f64 {
                     (0..8)
@@ -297,10 +328,32 @@ fn shares(lattice: &Lattice, c: usize, masks: &[u8], cut: &BTreeMap<(u32, u32), 
                         })
                         .sum()
                 };
-                (0..masks.len()).max_by(|&a, &b| weight(masks[a]).total_cmp(&weight(masks[b]))).unwrap_or(0)
+                let k = (0..self.masks.len())
+                    .max_by(|&a, &b| weight(self.masks[a]).total_cmp(&weight(self.masks[b])))
+                    .unwrap_or(0);
+                (k, -0.5)
             }
-        };
-        counts[k] += 1;
+        }
+    }
+}
+
+/// Corner `k` of the unit cube.
+fn corner(k: usize) -> Vector3<f64> {
+    Vector3::new(CORNERS[k][0] as f64, CORNERS[k][1] as f64, CORNERS[k][2] as f64)
+}
+
+/// How a cut cell's material is shared between its components: the share of samples of the cell
+/// that [`CellSplit::component_at`] gives each.
+fn shares(lattice: &Lattice, c: usize, masks: &[u8], cut: &BTreeMap<(u32, u32), f64>) -> Vec<f64> {
+    if masks.len() == 1 {
+        return vec![1.0];
+    }
+    let split = CellSplit::new(lattice, c, masks.to_vec(), cut);
+    let mut counts = vec![0usize; masks.len()];
+    let m = SHARE_SAMPLES;
+    for s in 0..m * m * m {
+        let p = Vector3::new((s % m) as f64 + 0.5, ((s / m) % m) as f64 + 0.5, (s / (m * m)) as f64 + 0.5) / m as f64;
+        counts[split.component_at(&p).0] += 1;
     }
     counts.iter().map(|&n| n as f64 / (m * m * m) as f64).collect()
 }
