@@ -28,7 +28,10 @@ pub use hand::hand_mesh;
 pub use mesh::TriMesh;
 pub use render::{CameraRenderer, Layers, Light, Part};
 pub use scalpel::{BLADE_LENGTH, BLADE_THICKNESS, BLADE_WIDTH, HANDLE_LENGTH, HANDLE_THICKNESS, HANDLE_WIDTH, Scalpel};
-pub use scene::{BLADE_ALBEDO, DepthImage, GLOVE_ALBEDO, HANDLE_ALBEDO, RenderedView, START_NS, Scene, SceneConfig};
+pub use scene::{
+    BLADE_ALBEDO, DEFAULT_STROKE_DEPTH, DepthImage, GLOVE_ALBEDO, HANDLE_ALBEDO, RenderedView, START_NS, Scene,
+    SceneConfig,
+};
 pub use synthesize::{SynthSummary, synthesize};
 pub use trajectory::{Key, ORGAN_TOP, SceneKind, ToolState, Trajectory, tool_rotation};
 

@@ -55,7 +55,14 @@ pub struct SceneConfig {
     pub truth_meshes: bool,
     /// PNG compression of the written dataset.
     pub compression: hullcut_dataset::PngCompression,
+    /// How far below [`crate::ORGAN_TOP`] the blade's tip presses during a stroke, metres, drawn
+    /// uniformly from this range per stroke (`cut` and `hard` scenes).
+    pub stroke_depth: [f64; 2],
 }
+
+/// Default of [`SceneConfig::stroke_depth`]: shallow strokes, the tool's pose being what these
+/// scenes measure.
+pub const DEFAULT_STROKE_DEPTH: [f64; 2] = [0.008, 0.025];
 
 impl SceneConfig {
     /// The defaults of a scene kind on the default rig.
@@ -76,6 +83,7 @@ impl SceneConfig {
             background_frames: 5,
             truth_meshes: true,
             compression: hullcut_dataset::PngCompression::Fast,
+            stroke_depth: DEFAULT_STROKE_DEPTH,
         }
     }
 }
@@ -120,7 +128,8 @@ impl Scene {
         }
         let scalpel = Scalpel::new();
         let duration = config.frames as f64 / config.fps;
-        let trajectory = Trajectory::for_scene(config.kind, config.seed, duration, scalpel.geometry.tip);
+        let trajectory =
+            Trajectory::for_scene(config.kind, config.seed, duration, scalpel.geometry.tip, config.stroke_depth);
         let light = Light::default();
         let renderers = config.rig.cameras.par_iter().map(|c| CameraRenderer::new(c, light)).collect();
         let schedule = Self::schedule(&config);

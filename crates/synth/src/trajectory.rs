@@ -147,8 +147,15 @@ impl Trajectory {
             .fold(0.0, f64::max)
     }
 
-    /// The trajectory of a scene, `duration` seconds long, deterministic for a seed.
-    pub fn for_scene(kind: SceneKind, seed: u64, duration: f64, tip_in_tool: Point3<f64>) -> Self {
+    /// The trajectory of a scene, `duration` seconds long, deterministic for a seed; strokes press
+    /// the tip `stroke_depth` (a range, metres) below [`ORGAN_TOP`].
+    pub fn for_scene(
+        kind: SceneKind,
+        seed: u64,
+        duration: f64,
+        tip_in_tool: Point3<f64>,
+        stroke_depth: [f64; 2],
+    ) -> Self {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x7a3c_91e5_0d42_b6f1);
         let deg = f64::to_radians;
         let mut keys = Vec::new();
@@ -184,7 +191,7 @@ impl Trajectory {
                     };
                     let pitch = deg(rng.random_range(32.0..55.0));
                     let roll = if hard { 0.0 } else { deg(rng.random_range(-12.0..12.0)) };
-                    let depth = rng.random_range(0.008..0.025);
+                    let depth = rng.random_range(stroke_depth[0]..stroke_depth[1].max(stroke_depth[0] + 1e-9));
                     let length = if hard { 0.10 } else { rng.random_range(0.05..0.09) };
                     let mean_speed = if hard { 0.1 / 0.3 } else { rng.random_range(0.05..0.12) };
                     let grip = if hard { 1.0 } else { rng.random_range(0.1..0.7) };
@@ -233,6 +240,7 @@ impl Trajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::DEFAULT_STROKE_DEPTH;
 
     #[test]
     fn tool_rotation_is_right_handed_with_the_tip_down_and_the_spine_up() {
@@ -246,16 +254,16 @@ mod tests {
     #[test]
     fn tip_follows_keys_and_hard_strokes_peak_at_half_a_metre_per_second() {
         let tip = Point3::new(0.038, 0.003, 0.0);
-        let tr = Trajectory::for_scene(SceneKind::Hard, 3, 6.0, tip);
+        let tr = Trajectory::for_scene(SceneKind::Hard, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
         for k in tr.keys() {
             let s = tr.state_at(k.time);
             assert!((s.tool_to_world * tip - k.tip).norm() < 1e-12);
         }
         let peak = tr.peak_tip_speed(6.0);
         assert!((0.45..0.56).contains(&peak), "peak {peak} m/s");
-        let cut = Trajectory::for_scene(SceneKind::Cut, 3, 6.0, tip);
+        let cut = Trajectory::for_scene(SceneKind::Cut, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
         assert!(cut.peak_tip_speed(6.0) < 0.25);
-        let still = Trajectory::for_scene(SceneKind::Static, 3, 6.0, tip);
+        let still = Trajectory::for_scene(SceneKind::Static, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
         assert_eq!(still.peak_tip_speed(6.0), 0.0);
     }
 
@@ -263,12 +271,12 @@ mod tests {
     fn same_seed_same_trajectory() {
         let tip = Point3::new(0.038, 0.003, 0.0);
         assert_eq!(
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip),
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip)
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH),
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH)
         );
         assert_ne!(
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip),
-            Trajectory::for_scene(SceneKind::Cut, 10, 5.0, tip)
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH),
+            Trajectory::for_scene(SceneKind::Cut, 10, 5.0, tip, DEFAULT_STROKE_DEPTH)
         );
     }
 }
