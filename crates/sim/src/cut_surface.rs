@@ -8,10 +8,12 @@
 //! piece. Surface nets over it give one closed, consistently oriented mesh per piece whose cut
 //! faces lie where the blade passed (planar within each cell) and whose outside follows the body.
 //!
+//! Adjacent samples of one piece whose copies share no node lie on opposite faces of a cut that
+//! has not (yet) separated the piece, a slit: the surface passes between them too, as two faces
+//! with their own vertices, one per side, so the slit opens as its sides move apart.
+//!
 //! Each vertex is bound to the copy that holds it: its trilinear weights in that copy's cube, so
 //! it moves with the copy's nodes (real or virtual) and the pieces come apart as their nodes do.
-//! A partial cut (a slit) leaves its cells whole, so it shows in the surface only once it
-//! separates material.
 
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -129,6 +131,14 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
         })
         .collect();
     let piece_of = |copy: u32| if copy == NO_COPY { u32::MAX } else { topology.piece_of[copy as usize] };
+    // Copies of split cells: only those can be cut apart from a neighbour.
+    let split: Vec<bool> = topology.copies.iter().map(|c| topology.copies_of(c.parent as usize).len() > 1).collect();
+    let joined = |a: u32, b: u32| {
+        a == b || !(split[a as usize] || split[b as usize]) || {
+            let (na, nb) = (&topology.copies[a as usize].nodes, &topology.copies[b as usize].nodes);
+            na.iter().any(|n| nb.contains(n))
+        }
+    };
     (0..topology.pieces as u32)
         .into_par_iter()
         .map(|piece| {
@@ -141,47 +151,23 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
                     } else if piece_of(copy) == piece {
                         body.max(cut)
                     } else if cut.is_finite() {
-                        // Across a cut: the distance to it, so the crossing lands on the plane.
                         (-cut).max(1e-6 * samples.h)
                     } else {
                         0.5 * samples.h
                     }
                 })
                 .collect();
-            let mesh = surface_nets(&values, samples);
-            let bindings = mesh.vertices.iter().map(|p| bind(lattice, topology, samples, &owner, &values, p)).collect();
+            let field = Field { values: &values, owner: &owner, samples, joined: &joined };
+            let (mesh, held_by) = field.surface_nets();
+            let bindings =
+                mesh.vertices.iter().zip(held_by).map(|(p, copy)| bind(lattice, topology, copy, p)).collect();
             PieceSurface { rest: mesh, bindings }
         })
         .collect()
 }
 
-/// Binds a vertex to the copy of the nearest inside sample among the eight around it.
-fn bind(
-    lattice: &Lattice,
-    topology: &CutTopology,
-    samples: &BodySamples,
-    owner: &[(u32, f64)],
-    values: &[f64],
-    p: &Point3<f64>,
-) -> Binding {
-    let d = samples.dims;
-    let g0 = ((p - samples.start) / samples.h).map(|x| x.floor().max(0.0) as usize);
-    let mut best: Option<(f64, u32)> = None;
-    for c in 0..8 {
-        let g = [
-            (g0[0] + (c & 1)).min(d[0] - 1),
-            (g0[1] + ((c >> 1) & 1)).min(d[1] - 1),
-            (g0[2] + ((c >> 2) & 1)).min(d[2] - 1),
-        ];
-        let idx = g[0] + d[0] * (g[1] + d[1] * g[2]);
-        let (copy, _) = owner[idx];
-        if copy != NO_COPY && values[idx] < 0.0 && best.is_none_or(|(v, _)| values[idx] < v) {
-            best = Some((values[idx], copy));
-        }
-    }
-    let Some((_, copy)) = best else {
-        return Binding { nodes: [0; 8], weights: [0.0; 8] };
-    };
+/// The trilinear weights of `p` in the cube of `copy`.
+fn bind(lattice: &Lattice, topology: &CutTopology, copy: u32, p: &Point3<f64>) -> Binding {
     let copy = &topology.copies[copy as usize];
     let ijk = lattice.cells[copy.parent as usize].ijk;
     let local = (p - lattice.origin) / lattice.cell - Vector3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64);
@@ -192,85 +178,175 @@ fn bind(
     Binding { nodes: copy.nodes, weights }
 }
 
-/// Naive surface nets over sampled values (negative inside, positive on the outer layer): one
-/// vertex per grid cube the surface crosses, at the mean of its edges' linear crossings, and one
-/// quad per grid edge with a sign change, oriented so that normals point from inside to outside.
-fn surface_nets(values: &[f64], samples: &BodySamples) -> TriMesh {
-    let n = samples.dims;
-    let node = |g: [usize; 3]| g[0] + n[0] * (g[1] + n[1] * g[2]);
-    let inside = |g: [usize; 3]| values[node(g)] < 0.0;
-    let cn = [n[0] - 1, n[1] - 1, n[2] - 1];
-    let cube = |c: [usize; 3]| c[0] + cn[0] * (c[1] + cn[1] * c[2]);
-    let mut vertex_of = std::collections::HashMap::new();
-    let mut vertices = Vec::new();
-    // Only cubes next to an inside sample can straddle the surface.
-    for (g, _) in values.iter().enumerate().filter(|(_, v)| **v < 0.0) {
-        let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
-        for c in 0..8 {
-            let lo = [gi[0].wrapping_sub(c & 1), gi[1].wrapping_sub((c >> 1) & 1), gi[2].wrapping_sub((c >> 2) & 1)];
-            if (0..3).any(|a| lo[a] >= cn[a]) || vertex_of.contains_key(&cube(lo)) {
-                continue;
-            }
-            let corner = |k: usize| [lo[0] + (k & 1), lo[1] + ((k >> 1) & 1), lo[2] + ((k >> 2) & 1)];
-            let v: [f64; 8] = std::array::from_fn(|k| values[node(corner(k))]);
-            let count = v.iter().filter(|&&x| x < 0.0).count();
-            if count == 8 {
-                continue;
-            }
-            let mut sum = Vector3::zeros();
-            let mut crossings = 0.0;
-            for a in 0..8 {
-                for bit in [1, 2, 4] {
-                    let b = a | bit;
-                    if a & bit != 0 || (v[a] < 0.0) == (v[b] < 0.0) {
-                        continue;
-                    }
-                    let t = (v[a] / (v[a] - v[b])).clamp(0.0, 1.0);
-                    let (pa, pb) = (samples.position(node(corner(a))), samples.position(node(corner(b))));
-                    sum += pa.coords + (pb - pa) * t;
-                    crossings += 1.0;
-                }
-            }
-            vertex_of.insert(cube(lo), vertices.len() as u32);
-            vertices.push(Point3::from(sum / crossings));
+/// One piece's signed samples with who owns them.
+struct Field<'a> {
+    /// Negative where the piece has material.
+    values: &'a [f64],
+    /// Each sample's copy and signed distance to its cell's cut (metres; infinite in whole cells).
+    owner: &'a [(u32, f64)],
+    samples: &'a BodySamples,
+    /// Whether two copies hold together (share a node): samples of copies that do not are on
+    /// opposite faces of a cut, even inside one piece.
+    joined: &'a (dyn Fn(u32, u32) -> bool + Sync),
+}
+
+impl Field<'_> {
+    fn inside(&self, g: usize) -> bool {
+        self.values[g] < 0.0
+    }
+
+    /// Whether the surface passes between adjacent samples `a` (inside) and `b`: `b` is outside,
+    /// or across a cut (a slit within the piece shows as two faces, one per side).
+    fn boundary(&self, a: usize, b: usize) -> bool {
+        !self.inside(b) || !(self.joined)(self.owner[a].0, self.owner[b].0)
+    }
+
+    /// Where the surface crosses the grid edge from `a` (inside) to `b`, as a fraction of it.
+    fn crossing(&self, a: usize, b: usize) -> f64 {
+        let (va, vb) = (self.values[a], self.values[b]);
+        if !self.inside(b) {
+            return (va / (va - vb)).clamp(0.0, 1.0);
+        }
+        // Across a cut: at the cut plane, as seen from either side's cell.
+        let h = self.samples.h;
+        let (ca, cb) = (self.owner[a].1.abs(), self.owner[b].1.abs());
+        match (ca.is_finite(), cb.is_finite()) {
+            (true, true) => ca / (ca + cb).max(1e-12),
+            (true, false) => (ca / h).min(1.0),
+            (false, true) => (1.0 - cb / h).max(0.0),
+            (false, false) => 0.5,
         }
     }
-    let mut triangles = Vec::new();
-    for (g, _) in values.iter().enumerate().filter(|(_, v)| **v < 0.0) {
-        let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
-        for axis in 0..3 {
-            let (u, w) = ((axis + 1) % 3, (axis + 2) % 3);
-            for dir in [-1i64, 1] {
-                let mut other = gi;
-                other[axis] = (gi[axis] as i64 + dir) as usize;
-                if inside(other) {
+
+    /// Naive surface nets with cut walls: in each grid cube the surface crosses, the inside samples
+    /// fall into groups that hold together (cube edges between samples whose copies are joined);
+    /// each group has its own vertex, at the mean of the crossings on its boundary edges (at a
+    /// slit's front, where both sides hold together, one group holds both faces' edges). One
+    /// quad per boundary grid edge, on the inside sample's side, oriented from inside to outside.
+    /// A whole body gives one group per cube (plain surface nets); a slit gives one group on
+    /// each side, so its two faces have their own vertices and can open. Returns the mesh and, per
+    /// vertex, the copy that holds it (the group's deepest sample's).
+    fn surface_nets(&self) -> (TriMesh, Vec<u32>) {
+        let n = self.samples.dims;
+        let node = |g: [usize; 3]| g[0] + n[0] * (g[1] + n[1] * g[2]);
+        let cn = [n[0] - 1, n[1] - 1, n[2] - 1];
+        let cube = |c: [usize; 3]| c[0] + cn[0] * (c[1] + cn[1] * c[2]);
+        // Per crossed cube: the vertex of each corner's group (u32::MAX for outside corners).
+        let mut vertex_of: std::collections::HashMap<usize, [u32; 8]> = std::collections::HashMap::new();
+        let mut vertices = Vec::new();
+        let mut held_by = Vec::new();
+        for g in (0..self.values.len()).filter(|&g| self.inside(g)) {
+            let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
+            for c in 0..8 {
+                let lo =
+                    [gi[0].wrapping_sub(c & 1), gi[1].wrapping_sub((c >> 1) & 1), gi[2].wrapping_sub((c >> 2) & 1)];
+                if (0..3).any(|a| lo[a] >= cn[a]) || vertex_of.contains_key(&cube(lo)) {
                     continue;
                 }
-                // The edge from the lower to the upper sample along `axis`.
-                let low = if dir > 0 { gi } else { other };
-                let quad_vertex = |du: usize, dw: usize| {
-                    let mut c = low;
-                    c[u] = low[u] + du - 1;
-                    c[w] = low[w] + dw - 1;
-                    vertex_of[&cube(c)]
+                let corner = |k: usize| node([lo[0] + (k & 1), lo[1] + ((k >> 1) & 1), lo[2] + ((k >> 2) & 1)]);
+                let idx: [usize; 8] = std::array::from_fn(corner);
+                // Groups: union of inside corners along cube edges that are not boundaries.
+                let mut group: [usize; 8] = std::array::from_fn(|k| k);
+                let find = |group: &[usize; 8], mut k: usize| {
+                    while group[k] != k {
+                        k = group[k];
+                    }
+                    k
                 };
-                // Counter-clockwise about +axis; reversed when the outside is below.
-                let mut q = [quad_vertex(0, 0), quad_vertex(1, 0), quad_vertex(1, 1), quad_vertex(0, 1)];
-                if dir < 0 {
-                    q.reverse();
+                let mut crossed = false;
+                for a in 0..8 {
+                    for bit in [1, 2, 4] {
+                        let b = a | bit;
+                        if a & bit != 0 {
+                            continue;
+                        }
+                        let (ia, ib) = (idx[a], idx[b]);
+                        match (self.inside(ia), self.inside(ib)) {
+                            (true, true) if !self.boundary(ia, ib) => {
+                                let (ra, rb) = (find(&group, a), find(&group, b));
+                                group[ra.max(rb)] = ra.min(rb);
+                            }
+                            (false, false) => {}
+                            _ => crossed = true,
+                        }
+                    }
                 }
-                let p = q.map(|i| vertices[i as usize]);
-                if (p[0] - p[2]).norm_squared() <= (p[1] - p[3]).norm_squared() {
-                    triangles.push([q[0], q[1], q[2]]);
-                    triangles.push([q[0], q[2], q[3]]);
-                } else {
-                    triangles.push([q[0], q[1], q[3]]);
-                    triangles.push([q[1], q[2], q[3]]);
+                if !crossed {
+                    continue;
+                }
+                let mut ids = [u32::MAX; 8];
+                for root in 0..8 {
+                    if !self.inside(idx[root]) || find(&group, root) != root {
+                        continue;
+                    }
+                    let members: Vec<usize> =
+                        (0..8).filter(|&k| self.inside(idx[k]) && find(&group, k) == root).collect();
+                    let mut sum = Vector3::zeros();
+                    let mut count = 0.0;
+                    for &a in &members {
+                        for bit in [1, 2, 4] {
+                            let b = a ^ bit;
+                            if !self.boundary(idx[a], idx[b]) {
+                                continue;
+                            }
+                            let t = self.crossing(idx[a], idx[b]);
+                            let (pa, pb) = (self.samples.position(idx[a]), self.samples.position(idx[b]));
+                            sum += pa.coords + (pb - pa) * t;
+                            count += 1.0;
+                        }
+                    }
+                    let deepest = members
+                        .iter()
+                        .map(|&k| idx[k])
+                        .min_by(|&x, &y| self.values[x].total_cmp(&self.values[y]))
+                        .unwrap_or(idx[root]);
+                    let id = vertices.len() as u32;
+                    vertices.push(Point3::from(sum / f64::max(count, 1.0)));
+                    held_by.push(self.owner[deepest].0);
+                    for &k in &members {
+                        ids[k] = id;
+                    }
+                }
+                vertex_of.insert(cube(lo), ids);
+            }
+        }
+        let mut triangles = Vec::new();
+        for g in (0..self.values.len()).filter(|&g| self.inside(g)) {
+            let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
+            for axis in 0..3 {
+                let (u, w) = ((axis + 1) % 3, (axis + 2) % 3);
+                for dir in [-1i64, 1] {
+                    let mut other = gi;
+                    other[axis] = (gi[axis] as i64 + dir) as usize;
+                    if !self.boundary(g, node(other)) {
+                        continue;
+                    }
+                    let low = if dir > 0 { gi } else { other };
+                    // The vertex of g's group in the cube with lower corner c.
+                    let quad_vertex = |du: usize, dw: usize| {
+                        let mut c = low;
+                        c[u] = low[u] + du - 1;
+                        c[w] = low[w] + dw - 1;
+                        let k = (0..3).map(|a| (gi[a] - c[a]) << a).sum::<usize>();
+                        vertex_of[&cube(c)][k]
+                    };
+                    let mut q = [quad_vertex(0, 0), quad_vertex(1, 0), quad_vertex(1, 1), quad_vertex(0, 1)];
+                    if dir < 0 {
+                        q.reverse();
+                    }
+                    let p = q.map(|i| vertices[i as usize]);
+                    if (p[0] - p[2]).norm_squared() <= (p[1] - p[3]).norm_squared() {
+                        triangles.push([q[0], q[1], q[2]]);
+                        triangles.push([q[0], q[2], q[3]]);
+                    } else {
+                        triangles.push([q[0], q[1], q[3]]);
+                        triangles.push([q[1], q[2], q[3]]);
+                    }
                 }
             }
         }
+        (TriMesh::new(vertices, triangles), held_by)
     }
-    TriMesh::new(vertices, triangles)
 }
 
 #[cfg(test)]
@@ -286,6 +362,54 @@ mod tests {
             let q = (p.coords - size / 2.0).abs() - size / 2.0;
             q.map(|x| x.max(0.0)).norm() + q.max().min(0.0)
         }
+    }
+
+    #[test]
+    fn a_slit_within_one_piece_shows_as_two_faces_that_open_with_their_sides() {
+        let l = Lattice::block(Point3::origin(), 0.01, [6, 6, 6]);
+        let size = Vector3::repeat(0.06);
+        let samples = BodySamples::new(&l, 4, &box_sdf(size));
+        let whole = &piece_surfaces(&l, &CutTopology::rebuild(&l, []), &samples)[0].rest;
+        // The blade goes in from the top, 3.3 cm deep, across the whole block at y = 0.023.
+        let edge: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect();
+        let hash = SpatialHash::new(&l, &l.rest, l.cell);
+        let s = SweptSurface::between(
+            &edge,
+            &Isometry3::translation(0.0, 0.023, 0.08),
+            &Isometry3::translation(0.0, 0.023, 0.027),
+            0.005,
+            0.1,
+        )
+        .expect("surface");
+        let cut = CutTopology::rebuild(&l, cut_edges(&l, &l.rest, &hash, &s).edges);
+        assert_eq!(cut.pieces, 1, "a slit does not separate");
+        let surfaces = piece_surfaces(&l, &cut, &samples);
+        let slit = &surfaces[0].rest;
+        assert!(slit.is_closed(), "closed with the slit's faces");
+        assert_eq!(slit.orientation_conflicts(), 0);
+        assert!((slit.volume() - whole.volume()).abs() < 0.01 * whole.volume(), "no material lost");
+        // Two faces, each as wide as the block and as deep as the split cells (3 of 6 layers),
+        // folded into each other at the slit's front.
+        let added = slit.area() - whole.area();
+        let expected = 2.0 * 0.06 * 0.03;
+        assert!((added - expected).abs() < 0.15 * expected, "added {added} m² vs {expected}");
+        // Pull the side y < 0.023 of the split cells away: the faces part, no vertex is torn from
+        // its side (vertices bound to copies whose nodes did not move stay put).
+        let mut u = vec![Vector3::zeros(); cut.node_count(&l)];
+        let base = l.node_count();
+        for (v, &real) in cut.virtual_of.iter().enumerate() {
+            if l.rest[real as usize].y > 0.023 {
+                u[base + v] = Vector3::new(0.0, -0.004, 0.0);
+            }
+        }
+        for n in 0..base {
+            if l.rest[n].y < 0.023 && l.rest[n].z > 0.025 {
+                u[n] = Vector3::new(0.0, -0.004, 0.0);
+            }
+        }
+        let moved = surfaces[0].deformed(&u);
+        let opened = moved.iter().zip(&slit.vertices).filter(|(q, p)| (q.y - p.y as f32) < -0.003).count();
+        assert!(opened > 0, "the side that moved carries its face along");
     }
 
     #[test]

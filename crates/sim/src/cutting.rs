@@ -128,7 +128,8 @@ impl CutSim {
         let free: Vec<[bool; 3]> = (0..cut.node_count()).map(|n| [!fixed[n]; 3]).collect();
         let zeros = vec![Vector3::zeros(); cut.node_count()];
         let limit = stability::estimate(&mut tled, &mass, &free, &zeros, lattice.cell, 300, 1e-6);
-        let dt = (params.dt_safety * limit.dt_critical) as f32;
+        let dt_critical = limit.dt_critical.min(lone_cell_dt(&lattice, &material, params.tled)?);
+        let dt = (params.dt_safety * dt_critical) as f32;
         let integrator = Integrator::new(mass, Vec::new(), 0, params.damping, dt, speed_limit(&material));
         let mut sim = CutSim {
             lattice,
@@ -142,7 +143,7 @@ impl CutSim {
             f_int: Vec::new(),
             f_ext: Vec::new(),
             surfaces: Vec::new(),
-            dt_critical: limit.dt_critical,
+            dt_critical,
             dropped,
         };
         sim.install(
@@ -353,6 +354,22 @@ impl CutSim {
 }
 
 /// A speed no stable run reaches: ten times the dilatational wave speed.
+/// The critical step of one free cell of the lattice's spacing (lumped masses, nothing held).
+///
+/// A body's highest eigenfrequency is at most the highest of its elements taken alone (Irons'
+/// bound), and a cut approaches that bound: a copy joined to the rest by few nodes vibrates almost
+/// on its own. A copy's mass and stiffness both scale with its material, so one full free cell
+/// bounds every copy a cut can make; the uncut body's own estimate is lower than this bound by up
+/// to the factor the safety margin leaves, which is why cut bodies need it.
+fn lone_cell_dt(lattice: &Lattice, material: &Material, tled: TledParams) -> Result<f64, SimError> {
+    let cell = Lattice::block(Point3::origin(), lattice.cell, [1, 1, 1]);
+    let mut model = Tled::new(&cell, None, material, tled)?;
+    let mass: Vec<f32> = cell.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
+    let free = vec![[true; 3]; cell.node_count()];
+    let zeros = vec![Vector3::zeros(); cell.node_count()];
+    Ok(stability::estimate(&mut model, &mass, &free, &zeros, lattice.cell, 300, 1e-6).dt_critical)
+}
+
 fn speed_limit(material: &Material) -> f32 {
     (10.0 * material.wave_speed()) as f32
 }
