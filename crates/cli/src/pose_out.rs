@@ -257,3 +257,18 @@ pub fn log_blade(rec: &RecordingStream, which: &str, pose: &BladePose) -> anyhow
     hullcut_viz::log_points3d(rec, &format!("{base}/tip"), &[f(pose.tip)], colour, 0.0015)?;
     Ok(())
 }
+
+/// The refused estimate of a frame set whose dataset has no tool.json.
+pub fn no_tool_estimate(frame: u64, timestamp_ns: i64) -> PoseEstimate {
+    PoseEstimate {
+        frame,
+        timestamp_ns,
+        valid: false,
+        held: false,
+        confidence: 0.0,
+        pose: None,
+        fitted: None,
+        reason: Some("the dataset has no tool.json: the pose needs the tool's geometry".to_owned()),
+        diagnostics: hullcut_pose::Diagnostics::default(),
+    }
+}

@@ -6,6 +6,7 @@ pub mod bench_pose;
 pub mod calibrate;
 pub mod reconstruct;
 pub mod rig;
+pub mod run;
 pub mod segment;
 pub mod sim;
 pub mod synth;

@@ -1,6 +1,6 @@
 //! `hullcut reconstruct`: visual hulls of hand and scalpel for every frame set of a dataset.
 
-mod checks;
+pub(crate) mod checks;
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -18,7 +18,7 @@ use serde::Serialize;
 use self::checks::ViewDisagreement;
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
-use crate::pose_out::{PoseReport, PoseWriter, log_blade};
+use crate::pose_out::{PoseReport, PoseWriter, log_blade, no_tool_estimate};
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 
@@ -282,17 +282,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .collect();
         let estimate = match &mut tracker {
             Some(tracker) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
-            None => hullcut_pose::PoseEstimate {
-                frame,
-                timestamp_ns: set.timestamp_ns,
-                valid: false,
-                held: false,
-                confidence: 0.0,
-                pose: None,
-                fitted: None,
-                reason: Some("the dataset has no tool.json: the pose needs the tool's geometry".to_owned()),
-                diagnostics: hullcut_pose::Diagnostics::default(),
-            },
+            None => no_tool_estimate(frame, set.timestamp_ns),
         };
         t.pose.push(clock.elapsed());
         t.pose_evidence.push(Duration::from_secs_f64(estimate.diagnostics.evidence_ms * 1e-3));
@@ -351,7 +341,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
         if let Some((rec, cams)) = &rec {
-            log_frame(rec, cams, &set, &occ, &grids, frame, args.rrd_every, &t)?;
+            log_hull(rec, cams, &set, &occ, &grids, frame, args.rrd_every)?;
+            let last = |d: &[Duration]| d.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
+            hullcut_viz::log_scalar(rec, "metrics/time/carve", last(&t.carve))?;
+            hullcut_viz::log_scalar(rec, "metrics/time/surface", last(&t.surface))?;
             if let (Some(tool), Some(pose)) = (&tool, poses.iter().find(|p| p.frame == frame)) {
                 log_tool(rec, "truth", tool, &pose.tool_to_world)?;
             }
@@ -521,8 +514,9 @@ fn score(
     }
 }
 
-#[allow(clippy::too_many_arguments)] // one call site; the pieces are what one frame logs
-fn log_frame(
+/// Logs one frame set's images and masks and hull leaves (every `every`-th frame) and hull
+/// meshes (every frame), on the frame and capture-time timelines.
+pub(crate) fn log_hull(
     rec: &hullcut_viz::RecordingStream,
     cams: &CameraLogger,
     set: &FrameSet,
@@ -530,7 +524,6 @@ fn log_frame(
     grids: &[(u8, &str, Option<DenseGrid>, Option<Mesh>)],
     frame: u64,
     every: u64,
-    t: &StageTimes,
 ) -> anyhow::Result<()> {
     hullcut_viz::set_frame(rec, frame as i64);
     hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
@@ -560,8 +553,5 @@ fn log_frame(
             hullcut_viz::log_mesh3d(rec, &format!("world/hull/{name}/mesh"), &v, &mesh.triangles, colours(*l))?;
         }
     }
-    let last = |d: &[Duration]| d.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
-    hullcut_viz::log_scalar(rec, "metrics/time/carve", last(&t.carve))?;
-    hullcut_viz::log_scalar(rec, "metrics/time/surface", last(&t.surface))?;
     Ok(())
 }

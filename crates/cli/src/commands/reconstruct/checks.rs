@@ -17,7 +17,7 @@ pub(super) fn voxel(voxel: f64, extent: f64) -> anyhow::Result<()> {
 
 /// Every mask of the frame set holds only the labels carving knows (0, 1, 2, 255); anything else
 /// (a mask saved with other values, a palette PNG's indices) is an error naming the file.
-pub(super) fn labels(ds: &Dataset, set: &FrameSet) -> anyhow::Result<()> {
+pub(crate) fn labels(ds: &Dataset, set: &FrameSet) -> anyhow::Result<()> {
     let bad = |v: &u8| ![label::BACKGROUND, label::HAND, label::SCALPEL, label::UNKNOWN].contains(v);
     for view in set.views.iter().flatten() {
         let Some(mask) = &view.mask else { continue };

@@ -1,0 +1,479 @@
+//! `hullcut run`: the whole pipeline, frame sets in, a cut organ out.
+
+mod stages;
+mod tissue;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use hullcut_dataset::Dataset;
+use hullcut_hull::HullParams;
+use hullcut_pose::{Template, isometry_from_matrix, pose_error};
+use hullcut_synth::{SceneConfig, SceneKind, synthesize};
+use serde::Serialize;
+
+use self::stages::{Policy, StageTimes, Work};
+use crate::frames::parse_frames;
+use crate::logging::{CameraLogger, log_tool};
+use crate::pose_out::{PoseReport, log_blade};
+use crate::progress::bar;
+use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+
+/// Run the whole pipeline: segment → hull → pose → cut → simulate, logged to rerun.
+///
+/// Frame sets come from a recorded dataset (--dataset) or, without one, from the built-in scene:
+/// a synthetic six-camera recording of a gloved hand cutting with a scalpel (`hullcut synth`'s
+/// `cut` scene), rendered once at start-up into a temporary folder (with a progress bar) and
+/// replayed. The stages run as threads joined by bounded channels (--queue frame sets each):
+/// reading, hull (segmentation when the masks are not files, octree carving, surfaces), pose (the
+/// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted),
+/// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
+/// virtual node algorithm; TLED moves it under gravity, its base held by the table). Untrusted
+/// poses never cut, and a sweep never bridges a refused frame. Without --realtime every frame is
+/// processed (a full queue blocks the reader); with --realtime the reader keeps to the capture
+/// timestamps and a full queue drops its oldest frame set, counted in the report.
+///
+/// The tissue: --tissue organ (the built-in two-lobed liver-like organ, 15 x 10 x 6 cm, resting on
+/// the table at z = 0 under the tool) or a PLY/OBJ mesh in world metres; --cell sets its lattice
+/// spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
+///
+/// Writes: the rerun recording (hullcut-run.rrd in the current folder unless --rrd, --spawn or
+/// --connect says otherwise): images and label masks under world/cams/NAME every --rrd-every
+/// frames, hull leaves and meshes under world/hull/LABEL, the blade's estimate and truth under
+/// world/tool/{estimate,truth}, the lattice nodes under world/tissue/nodes, the pieces' surfaces
+/// (cut faces included) under world/tissue/surface, the swept blade surface under
+/// world/tissue/cut, stage timings under metrics/time/STAGE and accuracy under
+/// metrics/accuracy/NAME, on the `frame` and `capture_time` timelines. REPORT (JSON) with
+/// --report: per-stage timings, sustained fps, pose accuracy where the dataset has truth, every
+/// drop, refusal and skipped sweep counted, the tissue's pieces. With --export-meshes DIR:
+/// DIR/NNNNNN/pieceK.ply, the organ's pieces at every frame (world metres, closed).
+#[derive(Debug, clap::Args)]
+#[command(verbatim_doc_comment)]
+pub struct Args {
+    /// A recorded dataset to replay; without it, the built-in scene.
+    #[arg(long, value_name = "DIR")]
+    dataset: Option<PathBuf>,
+    /// Log to this .rrd file.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["spawn", "connect"])]
+    rrd: Option<PathBuf>,
+    /// Start the rerun viewer found on PATH and stream to it.
+    #[arg(long, conflicts_with = "connect")]
+    spawn: bool,
+    /// Stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy.
+    #[arg(long, value_name = "URL")]
+    connect: Option<String>,
+    /// Frames: A:B (half-open) or N (the first N).
+    #[arg(long, value_name = "A:B|N")]
+    frames: Option<String>,
+    /// Pace the replay to the capture timestamps (a stage that falls behind drops frame sets).
+    #[arg(long)]
+    realtime: bool,
+    /// Compute backend. Only `cpu` exists so far (the wgpu backend is a later issue).
+    #[arg(long, value_name = "cpu|gpu", default_value = "cpu")]
+    backend: String,
+    /// The tissue: `organ` or a PLY/OBJ mesh in world metres.
+    #[arg(long, value_name = "NAME|MESH", default_value = "organ")]
+    tissue: String,
+    /// Lattice spacing of the tissue, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.005)]
+    cell: f64,
+    /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
+    #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
+    masks: String,
+    /// Leaf (voxel) size of the hull, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
+    voxel: f64,
+    /// Frame sets of the built-in scene (at 30 fps).
+    #[arg(long, value_name = "N", default_value_t = 150)]
+    scene_frames: u64,
+    /// Seed of the built-in scene.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Frame sets each queue between stages holds.
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    queue: usize,
+    /// Log images, masks and hull leaves every N-th frame (meshes, poses and scalars every frame).
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    rrd_every: u64,
+    /// Write a JSON report.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Write the organ's pieces as PLY meshes, per frame, under this folder.
+    #[arg(long, value_name = "DIR")]
+    export_meshes: Option<PathBuf>,
+}
+
+/// Counted events of a run.
+#[derive(Debug, Default, Serialize)]
+struct Counters {
+    frame_sets_read: u64,
+    frame_sets_processed: u64,
+    /// Dropped by the --realtime policy (queue full: the oldest frame set goes).
+    frame_sets_dropped: u64,
+    poses_trusted: u64,
+    poses_refused: u64,
+    poses_held: u64,
+    sweeps: u64,
+    /// Trusted poses that did not sweep because the frame before was refused.
+    sweeps_skipped_after_refusal: u64,
+    edges_cut: u64,
+    meshes_exported: u64,
+}
+
+#[derive(Debug, Serialize)]
+struct Timings {
+    read: StageTiming,
+    segment: Option<StageTiming>,
+    carve: StageTiming,
+    surface: StageTiming,
+    pose: StageTiming,
+    collide: StageTiming,
+    cut_topology: StageTiming,
+    cut_surface: StageTiming,
+    deform: StageTiming,
+    tissue_surface: StageTiming,
+    log: StageTiming,
+    /// From reading a frame set to having logged it.
+    latency: StageTiming,
+}
+
+#[derive(Debug, Serialize)]
+struct TissueReport {
+    source: String,
+    cell_m: f64,
+    nodes: usize,
+    cells: usize,
+    fixed_nodes: usize,
+    dt_s: f64,
+    dt_critical_s: f64,
+    pieces: usize,
+    copies: usize,
+    virtual_nodes: usize,
+    copies_dropped: usize,
+    inverted_cells: usize,
+    kinetic_energy_j: f64,
+    simulated_s: f64,
+    /// Why the tissue stopped, if it diverged.
+    failure: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+struct Report<'a> {
+    schema_version: u32,
+    kind: &'static str,
+    provenance: Provenance,
+    source: String,
+    seed: Option<u64>,
+    frames: [u64; 2],
+    backend: &'a str,
+    masks: &'static str,
+    voxel_m: f64,
+    realtime: bool,
+    queue: usize,
+    wall_s: f64,
+    /// Frame sets processed per second of wall time, start-up (rendering, the tissue's set-up)
+    /// excluded.
+    sustained_fps: f64,
+    capture_fps: f64,
+    counters: Counters,
+    tissue: TissueReport,
+    pose: PoseReport,
+    timings: Timings,
+    /// Entities logged to the recording.
+    entities: Vec<String>,
+}
+
+/// How far below `ORGAN_TOP` the built-in scene's strokes press the blade's tip, metres.
+const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
+
+/// The rerun entities a run logs (DESIGN's tree).
+pub const ENTITIES: [&str; 12] = [
+    "world/cams/NAME",
+    "world/cams/NAME/image",
+    "world/cams/NAME/labels",
+    "world/hull/LABEL",
+    "world/tool/estimate",
+    "world/tool/truth",
+    "world/tissue/nodes",
+    "world/tissue/surface",
+    "world/tissue/cut",
+    "metrics/time/STAGE",
+    "metrics/accuracy/NAME",
+    "world",
+];
+
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    if args.backend != "cpu" {
+        bail!("--backend {}: only the cpu backend exists so far", args.backend);
+    }
+    if args.queue == 0 || args.rrd_every == 0 {
+        bail!("--queue and --rrd-every must be at least 1");
+    }
+    if !(args.cell.is_finite() && args.cell > 0.0) {
+        bail!("--cell {}: must be a positive length in metres", args.cell);
+    }
+    let sink = match (&args.rrd, args.spawn, &args.connect) {
+        (Some(path), _, _) => hullcut_viz::Sink::File(path.clone()),
+        (None, true, _) => {
+            if which_rerun().is_none() {
+                bail!(
+                    "--spawn: no `rerun` viewer on PATH (install it with tools/setup.sh --with-viewer or \
+                     `pip install rerun-sdk==0.36.3`), or write a file with --rrd"
+                );
+            }
+            hullcut_viz::Sink::Spawn
+        }
+        (None, false, Some(url)) => hullcut_viz::Sink::Connect(url.clone()),
+        (None, false, None) => {
+            let path = PathBuf::from("hullcut-run.rrd");
+            println!("no --rrd, --spawn or --connect: writing {}", path.display());
+            hullcut_viz::Sink::File(path)
+        }
+    };
+    // The frame sets: a dataset, or the built-in scene rendered into a temporary folder.
+    let scene_dir;
+    let (dataset_path, seed) = match &args.dataset {
+        Some(path) => (path.clone(), None),
+        None => {
+            if args.scene_frames == 0 {
+                bail!("--scene-frames must be at least 1");
+            }
+            scene_dir = tempfile::tempdir().context("creating a temporary folder for the built-in scene")?;
+            let path = scene_dir.path().join("scene");
+            let mut config = SceneConfig::new(SceneKind::Cut, args.seed, args.scene_frames);
+            // The organ's top lies 5 to 15 mm below ORGAN_TOP where strokes run (it is domed, and
+            // sags under gravity): strokes 18 to 35 mm below it cut about 5 to 25 mm deep.
+            config.stroke_depth = BUILTIN_STROKE_DEPTH;
+            let scene = hullcut_synth::Scene::new(config).context("preparing the built-in scene")?;
+            let pb = bar(args.scene_frames, "rendering the built-in scene");
+            synthesize(&scene, &path, &format!("builtin-cut-seed{}", args.seed), false, &|| pb.inc(1))
+                .context("rendering the built-in scene")?;
+            pb.finish_and_clear();
+            (path, Some(args.seed))
+        }
+    };
+    let ds = Arc::new(Dataset::open(&dataset_path)?);
+    let use_files = match args.masks.as_str() {
+        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", dataset_path.display()),
+        "files" => true,
+        "segment" => false,
+        "auto" => ds.has_masks(),
+        other => bail!("--masks {other}: expected auto, files or segment"),
+    };
+    let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
+    let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
+    if frames.is_empty() {
+        bail!("{}: no frame sets in {}..{}", dataset_path.display(), range.start, range.end);
+    }
+    let tool = ds.tool()?;
+    let template =
+        tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
+    let truth = ds.truth_poses()?.unwrap_or_default();
+    let hull = HullParams { leaf_size: args.voxel, ..HullParams::default() };
+
+    let clock = Instant::now();
+    let tissue = tissue::build(&args.tissue, args.cell)?;
+    let setup_s = clock.elapsed().as_secs_f64();
+    for warning in &tissue.warnings {
+        eprintln!("warning: {warning}");
+    }
+    println!(
+        "tissue: {} nodes, {} cells at {:.1} mm, dt {:.3} ms ({:.0}% of the computed critical step), set up in {:.2} s",
+        tissue.sim.lattice().node_count(),
+        tissue.sim.cell_count(),
+        args.cell * 1e3,
+        tissue.sim.dt() * 1e3,
+        100.0 * tissue.sim.dt() / tissue.sim.dt_critical(),
+        setup_s
+    );
+
+    let rec = hullcut_viz::open_recording("hullcut-run", &sink)?;
+    hullcut_viz::log_world(&rec)?;
+    let cams = CameraLogger::new(&rec, ds.rig())?;
+
+    let policy = if args.realtime { Policy::DropOldest } else { Policy::Block };
+    let dropped = Arc::new(AtomicU64::new(0));
+    let t0 = Instant::now();
+    let pipeline = stages::spawn(stages::Setup {
+        ds: Arc::clone(&ds),
+        frames: frames.clone(),
+        use_files,
+        hull,
+        template: template.clone(),
+        tissue,
+        queue: args.queue,
+        policy,
+        dropped: Arc::clone(&dropped),
+        realtime: args.realtime,
+    })?;
+
+    let pb = bar(frames.len() as u64, "running");
+    let mut counters = Counters::default();
+    let mut pose_report = PoseReport::new(template.is_some());
+    let mut times = StageTimes::default();
+    let mut logging = Vec::new();
+    let mut latency = Vec::new();
+    for work in pipeline.output.iter() {
+        let clock = Instant::now();
+        counters.frame_sets_processed += 1;
+        let Work { frame, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
+        times.extend(&t);
+        let truth_iso = truth.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
+        match (&template, &estimate) {
+            (Some(template), Some(e)) => {
+                let error = |p: Option<&hullcut_pose::BladePose>| {
+                    p.zip(truth_iso.as_ref()).map(|(p, truth)| pose_error(p, template, truth))
+                };
+                pose_report.push(e, error(e.pose.as_ref()), error(e.fitted.as_ref()));
+            }
+            (None, Some(e)) => pose_report.push(e, None, None),
+            _ => {}
+        }
+        if let Some(e) = &estimate {
+            if e.valid {
+                counters.poses_trusted += 1;
+            } else {
+                counters.poses_refused += 1;
+                counters.poses_held += u64::from(e.held);
+            }
+        }
+        if let Some(step) = &step {
+            counters.sweeps += u64::from(step.swept.is_some());
+            counters.sweeps_skipped_after_refusal += u64::from(step.sweep_skipped);
+            counters.edges_cut += step.cut.map_or(0, |c| c.new_edges as u64);
+        }
+        // rerun: everything on the frame and capture-time timelines.
+        hullcut_viz::set_frame(&rec, frame as i64);
+        hullcut_viz::set_capture_time_ns(&rec, set.timestamp_ns);
+        if let Some(occ) = &occ {
+            crate::commands::reconstruct::log_hull(&rec, &cams, &set, occ, &grids, frame, args.rrd_every)?;
+        }
+        if let (Some(tool), Some(p)) = (&tool, truth.iter().find(|p| p.frame == frame)) {
+            log_tool(&rec, "truth", tool, &p.tool_to_world)?;
+        }
+        if let (Some(template), Some(iso)) = (&template, &truth_iso) {
+            log_blade(&rec, "truth", &hullcut_pose::BladePose::new(template, *iso))?;
+        }
+        if let Some(e) = &estimate {
+            match e.pose.as_ref().filter(|p| p.is_finite()) {
+                Some(p) => log_blade(&rec, "estimate", p)?,
+                None => hullcut_viz::log_clear(&rec, "world/tool/estimate")?,
+            }
+            hullcut_viz::log_scalar(&rec, "metrics/pose/confidence", e.confidence)?;
+            if let (Some(template), Some(p), Some(iso)) = (&template, e.pose.as_ref(), &truth_iso) {
+                let err = pose_error(p, template, iso);
+                hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_normal_deg", err.normal_deg)?;
+                hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_tip_mm", err.tip_mm)?;
+            }
+        }
+        if let Some(step) = &step {
+            tissue::log(&rec, step, frame, args.rrd_every)?;
+            if let Some(dir) = &args.export_meshes {
+                counters.meshes_exported += tissue::export(dir, frame, &step.surfaces)?;
+            }
+        }
+        for (name, ms) in t.last_ms() {
+            hullcut_viz::log_scalar(&rec, &format!("metrics/time/{name}"), ms)?;
+        }
+        logging.push(clock.elapsed());
+        latency.push(started.elapsed());
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let wall = t0.elapsed();
+    let outcome = pipeline.join()?;
+    counters.frame_sets_read = outcome.read;
+    counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
+    pose_report.finish();
+    hullcut_viz::flush(&rec)?;
+    let sim = &outcome.sim;
+    let topology = sim.topology();
+    let sustained_fps = counters.frame_sets_processed as f64 / wall.as_secs_f64().max(1e-9);
+    println!(
+        "{} frame sets in {:.2} s ({sustained_fps:.1} fps sustained; captured at {:.1} fps), {} dropped",
+        counters.frame_sets_processed,
+        wall.as_secs_f64(),
+        ds.meta().fps,
+        counters.frame_sets_dropped
+    );
+    println!("{}", pose_report.summary());
+    println!(
+        "tissue: {} sweeps cut {} lattice edges; {} piece(s), {} cell copies, {} virtual nodes{}",
+        counters.sweeps,
+        counters.edges_cut,
+        topology.pieces,
+        topology.copies.len(),
+        topology.virtual_of.len(),
+        outcome.failure.as_ref().map_or(String::new(), |f| format!("; STOPPED: {f}"))
+    );
+    let timing = |d: &[Duration]| StageTiming::from_durations(d);
+    if let Some(path) = &args.report {
+        let report = Report {
+            schema_version: SCHEMA_VERSION,
+            kind: "run",
+            provenance: Provenance::current(),
+            source: args
+                .dataset
+                .as_ref()
+                .map_or_else(|| "built-in scene (cut)".to_owned(), |p| p.display().to_string()),
+            seed,
+            frames: [range.start, range.end],
+            backend: &args.backend,
+            masks: if use_files { "files" } else { "segment" },
+            voxel_m: args.voxel,
+            realtime: args.realtime,
+            queue: args.queue,
+            wall_s: wall.as_secs_f64(),
+            sustained_fps,
+            capture_fps: ds.meta().fps,
+            counters,
+            tissue: TissueReport {
+                source: args.tissue.clone(),
+                cell_m: args.cell,
+                nodes: sim.lattice().node_count(),
+                cells: sim.lattice().cells.len(),
+                fixed_nodes: sim.fixed().iter().filter(|&&f| f).count(),
+                dt_s: sim.dt(),
+                dt_critical_s: sim.dt_critical(),
+                pieces: topology.pieces,
+                copies: topology.copies.len(),
+                virtual_nodes: topology.virtual_of.len(),
+                copies_dropped: sim.dropped_copies(),
+                inverted_cells: sim.inverted_cells(),
+                kinetic_energy_j: sim.kinetic_energy(),
+                simulated_s: sim.time(),
+                failure: outcome.failure.clone(),
+            },
+            pose: pose_report,
+            timings: Timings {
+                read: timing(&times.read),
+                segment: (!times.segment.is_empty()).then(|| timing(&times.segment)),
+                carve: timing(&times.carve),
+                surface: timing(&times.surface),
+                pose: timing(&times.pose),
+                collide: timing(&times.collide),
+                cut_topology: timing(&times.cut_topology),
+                cut_surface: timing(&times.cut_surface),
+                deform: timing(&times.deform),
+                tissue_surface: timing(&times.tissue_surface),
+                log: timing(&logging),
+                latency: timing(&latency),
+            },
+            entities: ENTITIES.iter().map(|s| (*s).to_owned()).collect(),
+        };
+        write_json(path, &report)?;
+    }
+    if let Some(f) = outcome.failure {
+        bail!("the tissue simulation stopped: {f}");
+    }
+    Ok(())
+}
+
+/// The `rerun` executable on PATH, if any.
+fn which_rerun() -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path).map(|d| d.join("rerun")).find(|p| p.is_file())
+}

@@ -1,0 +1,159 @@
+//! The organ `hullcut run` cuts: its set-up, one frame set's step, its logging and export.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use hullcut_sim::{
+    Body, CutOutcome, CutSim, CutSimParams, Material, SweptSurface, TriMesh, VoxelizeParams, WindingTree, organ_sdf,
+    voxelize,
+};
+use nalgebra::Point3;
+
+use super::stages::StageTimes;
+
+/// Young's modulus of the tissue, pascals (liver-like).
+pub const YOUNG_PA: f64 = 3e3;
+/// Poisson's ratio of the tissue.
+pub const POISSON: f64 = 0.45;
+/// Density of the tissue, kg/m³.
+pub const DENSITY: f64 = 1000.0;
+/// Simulated time the tissue settles under gravity before the first frame set, seconds.
+pub const SETTLE_S: f64 = 0.5;
+
+/// RGBA of lattice nodes run by TLED (DESIGN's colours: TLED green).
+const TLED_GREEN: [u8; 4] = [60, 200, 80, 255];
+/// RGBA of the organ's surface.
+const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
+/// RGBA of the swept blade surface.
+const SWEPT_CYAN: [u8; 4] = [80, 220, 240, 160];
+
+/// A body's signed distance (negative inside), metres.
+type SignedDistance = dyn Fn(&Point3<f64>) -> f64 + Sync;
+
+/// The organ being cut.
+pub struct Tissue {
+    /// The simulation.
+    pub sim: CutSim,
+    /// Lattice spacing, metres.
+    pub cell: f64,
+    /// Problems worked around while voxelizing a mesh (open, inward), naming the file.
+    pub warnings: Vec<String>,
+}
+
+/// What the tissue did on one frame set.
+#[derive(Debug, Default)]
+pub struct TissueStep {
+    /// The blade's swept surface between the last two trusted poses, when there were two.
+    pub swept: Option<SweptSurface>,
+    /// A trusted pose that did not sweep because the frame before it was refused.
+    pub sweep_skipped: bool,
+    /// What cutting with `swept` did.
+    pub cut: Option<CutOutcome>,
+    /// The pieces' closed surfaces, deformed (world metres).
+    pub surfaces: Vec<TriMesh>,
+    /// The lattice nodes, deformed (real nodes, then virtual ones).
+    pub nodes: Vec<Point3<f32>>,
+    /// Separate pieces.
+    pub pieces: usize,
+}
+
+/// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
+/// at lattice spacing `cell`, its lowest layer of nodes held (it rests on the table), settled
+/// under gravity.
+pub fn build(name: &str, cell: f64) -> anyhow::Result<Tissue> {
+    let material = Material::from_young_poisson(YOUNG_PA, POISSON, DENSITY);
+    let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
+        (Body::Organ, Box::new(organ_sdf))
+    } else {
+        let mesh = TriMesh::load(name).with_context(|| format!("--tissue {name}"))?;
+        // Inside where the generalized winding number exceeds one half (robust to holes); the
+        // magnitude is not a distance, so the cut faces' placement near the surface is approximate
+        // to a fraction of a cell.
+        let tree = WindingTree::new(&mesh);
+        (Body::Mesh(mesh), Box::new(move |p: &Point3<f64>| (0.5 - tree.winding_number(p).abs()) * cell))
+    };
+    let voxelized = voxelize(&body, cell, &VoxelizeParams::default()).with_context(|| format!("--tissue {name}"))?;
+    let lattice = voxelized.lattice;
+    let floor = lattice.rest.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+    let fixed = move |p: &Point3<f64>| p.z < floor + 0.25 * cell;
+    let mut sim = CutSim::new(lattice, &*signed, material, fixed, CutSimParams::default())
+        .with_context(|| format!("setting up the tissue ({name})"))?;
+    sim.advance(SETTLE_S).map_err(|d| anyhow::anyhow!("the tissue diverged while settling: {}", d.reason))?;
+    Ok(Tissue { sim, cell, warnings: voxelized.warnings })
+}
+
+impl Tissue {
+    /// Cuts with `step.swept` (when there is one), advances by `seconds` and fills in the step's
+    /// surfaces and nodes; timings go to `times`.
+    pub fn step(&mut self, step: &mut TissueStep, seconds: f64, times: &mut StageTimes) -> anyhow::Result<()> {
+        if let Some(swept) = &step.swept {
+            let outcome = self.sim.cut(swept)?;
+            let ms = |ms: f64| Duration::from_secs_f64(ms * 1e-3);
+            times.collide.push(ms(outcome.collide_ms));
+            times.cut_topology.push(ms(outcome.topology_ms));
+            times.cut_surface.push(ms(outcome.surface_ms));
+            step.cut = Some(outcome);
+        }
+        let clock = Instant::now();
+        self.sim.advance(seconds).map_err(|d| {
+            anyhow::anyhow!(
+                "the tissue diverged at step {} (t = {:.3} s, node {}): {}",
+                d.step,
+                d.time,
+                d.node,
+                d.reason
+            )
+        })?;
+        times.deform.push(clock.elapsed());
+        let clock = Instant::now();
+        step.surfaces = self.sim.surfaces();
+        step.nodes = self.sim.node_positions();
+        step.pieces = self.sim.pieces();
+        times.tissue_surface.push(clock.elapsed());
+        Ok(())
+    }
+}
+
+/// Logs one step: the surface every frame, the lattice nodes every `every`-th frame, the swept
+/// blade surface when there is one (else it is cleared), the piece count.
+pub fn log(rec: &hullcut_viz::RecordingStream, step: &TissueStep, frame: u64, every: u64) -> anyhow::Result<()> {
+    let (vertices, triangles) = merged(&step.surfaces);
+    hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, &triangles, TISSUE_RED)?;
+    if frame.is_multiple_of(every) {
+        let nodes: Vec<[f32; 3]> = step.nodes.iter().map(|p| [p.x, p.y, p.z]).collect();
+        hullcut_viz::log_points3d(rec, "world/tissue/nodes", &nodes, TLED_GREEN, 0.0008)?;
+    }
+    match &step.swept {
+        Some(swept) => {
+            let v: Vec<[f32; 3]> = swept.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+            hullcut_viz::log_mesh3d(rec, "world/tissue/cut", &v, &swept.triangles, SWEPT_CYAN)?;
+        }
+        None => hullcut_viz::log_clear(rec, "world/tissue/cut")?,
+    }
+    hullcut_viz::log_scalar(rec, "metrics/tissue/pieces", step.pieces as f64)?;
+    Ok(())
+}
+
+/// The pieces' surfaces as one vertex and triangle list.
+fn merged(surfaces: &[TriMesh]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut vertices = Vec::new();
+    let mut triangles = Vec::new();
+    for mesh in surfaces {
+        let base = vertices.len() as u32;
+        vertices.extend(mesh.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]));
+        triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    (vertices, triangles)
+}
+
+/// Writes the pieces as DIR/NNNNNN/pieceK.ply; returns how many.
+pub fn export(dir: &Path, frame: u64, surfaces: &[TriMesh]) -> anyhow::Result<u64> {
+    let folder = dir.join(format!("{frame:06}"));
+    std::fs::create_dir_all(&folder).with_context(|| format!("creating {}", folder.display()))?;
+    for (k, mesh) in surfaces.iter().enumerate() {
+        let path = folder.join(format!("piece{k}.ply"));
+        mesh.write_ply(&path).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(surfaces.len() as u64)
+}

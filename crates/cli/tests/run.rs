@@ -1,0 +1,125 @@
+//! End-to-end tests of `hullcut run`: the whole pipeline on the shipped dataset, its report, its
+//! recording and its exported pieces, and what it does with bad input.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const CUT_SMALL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+
+fn hullcut(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hullcut")).args(args).output().expect("hullcut runs")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("JSON")
+}
+
+#[test]
+fn run_cuts_the_organ_with_trusted_poses_and_exports_closed_pieces_every_frame() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report, meshes) = (dir.path().join("run.rrd"), dir.path().join("run.json"), dir.path().join("pieces"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let o = hullcut(&[
+        "run",
+        "--dataset",
+        CUT_SMALL,
+        "--rrd",
+        &p(&rrd),
+        "--report",
+        &p(&report),
+        "--export-meshes",
+        &p(&meshes),
+        "--rrd-every",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(std::fs::metadata(&rrd).expect("rrd written").len() > 100_000);
+    let r = json(&report);
+    assert_eq!((r["kind"].as_str(), r["schema_version"].as_u64()), (Some("run"), Some(1)));
+    let c = &r["counters"];
+    assert_eq!((c["frame_sets_read"].as_u64(), c["frame_sets_processed"].as_u64()), (Some(9), Some(9)));
+    assert_eq!(c["frame_sets_dropped"].as_u64(), Some(0), "nothing drops without --realtime");
+    // cut-small (320x240, truth masks): every pose trusted, so every frame after the first sweeps.
+    assert_eq!(c["poses_trusted"].as_u64(), Some(9), "{c}");
+    assert_eq!(c["sweeps"].as_u64(), Some(8), "{c}");
+    assert!(c["edges_cut"].as_u64().expect("edges") > 0, "the blade is in the organ in this recording: {c}");
+    let t = &r["tissue"];
+    assert!(t["failure"].is_null(), "{t}");
+    assert!(t["virtual_nodes"].as_u64().expect("virtual nodes") > 0, "{t}");
+    assert!(t["dt_s"].as_f64() < t["dt_critical_s"].as_f64(), "{t}");
+    assert!(t["simulated_s"].as_f64().expect("time") > 2.0, "settling and 8 frame gaps at 4 fps: {t}");
+    for stage in ["read", "carve", "surface", "pose", "deform", "tissue_surface", "latency"] {
+        assert_eq!(r["timings"][stage]["count"].as_u64(), Some(9), "{stage}");
+    }
+    assert_eq!(r["timings"]["collide"]["count"].as_u64(), Some(8));
+    assert!(r["pose"]["tip_mm"]["mean"].as_f64().expect("tip error") < 2.0);
+    assert!(r["entities"].as_array().expect("entities").iter().any(|e| e == "world/tissue/surface"));
+
+    // The pieces of every frame: closed, and together the organ's volume (nothing lost by cutting).
+    let mut volumes = Vec::new();
+    for frame in 0..9 {
+        let folder = meshes.join(format!("{frame:06}"));
+        let mut volume = 0.0;
+        for entry in std::fs::read_dir(&folder).expect("a folder per frame") {
+            let mesh = hullcut_sim::TriMesh::load(entry.expect("entry").path()).expect("a PLY piece");
+            assert!(mesh.is_closed(), "frame {frame}: an open piece");
+            volume += mesh.volume();
+        }
+        volumes.push(volume);
+    }
+    assert_eq!(c["meshes_exported"].as_u64(), Some(9 * t["pieces"].as_u64().expect("pieces")));
+    // The organ is about 15 x 10 x 6 cm: a few hundred millilitres.
+    assert!((2e-4..8e-4).contains(&volumes[0]), "{volumes:?}");
+    for v in &volumes {
+        assert!((v / volumes[0] - 1.0).abs() < 0.02, "volume changed by cutting: {volumes:?}");
+    }
+}
+
+#[test]
+fn run_paced_with_a_short_queue_counts_what_it_drops_and_processes_the_rest() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let o = hullcut(&[
+        "run",
+        "--dataset",
+        CUT_SMALL,
+        "--rrd",
+        &p(&rrd),
+        "--report",
+        &p(&report),
+        "--realtime",
+        "--queue",
+        "1",
+        "--cell",
+        "0.01",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let c = json(&report)["counters"].clone();
+    let (read, processed, dropped) =
+        (c["frame_sets_read"].as_u64(), c["frame_sets_processed"].as_u64(), c["frame_sets_dropped"].as_u64());
+    assert_eq!(read, Some(9));
+    assert_eq!(processed.zip(dropped).map(|(p, d)| p + d), Some(9), "{c}");
+}
+
+#[test]
+fn run_names_what_is_wrong_with_its_input() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rrd = dir.path().join("run.rrd");
+    let rrd = rrd.to_str().expect("utf-8");
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--tissue", "/nonexistent/liver.ply"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("/nonexistent/liver.ply"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--cell=0"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("--cell"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--frames", "20:30"]);
+    assert_eq!(o.status.code(), Some(1));
+    let o = hullcut(&["run", "--dataset", "/nonexistent/dataset", "--rrd", rrd]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("/nonexistent/dataset"), "{}", text(&o));
+}
