@@ -269,7 +269,7 @@ fn synth_writes_a_dataset_a_report_and_a_recording() {
 
     let unknown = hullcut(&["synth", "--out", &path(&dir.path().join("x")), "--scene", "juggling"]);
     assert_eq!(unknown.status.code(), Some(1));
-    assert!(stderr(&unknown).contains("juggling") && stderr(&unknown).contains("cut, static, hard"));
+    assert!(stderr(&unknown).contains("juggling") && stderr(&unknown).contains("cut, static, hard, resect"));
     assert!(!dir.path().join("x").exists());
 }
 

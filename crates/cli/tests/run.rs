@@ -123,3 +123,94 @@ fn run_names_what_is_wrong_with_its_input() {
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("/nonexistent/dataset"), "{}", text(&o));
 }
+
+#[test]
+fn the_built_in_scene_cuts_the_organ_in_two() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    // The resection's second stroke ends at about 4 s (frame 119 at 30 fps).
+    let o = hullcut(&["run", "--scene-frames", "135", "--rrd", &p(&rrd), "--report", &p(&report), "--rrd-every", "16"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["source"].as_str(), Some("built-in scene (resect)"));
+    assert_eq!(r["tissue"]["pieces"].as_u64(), Some(2), "{}", r["tissue"]);
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(135));
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 127, "{c}");
+    assert!(r["pose"]["trusted_wrong"].as_u64() == Some(0), "{}", r["pose"]);
+}
+
+#[test]
+fn the_recording_holds_every_entity_of_the_design_tree() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let rrd = dir.path().join("run.rrd");
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd.to_str().expect("utf-8"), "--cell", "0.01"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let entities = hullcut_viz::rrd_entities(&rrd).expect("the recording reads back");
+    let cameras = ["cam0", "cam1", "cam2", "cam3", "cam4", "cam5"];
+    let mut expected: Vec<String> = vec!["/world".into()];
+    for cam in cameras {
+        expected.extend([
+            format!("/world/cams/{cam}"),
+            format!("/world/cams/{cam}/image"),
+            format!("/world/cams/{cam}/labels"),
+        ]);
+    }
+    expected.extend(["/world/tissue/nodes", "/world/tissue/surface", "/world/tissue/cut"].map(String::from));
+    for e in &expected {
+        assert!(entities.contains(e), "{e} missing from {entities:?}");
+    }
+    for prefix in [
+        "/world/hull/hand/",
+        "/world/hull/scalpel/",
+        "/world/tool/estimate/",
+        "/world/tool/truth/",
+        "/metrics/time/",
+        "/metrics/accuracy/",
+    ] {
+        assert!(entities.iter().any(|e| e.starts_with(prefix)), "nothing under {prefix} in {entities:?}");
+    }
+}
+
+#[test]
+fn ctrl_c_stops_reading_and_leaves_a_complete_recording_and_report() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    // Paced at cut-small's 4 fps, the nine frame sets take over two seconds.
+    let child = Command::new(env!("CARGO_BIN_EXE_hullcut"))
+        .args([
+            "run",
+            "--dataset",
+            CUT_SMALL,
+            "--rrd",
+            &p(&rrd),
+            "--report",
+            &p(&report),
+            "--realtime",
+            "--cell",
+            "0.01",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("hullcut starts");
+    std::thread::sleep(std::time::Duration::from_millis(1200));
+    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().expect("kill runs");
+    assert!(status.success());
+    let o = child.wait_with_output().expect("hullcut ends");
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("interrupted after"), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["interrupted"].as_bool(), Some(true));
+    let c = &r["counters"];
+    let read = c["frame_sets_read"].as_u64().expect("read");
+    assert!(read < 9, "{c}");
+    assert_eq!(
+        c["frame_sets_processed"].as_u64().zip(c["frame_sets_dropped"].as_u64()).map(|(p, d)| p + d),
+        Some(read)
+    );
+    let entities = hullcut_viz::rrd_entities(&rrd).expect("the recording reads back to its end");
+    assert!(entities.contains("/world"), "{entities:?}");
+}

@@ -2,7 +2,7 @@
 //!
 //! The body is sampled on a grid finer than the lattice (in the rest configuration), every sample
 //! strictly inside one lattice cell. A sample belongs to the copy of its cell that owns its side of
-//! the cut ([`CellSplit::component_at`]), and so to that copy's piece. For each piece, a signed
+//! the cut ([`crate::vna::CellSplit::component_at`]), and so to that copy's piece. For each piece, a signed
 //! function is negative where the piece has material: the body's signed distance, bounded by the
 //! distance to the cut plane in split cells, and positive in every sample that belongs to another
 //! piece. Surface nets over it give one closed, consistently oriented mesh per piece whose cut

@@ -56,7 +56,8 @@ pub struct SceneConfig {
     /// PNG compression of the written dataset.
     pub compression: hullcut_dataset::PngCompression,
     /// How far below [`crate::ORGAN_TOP`] the blade's tip presses during a stroke, metres, drawn
-    /// uniformly from this range per stroke (`cut` and `hard` scenes).
+    /// uniformly from this range per stroke (`cut` and `hard` scenes, and `resect` after its
+    /// resection).
     pub stroke_depth: [f64; 2],
 }
 

@@ -23,12 +23,19 @@ pub enum SceneKind {
     /// Fast strokes (peaks of 0.5 m/s) with the blade edge-on to two cameras, the index finger over
     /// the blade, motion blur, strong exposure changes and a camera dropping frames.
     Hard,
+    /// A resection: two strokes along one line across the built-in organ's left lobe (x = 5.5 cm,
+    /// along +y), the second down to the table, which cut its tip off; then strokes as in `Cut`.
+    Resect,
 }
 
 impl SceneKind {
     /// Every scene with its command-line name.
-    pub const ALL: [(SceneKind, &'static str); 3] =
-        [(SceneKind::Cut, "cut"), (SceneKind::Static, "static"), (SceneKind::Hard, "hard")];
+    pub const ALL: [(SceneKind, &'static str); 4] = [
+        (SceneKind::Cut, "cut"),
+        (SceneKind::Static, "static"),
+        (SceneKind::Hard, "hard"),
+        (SceneKind::Resect, "resect"),
+    ];
 
     /// The command-line name.
     pub fn name(self) -> &'static str {
@@ -65,6 +72,43 @@ pub struct ToolState {
     pub tool_to_world: Isometry3<f64>,
     /// Hand grip in [0, 1].
     pub grip: f64,
+}
+
+/// The resection of [`SceneKind::Resect`] from time 0, across the left lobe at x = 5.5 cm along +y
+/// at 10 cm/s, blade pitched 60°: a first stroke with the tip 12 mm above the table, back, and a
+/// second stroke with the tip 2 mm below it (the cutting edge rises 26 mm above the tip, so two
+/// passes reach through the lobe's 35 mm, lattice included). Returns the last key.
+fn resection(keys: &mut Vec<Key>, hover: &dyn Fn(Point3<f64>) -> Point3<f64>) -> Key {
+    const X: f64 = 0.055;
+    let (y0, y1) = (-0.035, 0.055);
+    let stroke_s = (y1 - y0) / 0.1;
+    let at = |y: f64, z: f64| Point3::new(X, y, z);
+    let above = ORGAN_TOP + 0.004;
+    let base = Key {
+        time: 0.0,
+        tip: hover(at(y0, 0.0)),
+        azimuth: std::f64::consts::FRAC_PI_2,
+        pitch: 60f64.to_radians(),
+        roll: 0.0,
+        grip: 0.6,
+    };
+    let mut t = 0.0;
+    keys.push(base);
+    let mut go = |dt: f64, tip: Point3<f64>, grip: f64| {
+        t += dt;
+        keys.push(Key { time: t, tip, grip, ..base });
+        Key { time: t, tip, grip, ..base }
+    };
+    go(0.6, at(y0, above), 0.85);
+    for depth in [0.012f64, -0.002] {
+        go(0.35, at(y0, depth), 0.85);
+        go(stroke_s, at(y1, depth), 0.85);
+        go(0.35, at(y1, above), 0.85);
+        if depth > 0.0 {
+            go(0.5, at(y0, above), 0.85);
+        }
+    }
+    go(0.6, hover(at(y1, 0.0)), 0.6)
 }
 
 /// A piecewise-smoothstep trajectory through keyframes.
@@ -173,7 +217,7 @@ impl Trajectory {
                 keys.push(key);
                 keys.push(Key { time: duration.max(1.0), ..key });
             }
-            SceneKind::Cut | SceneKind::Hard => {
+            SceneKind::Cut | SceneKind::Hard | SceneKind::Resect => {
                 let hard = kind == SceneKind::Hard;
                 // The default rig's camera azimuths: a stroke along one of them is edge-on to it
                 // and to the camera opposite.
@@ -181,6 +225,11 @@ impl Trajectory {
                 let mut t = 0.0;
                 let mut cycle = 0usize;
                 let mut previous: Option<Key> = None;
+                if kind == SceneKind::Resect {
+                    let lifted = resection(&mut keys, &hover);
+                    t = lifted.time;
+                    previous = Some(lifted);
+                }
                 // Moves between strokes: quick in the hard scene, unhurried otherwise.
                 let (transfer_s, approach_s, lift_s) = if hard { (0.7, 0.5, 0.45) } else { (1.0, 1.0, 1.0) };
                 while t < duration + 1.0 {
@@ -241,6 +290,25 @@ impl Trajectory {
 mod tests {
     use super::*;
     use crate::scene::DEFAULT_STROKE_DEPTH;
+
+    #[test]
+    fn the_resection_reaches_the_table_twice_along_one_line_then_cuts_as_usual() {
+        let tip = Point3::new(0.038, 0.003, 0.0);
+        let tr = Trajectory::for_scene(SceneKind::Resect, 1, 8.0, tip, DEFAULT_STROKE_DEPTH);
+        let tips: Vec<Point3<f64>> = (0..800).map(|i| tr.state_at(i as f64 * 0.01).tool_to_world * tip).collect();
+        let low: Vec<&Point3<f64>> = tips[..400].iter().filter(|p| p.z < ORGAN_TOP - 0.02).collect();
+        assert!(!low.is_empty());
+        assert!(low.iter().all(|p| (p.x - 0.055).abs() < 1e-9), "one line across the left lobe");
+        let deepest = low.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+        assert!((deepest + 0.002).abs() < 1e-9, "down to 2 mm below the table: {deepest}");
+        // Two passes: the tip crosses y = 0.01 (the lobe's centre line) low twice.
+        let crossings =
+            tips[..400].windows(2).filter(|w| w[0].z < 0.02 && (w[0].y - 0.01) * (w[1].y - 0.01) <= 0.0).count();
+        assert_eq!(crossings, 2);
+        // The quick descents to the table peak near 0.3 m/s; the strokes themselves at 0.15.
+        assert!(tr.peak_tip_speed(8.0) < 0.35);
+        assert!(tips[400..].iter().any(|p| p.x != 0.055 && p.z < ORGAN_TOP), "cut strokes follow");
+    }
 
     #[test]
     fn tool_rotation_is_right_handed_with_the_tip_down_and_the_spine_up() {

@@ -39,6 +39,14 @@ pub enum VizError {
         /// Bytes given.
         actual: u64,
     },
+    /// An `.rrd` file could not be read back.
+    #[error("cannot read rerun recording {path}: {message}")]
+    Read {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
     /// Flushing the recording to its sink failed or timed out.
     #[error("cannot flush rerun recording: {source}")]
     Flush {

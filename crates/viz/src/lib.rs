@@ -20,6 +20,7 @@
 
 mod error;
 mod log;
+mod read;
 mod recording;
 mod undistort;
 
@@ -29,6 +30,7 @@ pub use log::{
     log_image_points, log_image_rgb, log_label_classes, log_labels, log_line_strips3d, log_mesh3d, log_points3d,
     log_rig, log_scalar, log_world,
 };
+pub use read::rrd_entities;
 pub use recording::{
     CAPTURE_TIME_TIMELINE, FLUSH_TIMEOUT, FRAME_TIMELINE, Sink, flush, open_recording, set_capture_time_ns, set_frame,
 };

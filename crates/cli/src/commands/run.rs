@@ -5,7 +5,7 @@ mod tissue;
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
@@ -26,8 +26,9 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 ///
 /// Frame sets come from a recorded dataset (--dataset) or, without one, from the built-in scene:
 /// a synthetic six-camera recording of a gloved hand cutting with a scalpel (`hullcut synth`'s
-/// `cut` scene), rendered once at start-up into a temporary folder (with a progress bar) and
-/// replayed. The stages run as threads joined by bounded channels (--queue frame sets each):
+/// `resect` scene: two strokes along one line cut the tip off the organ's left lobe, the second
+/// ending at about 4 s, then cut strokes 5 to 25 mm deep), rendered once at start-up into a
+/// temporary folder (with a progress bar) and replayed. The stages run as threads joined by bounded channels (--queue frame sets each):
 /// reading, hull (segmentation when the masks are not files, octree carving, surfaces), pose (the
 /// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted),
 /// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
@@ -87,7 +88,7 @@ pub struct Args {
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
     /// Frame sets of the built-in scene (at 30 fps).
-    #[arg(long, value_name = "N", default_value_t = 150)]
+    #[arg(long, value_name = "N", default_value_t = 180)]
     scene_frames: u64,
     /// Seed of the built-in scene.
     #[arg(long, value_name = "S", default_value_t = 1)]
@@ -173,6 +174,8 @@ struct Report<'a> {
     voxel_m: f64,
     realtime: bool,
     queue: usize,
+    /// Stopped by Ctrl-C before the last frame set (everything read until then was processed).
+    interrupted: bool,
     wall_s: f64,
     /// Frame sets processed per second of wall time, start-up (rendering, the tissue's set-up)
     /// excluded.
@@ -206,6 +209,21 @@ pub const ENTITIES: [&str; 12] = [
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    // Ctrl-C stops reading; what is in flight is processed, logged and flushed, and the report is
+    // written. A second Ctrl-C quits at once.
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!(
+                "interrupted: finishing the frame sets in flight and flushing the recording (Ctrl-C again quits now)"
+            );
+        })
+        .context("installing the Ctrl-C handler")?;
+    }
     if args.backend != "cpu" {
         bail!("--backend {}: only the cpu backend exists so far", args.backend);
     }
@@ -243,7 +261,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
             scene_dir = tempfile::tempdir().context("creating a temporary folder for the built-in scene")?;
             let path = scene_dir.path().join("scene");
-            let mut config = SceneConfig::new(SceneKind::Cut, args.seed, args.scene_frames);
+            let mut config = SceneConfig::new(SceneKind::Resect, args.seed, args.scene_frames);
             // The organ's top lies 5 to 15 mm below ORGAN_TOP where strokes run (it is domed, and
             // sags under gravity): strokes 18 to 35 mm below it cut about 5 to 25 mm deep.
             config.stroke_depth = BUILTIN_STROKE_DEPTH;
@@ -308,6 +326,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         policy,
         dropped: Arc::clone(&dropped),
         realtime: args.realtime,
+        stop: Arc::clone(&stop),
     })?;
 
     let pb = bar(frames.len() as u64, "running");
@@ -385,6 +404,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     pb.finish_and_clear();
     let wall = t0.elapsed();
     let outcome = pipeline.join()?;
+    let interrupted = stop.load(Ordering::SeqCst) && outcome.read < frames.len() as u64;
     counters.frame_sets_read = outcome.read;
     counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
     pose_report.finish();
@@ -418,7 +438,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             source: args
                 .dataset
                 .as_ref()
-                .map_or_else(|| "built-in scene (cut)".to_owned(), |p| p.display().to_string()),
+                .map_or_else(|| "built-in scene (resect)".to_owned(), |p| p.display().to_string()),
             seed,
             frames: [range.start, range.end],
             backend: &args.backend,
@@ -426,6 +446,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             voxel_m: args.voxel,
             realtime: args.realtime,
             queue: args.queue,
+            interrupted,
             wall_s: wall.as_secs_f64(),
             sustained_fps,
             capture_fps: ds.meta().fps,
@@ -468,6 +489,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if let Some(f) = outcome.failure {
         bail!("the tissue simulation stopped: {f}");
+    }
+    if interrupted {
+        bail!(
+            "interrupted after {} of {} frame sets (the recording and the report hold them all)",
+            outcome.read,
+            frames.len()
+        );
     }
     Ok(())
 }

@@ -18,7 +18,10 @@ use crate::report::{Provenance, SCHEMA_VERSION, write_json};
 /// Scenes: `cut` (cut strokes at up to ~0.2 m/s, every camera delivers every frame), `static`
 /// (the tool held still in the organ, for averaged accuracy), `hard` (fast strokes peaking at
 /// 0.5 m/s, the blade edge-on to two cameras, the index finger over the blade, motion blur, ±15 %
-/// exposure drift, camera 4 dropping about 10 % of its frames). Deterministic for a seed.
+/// exposure drift, camera 4 dropping about 10 % of its frames), `resect` (two strokes along one
+/// line down to the table across the built-in organ's left lobe, which cut its tip off in
+/// `hullcut run`, then strokes as in `cut`: `hullcut run`'s built-in scene). Deterministic for a
+/// seed.
 ///
 /// Writes the dataset OUT (DESIGN "Dataset format", datasets/README.md): dataset.toml, rig.yaml,
 /// frames.csv (per-camera timestamps with jitter), CAM/NNNNNN.png, CAM/backgroundNN.png

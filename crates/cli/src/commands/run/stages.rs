@@ -6,7 +6,7 @@
 //! simulation is not an error of the pipeline: the tissue stops and the frames go on.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -54,6 +54,8 @@ pub struct Setup {
     pub dropped: Arc<AtomicU64>,
     /// Pace the reader to the capture timestamps.
     pub realtime: bool,
+    /// Set (by Ctrl-C) to stop reading; the frame sets in flight still go through.
+    pub stop: Arc<AtomicBool>,
 }
 
 /// A hull label's grid and surface.
@@ -174,7 +176,7 @@ impl Pipeline {
 
 /// Starts the stages.
 pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
-    let Setup { ds, frames, use_files, hull, template, tissue, queue, policy, dropped, realtime } = setup;
+    let Setup { ds, frames, use_files, hull, template, tissue, queue, policy, dropped, realtime, stop } = setup;
     let segmenter = if use_files {
         None
     } else {
@@ -188,9 +190,10 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
     let reader = {
         let ds = Arc::clone(&ds);
         let oldest = read_rx.clone();
-        std::thread::Builder::new()
-            .name("read".into())
-            .spawn(move || read_stage(&ds, &frames, use_files, realtime, policy, &read_tx, &oldest, &dropped))?
+        std::thread::Builder::new().name("read".into()).spawn(move || {
+            let pace = Pace { realtime, policy, stop: &stop, dropped: &dropped };
+            read_stage(&ds, &frames, use_files, &pace, &read_tx, &oldest)
+        })?
     };
     let hull = {
         let ds = Arc::clone(&ds);
@@ -209,22 +212,32 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
     Ok(Pipeline { output: out_rx, reader, hull, pose, tissue })
 }
 
+/// How the reader keeps time and when it stops.
+#[derive(Clone, Copy)]
+struct Pace<'a> {
+    realtime: bool,
+    policy: Policy,
+    stop: &'a AtomicBool,
+    dropped: &'a AtomicU64,
+}
+
 /// Reads frame sets; with `realtime` keeps to their timestamps.
-#[allow(clippy::too_many_arguments)] // the reader's whole state, passed once
 fn read_stage(
     ds: &Dataset,
     frames: &[u64],
     use_files: bool,
-    realtime: bool,
-    policy: Policy,
+    pace: &Pace,
     tx: &Sender<Work>,
     oldest: &Receiver<Work>,
-    dropped: &AtomicU64,
 ) -> anyhow::Result<u64> {
+    let Pace { realtime, policy, stop, dropped } = *pace;
     let mut read = 0;
     let start = Instant::now();
     let mut first_ts = None;
     for &frame in frames {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         let started = Instant::now();
         let set = ds.read_frame_set(frame, use_files)?;
         let took = started.elapsed();
