@@ -35,6 +35,10 @@ fn run_cuts_the_organ_with_trusted_poses_and_exports_closed_pieces_every_frame()
         &p(&meshes),
         "--rrd-every",
         "3",
+        "--snapshots",
+        &p(&dir.path().join("snaps")),
+        "--snapshot-frames",
+        "8",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(std::fs::metadata(&rrd).expect("rrd written").len() > 100_000);
@@ -58,6 +62,16 @@ fn run_cuts_the_organ_with_trusted_poses_and_exports_closed_pieces_every_frame()
     assert_eq!(r["timings"]["collide"]["count"].as_u64(), Some(8));
     assert!(r["pose"]["tip_mm"]["mean"].as_f64().expect("tip error") < 2.0);
     assert!(r["entities"].as_array().expect("entities").iter().any(|e| e == "world/tissue/surface"));
+
+    // Snapshots: the six 320x240 views in a 3 x 2 grid, and the organ (drawn in reddish tones over
+    // a scene of green drape, grey floor and blue glove) enlarged to 640 pixels across.
+    assert_eq!(c["snapshots_written"].as_u64(), Some(2));
+    let views = image::open(dir.path().join("snaps/000008-views.png")).expect("views PNG").to_rgb8();
+    assert_eq!(views.dimensions(), (960, 480));
+    let organ = image::open(dir.path().join("snaps/000008-organ.png")).expect("organ PNG").to_rgb8();
+    assert_eq!(organ.width(), 640);
+    let reddish = organ.pixels().filter(|p| p.0[0] > p.0[1].saturating_add(40) && p.0[0] > p.0[2].saturating_add(40));
+    assert!(reddish.count() > 640 * 100, "the organ covers much of its snapshot");
 
     // The pieces of every frame: closed, and together the organ's volume (nothing lost by cutting).
     let mut volumes = Vec::new();

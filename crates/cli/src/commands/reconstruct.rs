@@ -341,7 +341,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
         if let Some((rec, cams)) = &rec {
-            log_hull(rec, cams, &set, &occ, &grids, frame, args.rrd_every)?;
+            log_hull(rec, cams, &set, &occ, &grids, frame, args.rrd_every, 1)?;
             let last = |d: &[Duration]| d.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
             hullcut_viz::log_scalar(rec, "metrics/time/carve", last(&t.carve))?;
             hullcut_viz::log_scalar(rec, "metrics/time/surface", last(&t.surface))?;
@@ -515,7 +515,8 @@ fn score(
 }
 
 /// Logs one frame set's images and masks and hull leaves (every `every`-th frame) and hull
-/// meshes (every frame), on the frame and capture-time timelines.
+/// meshes (every `mesh_every`-th frame), on the frame and capture-time timelines.
+#[allow(clippy::too_many_arguments)] // what one frame logs, and its two decimation rates
 pub(crate) fn log_hull(
     rec: &hullcut_viz::RecordingStream,
     cams: &CameraLogger,
@@ -524,6 +525,7 @@ pub(crate) fn log_hull(
     grids: &[(u8, &str, Option<DenseGrid>, Option<Mesh>)],
     frame: u64,
     every: u64,
+    mesh_every: u64,
 ) -> anyhow::Result<()> {
     hullcut_viz::set_frame(rec, frame as i64);
     hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
@@ -547,7 +549,7 @@ pub(crate) fn log_hull(
             )?;
         }
     }
-    for (l, name, _, mesh) in grids {
+    for (l, name, _, mesh) in grids.iter().filter(|_| frame.is_multiple_of(mesh_every)) {
         if let Some(mesh) = mesh {
             let v: Vec<[f32; 3]> = mesh.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
             hullcut_viz::log_mesh3d(rec, &format!("world/hull/{name}/mesh"), &v, &mesh.triangles, colours(*l))?;

@@ -1,5 +1,6 @@
 //! `hullcut run`: the whole pipeline, frame sets in, a cut organ out.
 
+mod snapshot;
 mod stages;
 mod tissue;
 
@@ -42,15 +43,17 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
 ///
 /// Writes: the rerun recording (hullcut-run.rrd in the current folder unless --rrd, --spawn or
-/// --connect says otherwise): images and label masks under world/cams/NAME every --rrd-every
-/// frames, hull leaves and meshes under world/hull/LABEL, the blade's estimate and truth under
-/// world/tool/{estimate,truth}, the lattice nodes under world/tissue/nodes, the pieces' surfaces
-/// (cut faces included) under world/tissue/surface, the swept blade surface under
-/// world/tissue/cut, stage timings under metrics/time/STAGE and accuracy under
+/// --connect says otherwise): images (JPEG) and label masks under world/cams/NAME, hull leaves
+/// and meshes under world/hull/LABEL and the lattice nodes under world/tissue/nodes every
+/// --rrd-every frames; every frame the blade's estimate and truth under
+/// world/tool/{estimate,truth} and the swept blade surface under world/tissue/cut; the pieces'
+/// surfaces (cut faces included) under world/tissue/surface whenever they changed (a cut, or a
+/// vertex moved by more than 0.2 mm); stage timings under metrics/time/STAGE and accuracy under
 /// metrics/accuracy/NAME, on the `frame` and `capture_time` timelines. REPORT (JSON) with
 /// --report: per-stage timings, sustained fps, pose accuracy where the dataset has truth, every
 /// drop, refusal and skipped sweep counted, the tissue's pieces. With --export-meshes DIR:
-/// DIR/NNNNNN/pieceK.ply, the organ's pieces at every frame (world metres, closed).
+/// DIR/NNNNNN/pieceK.ply, the organ's pieces at every frame (world metres, closed). With
+/// --snapshots DIR: PNGs drawn by hullcut itself at chosen frames, without a viewer.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -96,7 +99,9 @@ pub struct Args {
     /// Frame sets each queue between stages holds.
     #[arg(long, value_name = "N", default_value_t = 4)]
     queue: usize,
-    /// Log images, masks and hull leaves every N-th frame (meshes, poses and scalars every frame).
+    /// Log images (JPEG), masks, hull leaves and meshes and the lattice nodes every N-th frame; the
+    /// blade, the swept surface and the scalars every frame; the tissue surface whenever it has
+    /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged).
     #[arg(long, value_name = "N", default_value_t = 5)]
     rrd_every: u64,
     /// Write a JSON report.
@@ -105,6 +110,19 @@ pub struct Args {
     /// Write the organ's pieces as PLY meshes, per frame, under this folder.
     #[arg(long, value_name = "DIR")]
     export_meshes: Option<PathBuf>,
+    /// Draw PNG snapshots into this folder: NNNNNN-views.png (the six views, masks tinted, the
+    /// estimated cutting edge) and NNNNNN-organ.png (the cut organ through one camera).
+    #[arg(long, value_name = "DIR")]
+    snapshots: Option<PathBuf>,
+    /// Frames to snapshot (comma-separated); default every --snapshot-every frames and the last.
+    #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
+    snapshot_frames: Option<Vec<u64>>,
+    /// Snapshot every N-th frame (when --snapshot-frames is not given).
+    #[arg(long, value_name = "N", default_value_t = 30)]
+    snapshot_every: u64,
+    /// The camera the organ snapshot is drawn through (default: the rig's first).
+    #[arg(long, value_name = "NAME")]
+    snapshot_camera: Option<String>,
 }
 
 /// Counted events of a run.
@@ -122,6 +140,10 @@ struct Counters {
     sweeps_skipped_after_refusal: u64,
     edges_cut: u64,
     meshes_exported: u64,
+    snapshots_written: u64,
+    /// Frames whose tissue surface was logged, and skipped for not having changed visibly.
+    tissue_surfaces_logged: u64,
+    tissue_surfaces_unchanged: u64,
 }
 
 #[derive(Debug, Serialize)]
@@ -227,8 +249,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.backend != "cpu" {
         bail!("--backend {}: only the cpu backend exists so far", args.backend);
     }
-    if args.queue == 0 || args.rrd_every == 0 {
-        bail!("--queue and --rrd-every must be at least 1");
+    if args.queue == 0 || args.rrd_every == 0 || args.snapshot_every == 0 {
+        bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
     }
     if !(args.cell.is_finite() && args.cell > 0.0) {
         bail!("--cell {}: must be a positive length in metres", args.cell);
@@ -308,6 +330,21 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         setup_s
     );
 
+    let mut snapshots = match &args.snapshots {
+        Some(dir) => {
+            let chosen: std::collections::BTreeSet<u64> = match &args.snapshot_frames {
+                Some(list) => list.iter().copied().collect(),
+                None => frames
+                    .iter()
+                    .copied()
+                    .filter(|f| f.is_multiple_of(args.snapshot_every))
+                    .chain(frames.last().copied())
+                    .collect(),
+            };
+            Some(snapshot::Snapshots::new(dir, chosen, args.snapshot_camera.as_deref(), ds.rig())?)
+        }
+        None => None,
+    };
     let rec = hullcut_viz::open_recording("hullcut-run", &sink)?;
     hullcut_viz::log_world(&rec)?;
     let cams = CameraLogger::new(&rec, ds.rig())?;
@@ -335,6 +372,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut times = StageTimes::default();
     let mut logging = Vec::new();
     let mut latency = Vec::new();
+    let mut surface_log = tissue::SurfaceLog::default();
     for work in pipeline.output.iter() {
         let clock = Instant::now();
         counters.frame_sets_processed += 1;
@@ -368,7 +406,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hullcut_viz::set_frame(&rec, frame as i64);
         hullcut_viz::set_capture_time_ns(&rec, set.timestamp_ns);
         if let Some(occ) = &occ {
-            crate::commands::reconstruct::log_hull(&rec, &cams, &set, occ, &grids, frame, args.rrd_every)?;
+            crate::commands::reconstruct::log_hull(
+                &rec,
+                &cams,
+                &set,
+                occ,
+                &grids,
+                frame,
+                args.rrd_every,
+                args.rrd_every,
+            )?;
         }
         if let (Some(tool), Some(p)) = (&tool, truth.iter().find(|p| p.frame == frame)) {
             log_tool(&rec, "truth", tool, &p.tool_to_world)?;
@@ -389,10 +436,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
         if let Some(step) = &step {
-            tissue::log(&rec, step, frame, args.rrd_every)?;
+            tissue::log(&rec, step, frame, args.rrd_every, &mut surface_log)?;
             if let Some(dir) = &args.export_meshes {
                 counters.meshes_exported += tissue::export(dir, frame, &step.surfaces)?;
             }
+        }
+        if let Some(snaps) = snapshots.as_mut().filter(|s| s.wants(frame)) {
+            let blade = estimate.as_ref().and_then(|e| e.pose.as_ref()).filter(|p| p.is_finite());
+            let pieces = step.as_ref().map_or(&[][..], |s| &s.surfaces[..]);
+            snaps.write(ds.rig(), &set, &grids, blade, pieces)?;
         }
         for (name, ms) in t.last_ms() {
             hullcut_viz::log_scalar(&rec, &format!("metrics/time/{name}"), ms)?;
@@ -407,6 +459,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let interrupted = stop.load(Ordering::SeqCst) && outcome.read < frames.len() as u64;
     counters.frame_sets_read = outcome.read;
     counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
+    counters.snapshots_written = snapshots.as_ref().map_or(0, |s| s.written);
+    counters.tissue_surfaces_logged = surface_log.logged;
+    counters.tissue_surfaces_unchanged = surface_log.skipped;
     pose_report.finish();
     hullcut_viz::flush(&rec)?;
     let sim = &outcome.sim;

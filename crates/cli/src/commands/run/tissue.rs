@@ -115,11 +115,52 @@ impl Tissue {
     }
 }
 
-/// Logs one step: the surface every frame, the lattice nodes every `every`-th frame, the swept
-/// blade surface when there is one (else it is cleared), the piece count.
-pub fn log(rec: &hullcut_viz::RecordingStream, step: &TissueStep, frame: u64, every: u64) -> anyhow::Result<()> {
+/// The surface as last logged, to log it again only when it has changed visibly.
+#[derive(Debug, Default)]
+pub struct SurfaceLog {
+    vertices: Vec<[f32; 3]>,
+    triangles: Vec<[u32; 3]>,
+    /// Surfaces logged and skipped.
+    pub logged: u64,
+    pub skipped: u64,
+}
+
+/// A surface is logged again when a vertex has moved this far since it was last logged, metres.
+pub const SURFACE_LOG_TOLERANCE_M: f32 = 2e-4;
+
+impl SurfaceLog {
+    /// Whether `vertices`/`triangles` differ visibly from what was last logged.
+    fn changed(&self, vertices: &[[f32; 3]], triangles: &[[u32; 3]]) -> bool {
+        let tol2 = SURFACE_LOG_TOLERANCE_M * SURFACE_LOG_TOLERANCE_M;
+        triangles != self.triangles
+            || vertices.len() != self.vertices.len()
+            || vertices
+                .iter()
+                .zip(&self.vertices)
+                .any(|(a, b)| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2) > tol2)
+    }
+}
+
+/// Logs one step: the surface when it has changed (its topology, or a vertex moved by more than
+/// [`SURFACE_LOG_TOLERANCE_M`]: a tissue at rest costs nothing), the lattice nodes every
+/// `every`-th frame, the swept blade surface when there is one (else it is cleared), the piece
+/// count.
+pub fn log(
+    rec: &hullcut_viz::RecordingStream,
+    step: &TissueStep,
+    frame: u64,
+    every: u64,
+    last: &mut SurfaceLog,
+) -> anyhow::Result<()> {
     let (vertices, triangles) = merged(&step.surfaces);
-    hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, &triangles, TISSUE_RED)?;
+    if last.changed(&vertices, &triangles) {
+        hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, &triangles, TISSUE_RED)?;
+        last.vertices = vertices;
+        last.triangles = triangles;
+        last.logged += 1;
+    } else {
+        last.skipped += 1;
+    }
     if frame.is_multiple_of(every) {
         let nodes: Vec<[f32; 3]> = step.nodes.iter().map(|p| [p.x, p.y, p.z]).collect();
         hullcut_viz::log_points3d(rec, "world/tissue/nodes", &nodes, TLED_GREEN, 0.0008)?;
