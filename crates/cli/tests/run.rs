@@ -228,3 +228,29 @@ fn ctrl_c_stops_reading_and_leaves_a_complete_recording_and_report() {
     let entities = hullcut_viz::rrd_entities(&rrd).expect("the recording reads back to its end");
     assert!(entities.contains("/world"), "{entities:?}");
 }
+
+#[test]
+fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "pipeline", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", text(&o));
+    let summary = std::fs::read_to_string(dir.path().join("pipeline.csv")).expect("csv");
+    let header: Vec<&str> = summary.lines().next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let rows: Vec<Vec<&str>> = summary.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "two hull leaves x two tissue cells");
+    for r in &rows {
+        // Truth masks: the quick run's twelve frames are all trusted, within a millimetre.
+        assert_eq!(r[col("trusted")], "12", "{r:?}");
+        assert!(r[col("tip_mm_mean")].parse::<f64>().expect("tip") < 1.0, "{r:?}");
+        assert!(r[col("fps")].parse::<f64>().expect("fps") > 0.0);
+    }
+    let paper_scale = rows.iter().find(|r| r[col("cell_mm")] == "6").expect("6 mm row");
+    let nodes: usize = paper_scale[col("nodes")].parse().expect("nodes");
+    assert!((2_500..3_500).contains(&nodes), "the seed paper's size is 2,250-2,886 nodes: {nodes}");
+    let stages = std::fs::read_to_string(dir.path().join("pipeline_stages.csv")).expect("stages");
+    for stage in ["carve", "pose", "collide", "cut_topology", "cut_surface", "deform", "total"] {
+        assert_eq!(stages.lines().filter(|l| l.contains(&format!(",{stage},"))).count(), 4, "{stage}");
+    }
+    assert!(std::fs::read(dir.path().join("pipeline.png")).expect("png").starts_with(b"\x89PNG"));
+}

@@ -13,7 +13,19 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim`, `hull` and `pose` (the pipeline's arrives with it).
+/// Targets: `sim`, `hull`, `pose` and `pipeline`.
+/// `pipeline` measures (the `resect` scene, the built-in scene of `hullcut run`: 150 frame sets of
+/// 6 x 640x480 truth masks held in memory, the built-in organ at 6 mm, the paper's size, and 5 mm)
+///   pipeline_stages.csv per configuration (hull leaf 6.25 / 3.1 mm x tissue cell 6 / 5 mm) and
+///                     stage (carve, surface, pose, collide, cut_topology, cut_surface, deform for
+///                     the frame gap, tissue_surface, total): mean and p95 ms, the loop run on
+///                     one thread (rayon inside the stages), nothing logged;
+///   pipeline.csv, pipeline.png
+///                     per configuration: total per frame set, fps, blade tip and normal error,
+///                     trusted poses, pieces at the end, and PNG decoding of a frame set's six
+///                     images timed apart; the chart puts time against tip error;
+///   pipeline_seed_table2.csv
+///                     the seed paper's Table II stage times, to read beside ours.
 /// `hull` measures
 ///   hull.csv, hull_speed.png, hull_accuracy.png
 ///                     carving time of one rendered cut-scene frame (6 x 640x480 truth masks)
@@ -66,6 +78,8 @@ enum Target {
     Hull,
     /// The blade pose.
     Pose,
+    /// The whole loop of `hullcut run` on frame sets in memory.
+    Pipeline,
 }
 
 /// Runs the command.
@@ -81,6 +95,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         Target::Hull => super::bench_hull::run(&args.out, quick)?,
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
+        Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,
     }
     Ok(())
 }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_hull;
+pub mod bench_pipeline;
 pub mod bench_pose;
 pub mod calibrate;
 pub mod reconstruct;

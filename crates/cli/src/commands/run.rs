@@ -1,8 +1,8 @@
 //! `hullcut run`: the whole pipeline, frame sets in, a cut organ out.
 
 mod snapshot;
-mod stages;
-mod tissue;
+pub(crate) mod stages;
+pub(crate) mod tissue;
 
 use std::path::PathBuf;
 use std::sync::Arc;

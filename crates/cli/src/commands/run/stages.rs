@@ -16,10 +16,9 @@ use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
 use hullcut_pose::{PoseEstimate, Template, Tracker, TrackerParams, ViewInput};
-use hullcut_sim::{CutSim, SweptSurface};
-use nalgebra::Isometry3;
+use hullcut_sim::CutSim;
 
-use super::tissue::{Tissue, TissueStep};
+use super::tissue::{Sweeper, Tissue, TissueStep};
 use crate::commands::reconstruct::checks;
 use crate::pose_out::no_tool_estimate;
 
@@ -357,8 +356,7 @@ fn tissue_stage(
     rx: &Receiver<Work>,
     tx: &Sender<Work>,
 ) -> anyhow::Result<(CutSim, Option<String>)> {
-    let mut previous: Option<Isometry3<f64>> = None;
-    let mut refused_since = false;
+    let mut sweeper = Sweeper::default();
     let mut last_ts: Option<i64> = None;
     let mut failure: Option<String> = None;
     for mut work in rx.iter() {
@@ -366,24 +364,7 @@ fn tissue_stage(
         let seconds = last_ts.map_or(0.0, |t| ((ts - t) as f64 * 1e-9).clamp(0.0, MAX_ADVANCE_S));
         last_ts = Some(ts);
         if failure.is_none() {
-            let trusted =
-                work.estimate.as_ref().filter(|e| e.valid).and_then(|e| e.pose.as_ref()).map(|p| p.tool_to_world);
-            let mut step = TissueStep::default();
-            match (trusted, template) {
-                (Some(now), Some(template)) => {
-                    if let Some(before) = previous {
-                        step.swept = SweptSurface::between(&template.edge, &before, &now, tissue.cell / 2.0, 0.05);
-                    } else if refused_since {
-                        step.sweep_skipped = true;
-                    }
-                    previous = Some(now);
-                    refused_since = false;
-                }
-                _ => {
-                    refused_since |= previous.is_some();
-                    previous = None;
-                }
-            }
+            let mut step = sweeper.next(work.estimate.as_ref(), template, tissue.cell);
             match tissue.step(&mut step, seconds, &mut work.times) {
                 Ok(()) => work.tissue = Some(step),
                 Err(e) => failure = Some(format!("frame {}: {e}", work.frame)),
@@ -398,4 +379,4 @@ fn tissue_stage(
 
 /// The longest stretch of simulated time one frame set advances the tissue (a gap in the
 /// recording does not make the simulation run for seconds).
-const MAX_ADVANCE_S: f64 = 0.2;
+pub const MAX_ADVANCE_S: f64 = 0.2;

@@ -4,11 +4,12 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
     Body, CutOutcome, CutSim, CutSimParams, Material, SweptSurface, TriMesh, VoxelizeParams, WindingTree, organ_sdf,
     voxelize,
 };
-use nalgebra::Point3;
+use nalgebra::{Isometry3, Point3};
 
 use super::stages::StageTimes;
 
@@ -56,6 +57,39 @@ pub struct TissueStep {
     pub nodes: Vec<Point3<f32>>,
     /// Separate pieces.
     pub pieces: usize,
+}
+
+/// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge between
+/// them; untrusted poses never cut, and a sweep never bridges a refused frame.
+#[derive(Debug, Default)]
+pub struct Sweeper {
+    previous: Option<Isometry3<f64>>,
+    refused_since: bool,
+}
+
+impl Sweeper {
+    /// The step a frame set's pose starts: its swept surface (rows at most half a `cell` apart, at
+    /// most 0.05 rad of turn), or whether a sweep was skipped after a refusal.
+    pub fn next(&mut self, estimate: Option<&PoseEstimate>, template: Option<&Template>, cell: f64) -> TissueStep {
+        let mut step = TissueStep::default();
+        let trusted = estimate.filter(|e| e.valid).and_then(|e| e.pose.as_ref()).map(|p| p.tool_to_world);
+        match (trusted, template) {
+            (Some(now), Some(template)) => {
+                if let Some(before) = self.previous {
+                    step.swept = SweptSurface::between(&template.edge, &before, &now, cell / 2.0, 0.05);
+                } else if self.refused_since {
+                    step.sweep_skipped = true;
+                }
+                self.previous = Some(now);
+                self.refused_since = false;
+            }
+            _ => {
+                self.refused_since |= self.previous.is_some();
+                self.previous = None;
+            }
+        }
+        step
+    }
 }
 
 /// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,

@@ -1,0 +1,213 @@
+//! `hullcut bench pipeline`: the whole loop of `hullcut run` (hull, pose, cut, deformation) on
+//! frame sets already in memory, stage by stage, at the paper's organ size and finer, beside the
+//! seed paper's Table II; decoding the images is timed on its own.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use hullcut_dataset::label;
+use hullcut_hull::{DenseGrid, HullParams, carve, silhouettes};
+use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
+use hullcut_synth::{Scene, SceneConfig, SceneKind};
+use image::GrayImage;
+
+use super::run::stages::{MAX_ADVANCE_S, StageTimes};
+use super::run::tissue::{self, Sweeper};
+use crate::chart::{Scale, Series, line_chart};
+use crate::progress::bar;
+use crate::report::StageTiming;
+
+/// The seed paper's Table II (GeForce 9800, 2,250-2,886 nodes), milliseconds per frame:
+/// reconstruction, collision, cutting, deformation.
+const SEED_TABLE_II: [(&str, &str); 4] =
+    [("reconstruction", "20"), ("collision", "11-13"), ("cutting", "6-7"), ("deformation", "15")];
+
+/// One configuration of the loop.
+struct Config {
+    /// Hull leaf, metres.
+    voxel: f64,
+    /// Tissue lattice spacing, metres.
+    cell: f64,
+}
+
+/// Runs the benchmark into `out`.
+pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
+    // The resection's second pass ends near frame 120; quick runs stop during the first.
+    let count: u64 = if quick { 12 } else { 150 };
+    let scene = Scene::new(SceneConfig::new(SceneKind::Resect, 1, count))?;
+    let cameras = scene.config().rig.len();
+    let pb = bar(count, "rendering the resection scene");
+    let mut masks: Vec<Vec<Option<GrayImage>>> = Vec::new();
+    let mut decode = Vec::new();
+    for f in 0..count {
+        let views: Vec<_> = (0..cameras).map(|c| scene.render_view(f, c)).collect();
+        // Decoding a frame set's six PNG images, as `hullcut run` reads them from a dataset.
+        if f < 10 {
+            let encoded: Vec<Vec<u8>> = views
+                .iter()
+                .flatten()
+                .map(|v| {
+                    let mut png = Vec::new();
+                    v.image.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map(|()| png)
+                })
+                .collect::<Result<_, _>>()
+                .context("encoding a PNG")?;
+            let clock = Instant::now();
+            for png in &encoded {
+                image::load_from_memory(png).context("decoding a PNG")?;
+            }
+            decode.push(clock.elapsed());
+        }
+        masks.push(views.into_iter().map(|v| v.map(|v| v.mask)).collect());
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let decode = StageTiming::from_durations(&decode);
+    let extent = HullParams::default().workspace.extent();
+    let configs = [
+        Config { voxel: extent / 64.0, cell: 0.006 },
+        Config { voxel: extent / 128.0, cell: 0.006 },
+        Config { voxel: extent / 64.0, cell: 0.005 },
+        Config { voxel: extent / 128.0, cell: 0.005 },
+    ];
+    let template = Template::new(&scene.scalpel().geometry)?;
+    let stages = ["carve", "surface", "pose", "collide", "cut_topology", "cut_surface", "deform", "tissue_surface"];
+    let mut csv = String::from("voxel_mm,cell_mm,nodes,frames,stage,mean_ms,p95_ms\n");
+    let mut summary = String::from(
+        "voxel_mm,cell_mm,nodes,frames,total_mean_ms,total_p95_ms,fps,decode_mean_ms,tip_mm_mean,normal_deg_mean,trusted,pieces\n",
+    );
+    let mut series: Vec<Series> = Vec::new();
+    for config in &configs {
+        let hull = HullParams { leaf_size: config.voxel, ..HullParams::default() };
+        let mut sim = tissue::build("organ", config.cell)?;
+        let nodes = sim.sim.lattice().node_count();
+        let mut tracker = Tracker::new(template.clone(), TrackerParams::default());
+        let mut sweeper = Sweeper::default();
+        let mut times = StageTimes::default();
+        let mut totals = Vec::new();
+        let (mut tips, mut normals, mut trusted) = (Vec::new(), Vec::new(), 0);
+        let mut last_ts = None;
+        let pb = bar(count, &format!("voxel {:.2} mm, cell {} mm", config.voxel * 1e3, config.cell * 1e3));
+        for (f, frame_masks) in masks.iter().enumerate() {
+            let f = f as u64;
+            let started = Instant::now();
+            let refs: Vec<Option<&GrayImage>> = frame_masks.iter().map(Option::as_ref).collect();
+            let clock = Instant::now();
+            let occ = carve(&silhouettes(&scene.config().rig, &refs)?, &hull)?;
+            times.carve.push(clock.elapsed());
+            let clock = Instant::now();
+            for &(l, _) in &label::NAMED {
+                if let Some(grid) = DenseGrid::from_occupancy(&occ, Some(l)) {
+                    std::hint::black_box(grid.surface());
+                }
+            }
+            times.surface.push(clock.elapsed());
+            let clock = Instant::now();
+            let inputs: Vec<Option<ViewInput>> = scene
+                .config()
+                .rig
+                .cameras
+                .iter()
+                .zip(&refs)
+                .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
+                .collect();
+            let ts = scene.frame_timestamp(f);
+            let estimate = tracker.update(f, ts, &occ, &inputs);
+            times.pose.push(clock.elapsed());
+            if let (true, Some(p)) = (estimate.valid, &estimate.pose) {
+                trusted += 1;
+                let truth = isometry_from_matrix(&scene.truth_pose(f).tool_to_world).context("a true pose")?;
+                let e = pose_error(p, &template, &truth);
+                tips.push(e.tip_mm);
+                normals.push(e.normal_deg);
+            }
+            let seconds = last_ts.map_or(0.0, |t: i64| ((ts - t) as f64 * 1e-9).clamp(0.0, MAX_ADVANCE_S));
+            last_ts = Some(ts);
+            let mut step = sweeper.next(Some(&estimate), Some(&template), config.cell);
+            sim.step(&mut step, seconds, &mut times).with_context(|| format!("frame {f}"))?;
+            totals.push(started.elapsed());
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
+        let total = StageTiming::from_durations(&totals);
+        let row = |name: &str, d: &[Duration]| {
+            let t = StageTiming::from_durations(d);
+            format!(
+                "{:.3},{},{nodes},{count},{name},{:.3},{:.3}\n",
+                config.voxel * 1e3,
+                config.cell * 1e3,
+                t.mean_ms,
+                t.p95_ms
+            )
+        };
+        let fields = [
+            &times.carve,
+            &times.surface,
+            &times.pose,
+            &times.collide,
+            &times.cut_topology,
+            &times.cut_surface,
+            &times.deform,
+            &times.tissue_surface,
+        ];
+        for (name, d) in stages.iter().zip(fields) {
+            csv += &row(name, d);
+        }
+        csv += &row("total", &totals);
+        let fps = 1e3 / total.mean_ms;
+        writeln!(
+            summary,
+            "{:.3},{},{nodes},{count},{:.3},{:.3},{fps:.2},{:.3},{:.3},{:.3},{trusted},{}",
+            config.voxel * 1e3,
+            config.cell * 1e3,
+            total.mean_ms,
+            total.p95_ms,
+            decode.mean_ms,
+            mean(&tips),
+            mean(&normals),
+            sim.sim.pieces()
+        )?;
+        println!(
+            "voxel {:.2} mm, cell {} mm ({nodes} nodes): {:.1} ms per frame set (p95 {:.1}), {fps:.1} fps; tip {:.2} mm; {} piece(s)",
+            config.voxel * 1e3,
+            config.cell * 1e3,
+            total.mean_ms,
+            total.p95_ms,
+            mean(&tips),
+            sim.sim.pieces()
+        );
+        let label = format!("tissue cell {} mm ({nodes} nodes)", config.cell * 1e3);
+        let point = (total.mean_ms, mean(&tips));
+        match series.iter_mut().find(|s| s.label == label) {
+            Some(s) => s.points.push(point),
+            None => series.push(Series { label, points: vec![point] }),
+        }
+    }
+    let mut seed = String::from("stage,seed_ms\n");
+    for (stage, ms) in SEED_TABLE_II {
+        writeln!(seed, "{stage},{ms}")?;
+    }
+    write(&out.join("pipeline_stages.csv"), &csv)?;
+    write(&out.join("pipeline.csv"), &summary)?;
+    write(&out.join("pipeline_seed_table2.csv"), &seed)?;
+    println!("decoding six PNG images per frame set: {:.1} ms mean (timed apart from the loop)", decode.mean_ms);
+    line_chart(
+        &out.join("pipeline.png"),
+        "Whole loop on frame sets in memory: time per frame set against blade tip error (hull leaf 6.25 / 3.1 mm)",
+        "compute per frame set, ms (2 cores)",
+        "blade tip error, mm (mean over trusted frames)",
+        (Scale::Linear, Scale::Linear),
+        &series,
+    )?;
+    println!("wrote {}", out.join("pipeline.png").display());
+    Ok(())
+}
+
+fn write(path: &Path, text: &str) -> anyhow::Result<()> {
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
