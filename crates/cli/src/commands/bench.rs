@@ -23,7 +23,8 @@ use crate::progress::bar;
 ///   pipeline.csv, pipeline.png
 ///                     per configuration: total per frame set, fps, blade tip and normal error,
 ///                     trusted poses, pieces at the end, and PNG decoding of a frame set's six
-///                     images timed apart; the chart puts time against tip error;
+///                     images timed apart; the chart: reconstruction, cutting, deformation and total
+///                     against the tissue's nodes, per hull leaf;
 ///   pipeline_seed_table2.csv
 ///                     the seed paper's Table II stage times, to read beside ours.
 /// `hull` measures
