@@ -254,3 +254,51 @@ fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
     }
     assert!(std::fs::read(dir.path().join("pipeline.png")).expect("png").starts_with(b"\x89PNG"));
 }
+
+/// Copies a folder tree.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("read_dir").flatten() {
+        let (src, dst) = (entry.path(), to.join(entry.file_name()));
+        if src.is_dir() {
+            copy_tree(&src, &dst);
+        } else {
+            std::fs::copy(&src, &dst).expect("copy");
+        }
+    }
+}
+
+#[test]
+fn a_camera_that_dies_mid_run_and_a_recording_that_stops_early_are_counted_not_fatal() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("faulty");
+    copy_tree(Path::new(CUT_SMALL), &ds);
+    // cam3 dies after frame 4; the recording stops after frame 6 (frames 7 and 8 lost entirely).
+    let gone = |frame: u64, cam: &str| (cam == "cam3" && frame >= 5) || frame >= 7;
+    let csv = std::fs::read_to_string(ds.join("frames.csv")).expect("frames.csv");
+    let mut kept = String::new();
+    for line in csv.lines() {
+        let fields: Vec<&str> = line.split(',').collect();
+        if let Ok(frame) = fields[0].parse::<u64>()
+            && gone(frame, fields[1])
+        {
+            for folder in [ds.join(fields[1]), ds.join("masks").join(fields[1])] {
+                std::fs::remove_file(folder.join(format!("{frame:06}.png"))).expect("remove an image");
+            }
+            continue;
+        }
+        kept += line;
+        kept += "\n";
+    }
+    std::fs::write(ds.join("frames.csv"), kept).expect("frames.csv");
+    let report = dir.path().join("run.json");
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let rrd = dir.path().join("run.rrd");
+    let o = hullcut(&["run", "--dataset", &p(&ds), "--rrd", &p(&rrd), "--report", &p(&report), "--cell", "0.01"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let c = json(&report)["counters"].clone();
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(7), "{c}");
+    assert_eq!(c["views_missing"].as_u64(), Some(2), "cam3 in frames 5 and 6: {c}");
+    // Five views still give trusted poses on this recording.
+    assert_eq!(c["poses_trusted"].as_u64(), Some(7), "{c}");
+}

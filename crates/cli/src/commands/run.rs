@@ -129,6 +129,8 @@ pub struct Args {
 #[derive(Debug, Default, Serialize)]
 struct Counters {
     frame_sets_read: u64,
+    /// Camera images missing from the frame sets processed (a camera that dropped frames or died).
+    views_missing: u64,
     frame_sets_processed: u64,
     /// Dropped by the --realtime policy (queue full: the oldest frame set goes).
     frame_sets_dropped: u64,
@@ -376,6 +378,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     for work in pipeline.output.iter() {
         let clock = Instant::now();
         counters.frame_sets_processed += 1;
+        counters.views_missing += work.set.views.iter().filter(|v| v.is_none()).count() as u64;
         let Work { frame, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
         times.extend(&t);
         let truth_iso = truth.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));

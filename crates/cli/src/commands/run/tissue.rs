@@ -232,3 +232,47 @@ pub fn export(dir: &Path, frame: u64, surfaces: &[TriMesh]) -> anyhow::Result<u6
     }
     Ok(surfaces.len() as u64)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn template() -> Template {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+        let ds = hullcut_dataset::Dataset::open(root).expect("cut-small");
+        Template::new(&ds.tool().expect("tool.json").expect("a tool")).expect("a template")
+    }
+
+    fn estimate(template: &Template, valid: bool, x: f64) -> PoseEstimate {
+        let mut e = crate::pose_out::no_tool_estimate(0, 0);
+        e.valid = valid;
+        e.pose = Some(hullcut_pose::BladePose::new(template, Isometry3::translation(x, 0.0, 0.05)));
+        e
+    }
+
+    #[test]
+    fn only_consecutive_trusted_poses_sweep_and_a_refusal_is_never_bridged() {
+        let t = template();
+        let mut s = Sweeper::default();
+        let steps: Vec<TissueStep> = [(true, 0.0), (true, 0.01), (false, 0.02), (true, 0.03), (true, 0.04)]
+            .into_iter()
+            .map(|(valid, x)| s.next(Some(&estimate(&t, valid, x)), Some(&t), 0.005))
+            .collect();
+        let swept: Vec<bool> = steps.iter().map(|s| s.swept.is_some()).collect();
+        let skipped: Vec<bool> = steps.iter().map(|s| s.sweep_skipped).collect();
+        assert_eq!(swept, [false, true, false, false, true]);
+        assert_eq!(skipped, [false, false, false, true, false]);
+        // The sweep spans exactly the blade's travel between the two trusted poses.
+        let sweep = steps[4].swept.as_ref().expect("a sweep");
+        let xs = sweep.vertices.iter().map(|p| p.x - t.edge[0].x);
+        let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        let span = t
+            .edge
+            .iter()
+            .map(|p| p.x - t.edge[0].x)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        assert!((lo - (0.03 + span.0)).abs() < 1e-9 && (hi - (0.04 + span.1)).abs() < 1e-9, "{lo} {hi}");
+        // Without a template (no tool.json) nothing ever sweeps.
+        assert!(s.next(Some(&estimate(&t, true, 0.05)), None, 0.005).swept.is_none());
+    }
+}
