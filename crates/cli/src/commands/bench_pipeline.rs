@@ -73,7 +73,8 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         Config { voxel: extent / 128.0, cell: 0.005 },
     ];
     let template = Template::new(&scene.scalpel().geometry)?;
-    let stages = ["carve", "surface", "pose", "collide", "cut_topology", "cut_surface", "deform", "tissue_surface"];
+    let stages =
+        ["carve", "surface", "pose", "collide", "cut_topology", "cut_surface", "contact", "deform", "tissue_surface"];
     let mut csv = String::from("voxel_mm,cell_mm,nodes,frames,stage,mean_ms,p95_ms\n");
     let mut summary = String::from(
         "voxel_mm,cell_mm,nodes,frames,total_mean_ms,total_p95_ms,fps,decode_mean_ms,tip_mm_mean,normal_deg_mean,trusted,pieces\n",
@@ -98,9 +99,13 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             let occ = carve(&silhouettes(&scene.config().rig, &refs)?, &hull)?;
             times.carve.push(clock.elapsed());
             let clock = Instant::now();
+            let mut hand = None;
             for &(l, _) in &label::NAMED {
                 if let Some(grid) = DenseGrid::from_occupancy(&occ, Some(l)) {
                     std::hint::black_box(grid.surface());
+                    if l == label::HAND {
+                        hand = Some(grid);
+                    }
                 }
             }
             times.surface.push(clock.elapsed());
@@ -126,7 +131,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             let seconds = last_ts.map_or(0.0, |t: i64| ((ts - t) as f64 * 1e-9).clamp(0.0, MAX_ADVANCE_S));
             last_ts = Some(ts);
             let mut step = sweeper.next(Some(&estimate), Some(&template), config.cell);
-            sim.step(&mut step, seconds, &mut times).with_context(|| format!("frame {f}"))?;
+            sim.step(&mut step, seconds, hand.as_ref(), &mut times).with_context(|| format!("frame {f}"))?;
             totals.push(started.elapsed());
             pb.inc(1);
         }
@@ -150,6 +155,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             &times.collide,
             &times.cut_topology,
             &times.cut_surface,
+            &times.contact,
             &times.deform,
             &times.tissue_surface,
         ];

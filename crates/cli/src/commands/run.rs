@@ -33,7 +33,8 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// reading, hull (segmentation when the masks are not files, octree carving, surfaces), pose (the
 /// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted),
 /// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
-/// virtual node algorithm; TLED moves it under gravity, its base held by the table). Untrusted
+/// virtual node algorithm; TLED moves it under gravity, its base held by the table; the hand's
+/// hull pushes it aside where it presses on it). Untrusted
 /// poses never cut, and a sweep never bridges a refused frame. Without --realtime every frame is
 /// processed (a full queue blocks the reader); with --realtime the reader keeps to the capture
 /// timestamps and a full queue drops its oldest frame set, counted in the report.
@@ -141,6 +142,10 @@ struct Counters {
     /// Trusted poses that did not sweep because the frame before was refused.
     sweeps_skipped_after_refusal: u64,
     edges_cut: u64,
+    /// Frame sets after which the hand's hull was pressing on the tissue, and the most lattice
+    /// nodes it pushed at once.
+    frames_with_contact: u64,
+    max_contact_nodes: u64,
     meshes_exported: u64,
     snapshots_written: u64,
     /// Frames whose tissue surface was logged, and skipped for not having changed visibly.
@@ -158,6 +163,8 @@ struct Timings {
     collide: StageTiming,
     cut_topology: StageTiming,
     cut_surface: StageTiming,
+    /// The hand's hull made an obstacle for the tissue.
+    contact: StageTiming,
     deform: StageTiming,
     tissue_surface: StageTiming,
     log: StageTiming,
@@ -404,6 +411,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             counters.sweeps += u64::from(step.swept.is_some());
             counters.sweeps_skipped_after_refusal += u64::from(step.sweep_skipped);
             counters.edges_cut += step.cut.map_or(0, |c| c.new_edges as u64);
+            counters.frames_with_contact += u64::from(step.contacts > 0);
+            counters.max_contact_nodes = counters.max_contact_nodes.max(step.contacts as u64);
         }
         // rerun: everything on the frame and capture-time timelines.
         hullcut_viz::set_frame(&rec, frame as i64);
@@ -536,6 +545,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 collide: timing(&times.collide),
                 cut_topology: timing(&times.cut_topology),
                 cut_surface: timing(&times.cut_surface),
+                contact: timing(&times.contact),
                 deform: timing(&times.deform),
                 tissue_surface: timing(&times.tissue_surface),
                 log: timing(&logging),

@@ -91,12 +91,13 @@ pub struct StageTimes {
     pub collide: Vec<Duration>,
     pub cut_topology: Vec<Duration>,
     pub cut_surface: Vec<Duration>,
+    pub contact: Vec<Duration>,
     pub deform: Vec<Duration>,
     pub tissue_surface: Vec<Duration>,
 }
 
 impl StageTimes {
-    fn fields(&self) -> [(&'static str, &Vec<Duration>); 10] {
+    fn fields(&self) -> [(&'static str, &Vec<Duration>); 11] {
         [
             ("read", &self.read),
             ("segment", &self.segment),
@@ -106,6 +107,7 @@ impl StageTimes {
             ("collide", &self.collide),
             ("cut_topology", &self.cut_topology),
             ("cut_surface", &self.cut_surface),
+            ("contact", &self.contact),
             ("deform", &self.deform),
             ("tissue_surface", &self.tissue_surface),
         ]
@@ -122,6 +124,7 @@ impl StageTimes {
             &mut self.collide,
             &mut self.cut_topology,
             &mut self.cut_surface,
+            &mut self.contact,
             &mut self.deform,
             &mut self.tissue_surface,
         ];
@@ -365,7 +368,8 @@ fn tissue_stage(
         last_ts = Some(ts);
         if failure.is_none() {
             let mut step = sweeper.next(work.estimate.as_ref(), template, tissue.cell);
-            match tissue.step(&mut step, seconds, &mut work.times) {
+            let hand = work.grids.iter().find(|g| g.0 == label::HAND).and_then(|g| g.2.as_ref());
+            match tissue.step(&mut step, seconds, hand, &mut work.times) {
                 Ok(()) => work.tissue = Some(step),
                 Err(e) => failure = Some(format!("frame {}: {e}", work.frame)),
             }

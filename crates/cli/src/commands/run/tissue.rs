@@ -4,10 +4,11 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
-    Body, CutOutcome, CutSim, CutSimParams, Material, SweptSurface, TriMesh, VoxelizeParams, WindingTree, organ_sdf,
-    voxelize,
+    Body, CutOutcome, CutSim, CutSimParams, Material, Obstacle, SweptSurface, TriMesh, VoxelizeParams, WindingTree,
+    organ_sdf, voxelize,
 };
 use nalgebra::{Isometry3, Point3};
 
@@ -57,6 +58,8 @@ pub struct TissueStep {
     pub nodes: Vec<Point3<f32>>,
     /// Separate pieces.
     pub pieces: usize,
+    /// Lattice nodes the hand's hull pushed at the end of the step.
+    pub contacts: usize,
 }
 
 /// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge between
@@ -120,7 +123,13 @@ pub fn build(name: &str, cell: f64) -> anyhow::Result<Tissue> {
 impl Tissue {
     /// Cuts with `step.swept` (when there is one), advances by `seconds` and fills in the step's
     /// surfaces and nodes; timings go to `times`.
-    pub fn step(&mut self, step: &mut TissueStep, seconds: f64, times: &mut StageTimes) -> anyhow::Result<()> {
+    pub fn step(
+        &mut self,
+        step: &mut TissueStep,
+        seconds: f64,
+        hand: Option<&DenseGrid>,
+        times: &mut StageTimes,
+    ) -> anyhow::Result<()> {
         if let Some(swept) = &step.swept {
             let outcome = self.sim.cut(swept)?;
             let ms = |ms: f64| Duration::from_secs_f64(ms * 1e-3);
@@ -129,6 +138,12 @@ impl Tissue {
             times.cut_surface.push(ms(outcome.surface_ms));
             step.cut = Some(outcome);
         }
+        // The hand's hull pushes the tissue aside (the scalpel's does not: its blade cuts, and its
+        // hull, voxels thick, would shove the tissue ahead of the edge away from it).
+        let clock = Instant::now();
+        let obstacles = hand.and_then(|g| self.obstacle(g)).into_iter().collect();
+        self.sim.set_obstacles(obstacles);
+        times.contact.push(clock.elapsed());
         let clock = Instant::now();
         self.sim.advance(seconds).map_err(|d| {
             anyhow::anyhow!(
@@ -144,10 +159,49 @@ impl Tissue {
         step.surfaces = self.sim.surfaces();
         step.nodes = self.sim.node_positions();
         step.pieces = self.sim.pieces();
+        step.contacts = self.sim.contacts();
         times.tissue_surface.push(clock.elapsed());
         Ok(())
     }
 }
+
+impl Tissue {
+    /// The part of a hull grid within [`CONTACT_MARGIN_M`] of the tissue's bounds, as an obstacle
+    /// (the rest cannot touch it this frame, and the way out of a voxel is computed only where
+    /// it can matter).
+    fn obstacle(&self, grid: &DenseGrid) -> Option<Obstacle> {
+        let nodes = self.sim.node_positions();
+        let (mut lo, mut hi) = (Point3::from([f32::MAX; 3]), Point3::from([f32::MIN; 3]));
+        for p in &nodes {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        let margin = CONTACT_MARGIN_M;
+        let range = |a: usize| {
+            let first = ((f64::from(lo[a]) - margin - grid.origin[a]) / grid.leaf).floor().max(0.0) as usize;
+            let last = ((f64::from(hi[a]) + margin - grid.origin[a]) / grid.leaf).ceil().max(0.0) as usize;
+            (first.min(grid.dims[a]), (last + 1).min(grid.dims[a]))
+        };
+        let r = [range(0), range(1), range(2)];
+        let dims = r.map(|(a, b)| b.saturating_sub(a));
+        if dims.contains(&0) {
+            return None;
+        }
+        let mut occupied = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+        for k in r[2].0..r[2].1 {
+            for j in r[1].0..r[1].1 {
+                for i in r[0].0..r[0].1 {
+                    occupied.push(grid.occupied[i + grid.dims[0] * (j + grid.dims[1] * k)]);
+                }
+            }
+        }
+        let origin = grid.origin + nalgebra::Vector3::new(r[0].0 as f64, r[1].0 as f64, r[2].0 as f64) * grid.leaf;
+        Obstacle::from_occupancy(origin, grid.leaf, dims, &occupied)
+    }
+}
+
+/// How far beyond the tissue's bounds a hull is taken as an obstacle, metres.
+pub const CONTACT_MARGIN_M: f64 = 0.01;
 
 /// The surface as last logged, to log it again only when it has changed visibly.
 #[derive(Debug, Default)]
