@@ -131,6 +131,12 @@ fn run_names_what_is_wrong_with_its_input() {
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--cell=0"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("--cell"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--voxel=0"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("--voxel"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--masks", "guess"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("--masks guess"), "{}", text(&o));
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--frames", "20:30"]);
     assert_eq!(o.status.code(), Some(1));
     let o = hullcut(&["run", "--dataset", "/nonexistent/dataset", "--rrd", rrd]);

@@ -14,7 +14,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use crate::lattice::Lattice;
-use crate::mesh::{MeshError, TriMesh, WindingTree};
+use crate::mesh::{MeshError, TriMesh, WindingTree, push_quad};
 
 /// A body to simulate, in metres.
 #[derive(Debug, Clone, PartialEq)]
@@ -141,6 +141,15 @@ fn smooth_min(a: f64, b: f64, k: f64) -> f64 {
     a.min(b) - h * h * k * 0.25
 }
 
+/// Exact signed distance of the box `[0, size]`, metres (negative inside); for tests.
+#[cfg(test)]
+pub(crate) fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
+    move |p: &Point3<f64>| {
+        let q = (p.coords - size / 2.0).abs() - size / 2.0;
+        q.map(|x| x.max(0.0)).norm() + q.max().min(0.0)
+    }
+}
+
 /// Signed distance estimate of the built-in liver-like organ, metres (negative inside).
 ///
 /// Two ellipsoidal lobes joined by a smooth union and cut flat by the table at z = 0: a right lobe
@@ -236,14 +245,7 @@ fn surface_nets(f: &(dyn Fn(&Point3<f64>) -> f64 + Sync), start: Point3<f64>, h:
                     if !a {
                         q.reverse();
                     }
-                    let p = q.map(|i| vertices[i as usize]);
-                    if (p[0] - p[2]).norm_squared() <= (p[1] - p[3]).norm_squared() {
-                        triangles.push([q[0], q[1], q[2]]);
-                        triangles.push([q[0], q[2], q[3]]);
-                    } else {
-                        triangles.push([q[0], q[1], q[3]]);
-                        triangles.push([q[1], q[2], q[3]]);
-                    }
+                    push_quad(&mut triangles, &vertices, q);
                 }
             }
         }

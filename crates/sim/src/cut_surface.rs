@@ -19,7 +19,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use crate::lattice::Lattice;
-use crate::mesh::TriMesh;
+use crate::mesh::{TriMesh, push_quad};
 use crate::vna::CutTopology;
 
 /// A sample's copy: none outside the lattice.
@@ -334,14 +334,7 @@ impl Field<'_> {
                     if dir < 0 {
                         q.reverse();
                     }
-                    let p = q.map(|i| vertices[i as usize]);
-                    if (p[0] - p[2]).norm_squared() <= (p[1] - p[3]).norm_squared() {
-                        triangles.push([q[0], q[1], q[2]]);
-                        triangles.push([q[0], q[2], q[3]]);
-                    } else {
-                        triangles.push([q[0], q[1], q[3]]);
-                        triangles.push([q[1], q[2], q[3]]);
-                    }
+                    push_quad(&mut triangles, &vertices, q);
                 }
             }
         }
@@ -354,15 +347,9 @@ mod tests {
     use nalgebra::Isometry3;
 
     use super::*;
+    use crate::body::box_sdf;
     use crate::collide::{SpatialHash, cut_edges};
     use crate::sweep::SweptSurface;
-
-    fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
-        move |p: &Point3<f64>| {
-            let q = (p.coords - size / 2.0).abs() - size / 2.0;
-            q.map(|x| x.max(0.0)).norm() + q.max().min(0.0)
-        }
-    }
 
     #[test]
     fn a_slit_within_one_piece_shows_as_two_faces_that_open_with_their_sides() {

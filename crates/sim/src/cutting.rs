@@ -441,13 +441,7 @@ mod tests {
     use nalgebra::Isometry3;
 
     use super::*;
-
-    fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
-        move |p: &Point3<f64>| {
-            let q = (p.coords - size / 2.0).abs() - size / 2.0;
-            q.map(|x| x.max(0.0)).norm() + q.max().min(0.0)
-        }
-    }
+    use crate::body::box_sdf;
 
     /// The surface a blade edge along y sweeps going down through x = `x` from z0 to z1.
     fn vertical_stroke(x: f64, z0: f64, z1: f64) -> SweptSurface {

@@ -182,13 +182,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
     let ds = Dataset::open(&args.dataset)?;
-    let use_files = match args.masks.as_str() {
-        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", args.dataset.display()),
-        "files" => true,
-        "segment" => false,
-        "auto" => ds.has_masks(),
-        other => bail!("--masks {other}: expected auto, files or segment"),
-    };
+    let use_files = checks::masks_from_files(&ds, &args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
     let params = HullParams { leaf_size: args.voxel, carve_votes: args.carve_votes, ..HullParams::default() };
     let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };

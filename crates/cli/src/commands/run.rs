@@ -17,6 +17,7 @@ use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use serde::Serialize;
 
 use self::stages::{Policy, StageTimes, Work};
+use crate::commands::reconstruct::checks;
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, log_blade};
@@ -261,6 +262,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.queue == 0 || args.rrd_every == 0 || args.snapshot_every == 0 {
         bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
     }
+    checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
     if !(args.cell.is_finite() && args.cell > 0.0) {
         bail!("--cell {}: must be a positive length in metres", args.cell);
     }
@@ -305,13 +307,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     };
     let ds = Arc::new(Dataset::open(&dataset_path)?);
-    let use_files = match args.masks.as_str() {
-        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", dataset_path.display()),
-        "files" => true,
-        "segment" => false,
-        "auto" => ds.has_masks(),
-        other => bail!("--masks {other}: expected auto, files or segment"),
-    };
+    let use_files = checks::masks_from_files(&ds, &args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
     let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
     if frames.is_empty() {

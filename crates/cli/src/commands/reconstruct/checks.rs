@@ -6,13 +6,24 @@ use hullcut_hull::CarveStats;
 use serde::Serialize;
 
 /// `--voxel` lies in (0, the workspace's side].
-pub(super) fn voxel(voxel: f64, extent: f64) -> anyhow::Result<()> {
+pub(crate) fn voxel(voxel: f64, extent: f64) -> anyhow::Result<()> {
     if !(voxel > 0.0 && voxel <= extent) {
         bail!(
             "--voxel {voxel}: the leaf size must be above 0 and at most the side of the carved workspace ({extent} m)"
         );
     }
     Ok(())
+}
+
+/// Whether masks come from the dataset's files (else segmented): `--masks auto|files|segment`.
+pub(crate) fn masks_from_files(ds: &Dataset, masks: &str) -> anyhow::Result<bool> {
+    Ok(match masks {
+        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", ds.root().display()),
+        "files" => true,
+        "segment" => false,
+        "auto" => ds.has_masks(),
+        other => bail!("--masks {other}: expected auto, files or segment"),
+    })
 }
 
 /// Every mask of the frame set holds only the labels carving knows (0, 1, 2, 255); anything else
