@@ -13,8 +13,9 @@
 //! Obstacles ([`CutSim::set_obstacles`], the reconstructed hand) push the tissue aside: nodes
 //! found inside one after a time step are moved out and stopped.
 //!
-//! Every cell is TLED here: the operational region does not yet follow the tool, and FLSM does
-//! not run in a cut body.
+//! Every cell is TLED unless [`CutSimParams::hybrid`] is set: then the operational region follows
+//! the tool ([`CutSim::set_tool`]) and FLSM moves the rest, with regions rebuilt from the cut
+//! lattice's connectivity (see [`crate::operational`]).
 
 use std::time::Instant;
 
@@ -24,9 +25,12 @@ use rayon::prelude::*;
 use crate::collide::{EdgeCut, SpatialHash, cut_edges};
 use crate::cut_surface::{BodySamples, PieceSurface, piece_surfaces};
 use crate::dynamics::{Divergence, Integrator, Prescribed};
+use crate::flsm::FlsmParams;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::obstacle::Obstacle;
+use crate::operational::{FlsmPart, HybridParams, HybridSteps, cut_band, near_tool, node_roles};
+use crate::simulation::NodeRole;
 use crate::stability;
 use crate::sweep::SweptSurface;
 use crate::tled::{Tled, TledParams};
@@ -49,6 +53,8 @@ pub struct CutSimParams {
     pub min_fraction: f32,
     /// Surface samples per lattice cell along each axis.
     pub samples_per_cell: usize,
+    /// The hybrid model (TLED near the tool, FLSM elsewhere); `None`: TLED everywhere.
+    pub hybrid: Option<HybridParams>,
 }
 
 impl Default for CutSimParams {
@@ -60,6 +66,7 @@ impl Default for CutSimParams {
             dt_safety: 0.8,
             min_fraction: 1e-3,
             samples_per_cell: 2,
+            hybrid: None,
         }
     }
 }
@@ -107,6 +114,26 @@ pub struct CutSim {
     held: Vec<bool>,
     obstacles: Vec<Obstacle>,
     contacts: usize,
+    /// The cut lattice: one cell per kept copy, over lattice and virtual nodes.
+    cut_lattice: Lattice,
+    /// Gravity on each node, newtons.
+    f_gravity: Vec<Vector3<f32>>,
+    /// Lattice cells run by TLED.
+    cell_tled: Vec<bool>,
+    /// Cells that stay TLED because a cut passes through them or next to them.
+    band: Vec<bool>,
+    /// Nodes of TLED cells.
+    node_tled: Vec<bool>,
+    /// Where the tool is, world metres (deformed configuration).
+    tool: Vec<Point3<f64>>,
+    /// FLSM over the cells outside the operational region (hybrid only, when there are any).
+    flsm: Option<FlsmPart>,
+    /// Operational-region changes so far.
+    region_changes: usize,
+    /// Substeps and stiffnesses of the hybrid model.
+    steps: Option<HybridSteps>,
+    /// Interface anchors of the current FLSM step: node, goal − rest, β × velocity.
+    anchors: Vec<(usize, Vector3<f32>, Vector3<f32>)>,
 }
 
 impl CutSim {
@@ -130,6 +157,9 @@ impl CutSim {
         if lattice.cells.is_empty() {
             return Err(invalid("body", "the lattice has no cells".to_owned()));
         }
+        if let Some(hybrid) = &params.hybrid {
+            hybrid.validate()?;
+        }
         let fixed: Vec<bool> = lattice.rest.iter().map(fixed).collect();
         let samples = BodySamples::new(&lattice, params.samples_per_cell, signed);
         let topology = CutTopology::rebuild(&lattice, []);
@@ -141,6 +171,7 @@ impl CutSim {
         let limit = stability::estimate(&mut tled, &mass, &free, &zeros, lattice.cell, 300, 1e-6);
         let dt_critical = limit.dt_critical.min(lone_cell_dt(&lattice, &material, params.tled)?);
         let dt = (params.dt_safety * dt_critical) as f32;
+        let steps = params.hybrid.map(|h| h.resolve(f64::from(dt), lattice.cell, &material));
         let integrator = Integrator::new(mass, Vec::new(), 0, params.damping, dt, speed_limit(&material));
         let mut sim = CutSim {
             lattice,
@@ -160,6 +191,16 @@ impl CutSim {
             held: Vec::new(),
             obstacles: Vec::new(),
             contacts: 0,
+            cut_lattice: Lattice::block(Point3::origin(), 1.0, [0, 0, 0]),
+            f_gravity: Vec::new(),
+            cell_tled: Vec::new(),
+            band: Vec::new(),
+            node_tled: Vec::new(),
+            tool: Vec::new(),
+            flsm: None,
+            region_changes: 0,
+            steps,
+            anchors: Vec::new(),
         };
         sim.install(
             cut,
@@ -171,10 +212,20 @@ impl CutSim {
     }
 
     /// Sets up TLED, masses, constraints and forces for a cut lattice, with its displacements now
-    /// and one step ago.
+    /// and one step ago, and the operational region over it.
     fn install(&mut self, cut: Lattice, u: Vec<Vector3<f32>>, u_prev: Vec<Vector3<f32>>) -> Result<(), SimError> {
-        self.tled = Tled::new(&cut, None, &self.material, self.params.tled)?;
-        let mass: Vec<f32> = cut.lumped_masses(self.material.density).iter().map(|&m| m as f32).collect();
+        // Selective mass scaling: a node of the cut lattice that carries mass weighs at least
+        // MASS_FLOOR of a full cell's node. A sliver copy's mass and stiffness scale together, so
+        // it is stable in the linear range, but crossing cuts leave slivers that deform far into
+        // the nonlinear one: in the built-in scene with the hybrid model, a virtual node of 6% of
+        // a node's mass reached 55 m/s at frame 120 without the floor. Nodes of dropped copies
+        // only keep no mass (the integrator leaves them where they are).
+        let floor = (MASS_FLOOR * self.material.density * self.lattice.cell.powi(3) / 8.0) as f32;
+        let mass: Vec<f32> = cut
+            .lumped_masses(self.material.density)
+            .iter()
+            .map(|&m| if m > 0.0 { (m as f32).max(floor) } else { 0.0 })
+            .collect();
         let base = self.lattice.node_count();
         let held = |n: usize| {
             let real = if n < base { n } else { self.topology.virtual_of[n - base] as usize };
@@ -187,7 +238,8 @@ impl CutSim {
             })
             .collect();
         let g = Vector3::from(self.params.gravity).cast::<f32>();
-        self.f_ext = mass.iter().map(|&m| g * m).collect();
+        self.f_gravity = mass.iter().map(|&m| g * m).collect();
+        self.f_ext.clone_from(&self.f_gravity);
         self.f_int = vec![Vector3::zeros(); cut.node_count()];
         self.rest = cut.rest.iter().map(|p| p.cast::<f32>()).collect();
         self.held = (0..cut.node_count()).map(held).collect();
@@ -198,7 +250,152 @@ impl CutSim {
         integrator.u = u;
         integrator.u_prev = u_prev;
         self.integrator = integrator;
+        self.cut_lattice = cut;
+        // Whatever FLSM moved is in u and u_prev now (see `flush_flsm`); the region is rebuilt.
+        self.flsm = None;
+        let width = self.params.hybrid.map_or(0, |h| h.flsm.w);
+        self.band = cut_band(&self.lattice, &self.topology, width);
+        let wanted = match self.params.hybrid {
+            Some(_) => self.wanted_region(),
+            None => vec![true; self.lattice.cells.len()],
+        };
+        self.set_region(wanted)
+    }
+
+    /// The cells the operational region should hold now (hybrid only): the cut band, the cells
+    /// near the tool, and TLED cells still near it or still moving.
+    fn wanted_region(&self) -> Vec<bool> {
+        let Some(h) = self.params.hybrid else {
+            return vec![true; self.lattice.cells.len()];
+        };
+        let u = &self.integrator.u;
+        let near = near_tool(&self.lattice, u, &self.tool, h.radius);
+        let near_leave = near_tool(&self.lattice, u, &self.tool, 1.5 * h.radius);
+        let dt = self.integrator.dt;
+        let moving = |c: usize| {
+            self.lattice.cells[c]
+                .nodes
+                .iter()
+                .any(|&n| (u[n as usize] - self.integrator.u_prev[n as usize]).norm() > h.rest_speed * dt)
+        };
+        (0..self.lattice.cells.len())
+            .map(|c| {
+                self.band[c]
+                    || near[c]
+                    || (self.cell_tled.get(c).copied().unwrap_or(false) && (near_leave[c] || moving(c)))
+            })
+            .collect()
+    }
+
+    /// Makes `wanted` the operational region: TLED over the copies of its cells, FLSM over the
+    /// other cells, interface pulls and frozen nodes set; velocities carry over.
+    fn set_region(&mut self, wanted: Vec<bool>) -> Result<(), SimError> {
+        self.flush_flsm();
+        let cells: Vec<usize> = self
+            .cut_lattice
+            .cells
+            .iter()
+            .enumerate()
+            .filter(|(_, cell)| {
+                let parent = self.lattice.cell_index(cell.ijk.map(|a| a as usize));
+                parent.is_none_or(|p| wanted[p])
+            })
+            .map(|(k, _)| k)
+            .collect();
+        self.tled = Tled::new(&self.cut_lattice, Some(&cells), &self.material, self.params.tled)?;
+        let n = self.cut_lattice.node_count();
+        self.node_tled = vec![false; n];
+        for &k in &cells {
+            for &node in &self.cut_lattice.cells[k].nodes {
+                self.node_tled[node as usize] = true;
+            }
+        }
+        let dt = self.integrator.dt;
+        let (u, u_prev) = (&self.integrator.u, &self.integrator.u_prev);
+        self.flsm = match (self.params.hybrid, self.steps) {
+            (Some(h), Some(steps)) => {
+                let flsm_cells: Vec<bool> = wanted.iter().map(|w| !w).collect();
+                FlsmPart::new(
+                    &self.lattice,
+                    &flsm_cells,
+                    &self.integrator.mass,
+                    Vector3::from(self.params.gravity).cast::<f32>(),
+                    &self.node_tled,
+                    &self.held,
+                    |node| u[node],
+                    |node| (u[node] - u_prev[node]) / dt,
+                    FlsmParams { alpha: steps.alpha, ..h.flsm },
+                )?
+            }
+            _ => None,
+        };
+        self.anchors.clear();
+        self.integrator.frozen = vec![false; n];
+        self.integrator.implicit_stiffness = vec![0.0; n];
+        self.f_ext.clone_from(&self.f_gravity);
+        if let (Some(part), Some(steps)) = (&self.flsm, self.steps) {
+            for (p, &node) in part.node.iter().enumerate() {
+                self.integrator.frozen[node as usize] = part.is_active(p);
+            }
+            for &p in &part.interface {
+                self.integrator.implicit_stiffness[part.node[p as usize] as usize] = steps.beta;
+            }
+        }
+        if self.cell_tled != wanted {
+            self.region_changes += 1;
+        }
+        self.cell_tled = wanted;
         Ok(())
+    }
+
+    /// Writes the velocities FLSM keeps for its nodes back into the integrator's previous
+    /// displacements (frozen nodes lose theirs there), so that the integrator state alone
+    /// describes the motion.
+    fn flush_flsm(&mut self) {
+        let Some(part) = &self.flsm else {
+            return;
+        };
+        let dt = self.integrator.dt;
+        for (p, &node) in part.node.iter().enumerate() {
+            if part.is_active(p) {
+                let n = node as usize;
+                self.integrator.u_prev[n] = self.integrator.u[n] - part.v[p] * dt;
+            }
+        }
+    }
+
+    /// Where the tool is now (world metres, deformed configuration), e.g. the swept blade surface
+    /// and the edge: with the hybrid model, cells near it become TLED at the next
+    /// [`Self::advance`]. An empty slice: no tool (cells return to FLSM once at rest).
+    pub fn set_tool(&mut self, points: &[Point3<f64>]) {
+        self.tool.clear();
+        self.tool.extend_from_slice(points);
+    }
+
+    /// The role of every node of the cut lattice (lattice nodes first, then virtual ones): TLED,
+    /// FLSM or interface.
+    pub fn node_roles(&self) -> Vec<NodeRole> {
+        node_roles(self.integrator.u.len(), &self.node_tled, self.flsm.as_ref())
+    }
+
+    /// Lattice cells run by TLED now.
+    pub fn tled_cells(&self) -> usize {
+        self.cell_tled.iter().filter(|&&t| t).count()
+    }
+
+    /// TLED steps per FLSM step (1 without the hybrid).
+    pub fn substeps(&self) -> usize {
+        self.steps.map_or(1, |s| s.substeps)
+    }
+
+    /// The hybrid model's substeps and stiffnesses, when it runs.
+    pub fn hybrid_steps(&self) -> Option<HybridSteps> {
+        self.steps
+    }
+
+    /// How many times the operational region has changed.
+    pub fn region_changes(&self) -> usize {
+        self.region_changes
     }
 
     /// Cuts the body with a swept blade surface (world metres, in the deformed configuration).
@@ -226,6 +423,7 @@ impl CutSim {
         let old_edges = self.topology.cut.iter().map(|(&(a, b), &t)| EdgeCut { a, b, t, triangle: u32::MAX });
         let edges: Vec<EdgeCut> = old_edges.chain(cuts.edges).collect();
         let topology = CutTopology::rebuild(&self.lattice, edges);
+        self.flush_flsm();
         let (u, u_prev) = self.carry_over(&topology);
         let old = std::mem::replace(&mut self.topology, topology);
         let (cut, dropped) = self.topology.to_lattice(&self.lattice, self.params.min_fraction);
@@ -276,18 +474,62 @@ impl CutSim {
         (u, u_prev)
     }
 
-    /// Advances by `seconds` of simulated time (whole steps, at least one); the steps taken.
+    /// Advances by `seconds` of simulated time (whole steps, at least one); the TLED steps taken.
+    ///
+    /// With the hybrid model the operational region is updated first (see
+    /// [`crate::operational`]), and time advances in FLSM steps of `substeps` TLED steps.
     pub fn advance(&mut self, seconds: f64) -> Result<usize, Divergence> {
-        let steps = (seconds / f64::from(self.integrator.dt)).ceil().max(1.0) as usize;
-        self.contacts = 0;
-        for _ in 0..steps {
-            self.tled.internal_forces(&self.integrator.u, &mut self.f_int);
-            self.integrator.advance(&self.f_int, &self.f_ext)?;
-            if !self.obstacles.is_empty() {
-                self.contacts = self.resolve_contacts();
+        let substeps = self.substeps();
+        if self.params.hybrid.is_some() {
+            let wanted = self.wanted_region();
+            if wanted != self.cell_tled {
+                self.set_region(wanted).map_err(|e| Divergence {
+                    step: self.integrator.step,
+                    time: self.integrator.time(),
+                    node: 0,
+                    reason: format!("the operational region could not be rebuilt: {e}"),
+                })?;
             }
         }
-        Ok(steps)
+        let outer = (seconds / (f64::from(self.integrator.dt) * substeps as f64)).ceil().max(1.0) as usize;
+        self.contacts = 0;
+        for _ in 0..outer {
+            if let (Some(part), Some(steps)) = (&mut self.flsm, self.steps) {
+                let dt = self.integrator.dt;
+                part.step(
+                    &self.rest,
+                    (&mut self.integrator.u, &self.integrator.u_prev, dt),
+                    dt * substeps as f32,
+                    self.params.damping,
+                );
+                // The interface pull's anchor: the goal, moving on through the sub-steps as it moved
+                // over the last FLSM step. A fixed goal lags the body's motion by up to one FLSM
+                // step and drags the interface like a damper of about β × h per node (a cut-off
+                // piece then sinks at millimetres per second instead of falling); the node's own
+                // velocity would feed back into its pull and destabilize it.
+                self.anchors.clear();
+                for &p in &part.interface {
+                    let (n, p) = (part.node[p as usize] as usize, p as usize);
+                    let goal = part.goal(p) - self.rest[n].coords;
+                    self.anchors.push((n, goal, part.goal_velocity(p) * steps.beta));
+                }
+            }
+            for k in 0..substeps {
+                // β (anchor − x) with x = rest + u: the constant part here, −β u implicitly, both at
+                // the end of the sub-step (the integrator takes the pull on the new displacement).
+                let beta = self.steps.map_or(0.0, |s| s.beta);
+                let tau = (k + 1) as f32 * self.integrator.dt;
+                for &(n, goal, beta_v) in &self.anchors {
+                    self.f_ext[n] = self.f_gravity[n] + goal * beta + beta_v * tau;
+                }
+                self.tled.internal_forces(&self.integrator.u, &mut self.f_int);
+                self.integrator.advance(&self.f_int, &self.f_ext)?;
+                if !self.obstacles.is_empty() {
+                    self.contacts = self.resolve_contacts();
+                }
+            }
+        }
+        Ok(outer * substeps)
     }
 
     /// Obstacles the tissue cannot enter from now on (replacing the previous ones): nodes found
@@ -391,9 +633,17 @@ impl CutSim {
         self.integrator.time()
     }
 
-    /// Kinetic energy, joules.
+    /// Kinetic energy, joules (FLSM nodes with the velocities FLSM keeps for them).
     pub fn kinetic_energy(&self) -> f64 {
-        self.integrator.kinetic_energy()
+        let mut energy = self.integrator.kinetic_energy();
+        if let Some(part) = &self.flsm {
+            for (p, &n) in part.node.iter().enumerate() {
+                if part.is_active(p) {
+                    energy += 0.5 * f64::from(self.integrator.mass[n as usize]) * f64::from(part.v[p].norm_squared());
+                }
+            }
+        }
+        energy
     }
 
     /// Copies dropped for holding too little material.
@@ -408,13 +658,15 @@ impl CutSim {
 
     /// Cells of the cut lattice (copies kept).
     pub fn cell_count(&self) -> usize {
-        self.tled.cell_count()
+        self.cut_lattice.cells.len()
     }
 }
 
-/// A speed no stable run reaches: ten times the dilatational wave speed.
 /// How far contact moves a node in one time step, in lattice cells.
 pub const MAX_PUSH_PER_STEP: f64 = 0.05;
+
+/// Least mass of a node of the cut lattice, as a share of a full cell's node mass (`ρ cell³ / 8`).
+pub const MASS_FLOOR: f64 = 0.25;
 
 /// The critical step of one free cell of the lattice's spacing (lumped masses, nothing held).
 ///
@@ -558,5 +810,153 @@ mod tests {
         // A repeated stroke through the same cut changes nothing.
         let again = sim.cut(&vertical_stroke(0.037, 0.05, -0.01)).expect("cut");
         assert_eq!(again.pieces, 2);
+    }
+
+    /// Hybrid settings with an operational region of `radius` metres.
+    fn hybrid(radius: f64) -> CutSimParams {
+        CutSimParams { hybrid: Some(HybridParams { radius, ..HybridParams::default() }), ..CutSimParams::default() }
+    }
+
+    /// Centres of the TLED cells, rest metres.
+    fn tled_centres(sim: &CutSim) -> Vec<Point3<f64>> {
+        let cell = sim.lattice().cell;
+        (0..sim.lattice().cells.len())
+            .filter(|&c| sim.cell_tled[c])
+            .map(|c| sim.lattice().rest[sim.lattice().cells[c].nodes[0] as usize] + Vector3::repeat(cell / 2.0))
+            .collect()
+    }
+
+    #[test]
+    fn the_operational_region_follows_the_tool_and_gives_cells_at_rest_back_to_flsm() {
+        // A 6 x 2 x 2 cm block of 5 mm cells on the table; the tool (a few points) at one end,
+        // then at the other.
+        let size = Vector3::new(0.06, 0.02, 0.02);
+        let lattice = Lattice::block(Point3::origin(), 0.005, [12, 4, 4]);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let mut sim = CutSim::new(lattice, &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.008)).expect("sim");
+        // No tool, nothing cut: all FLSM.
+        assert_eq!(sim.tled_cells(), 0);
+        assert!(sim.node_roles().iter().all(|&r| r == NodeRole::Flsm));
+        sim.advance(0.2).expect("stable");
+        let tool_at = |x: f64| -> Vec<Point3<f64>> { (0..5).map(|k| Point3::new(x, 0.005 * k as f64, 0.02)).collect() };
+        sim.set_tool(&tool_at(0.005));
+        sim.advance(0.05).expect("stable");
+        let centres = tled_centres(&sim);
+        assert!(!centres.is_empty(), "cells near the tool are TLED");
+        assert!(centres.iter().all(|c| c.x < 0.005 + 0.008 + 0.0025 + 1e-9), "only near the tool: {centres:?}");
+        let roles = sim.node_roles();
+        for role in [NodeRole::Tled, NodeRole::Flsm, NodeRole::Interface] {
+            assert!(roles.contains(&role), "{role:?} among the roles");
+        }
+        // The tool moves to the other end: the cells there become TLED at once; the first ones
+        // return to FLSM once the tool has left and they have come to rest.
+        sim.set_tool(&tool_at(0.055));
+        sim.advance(0.05).expect("stable");
+        assert!(tled_centres(&sim).iter().any(|c| c.x > 0.045), "TLED at the new place");
+        sim.set_tool(&[]);
+        sim.advance(1.0).expect("stable");
+        sim.advance(0.05).expect("stable");
+        assert_eq!(sim.tled_cells(), 0, "all back to FLSM at rest");
+        assert!(sim.region_changes() >= 3);
+        // At rest: below the energy of the whole block (24 g) at the rest speed.
+        let rest_speed = f64::from(HybridParams::default().rest_speed);
+        assert!(sim.kinetic_energy() < 0.5 * 0.024 * rest_speed * rest_speed, "at rest: {}", sim.kinetic_energy());
+    }
+
+    #[test]
+    fn a_hybrid_body_sags_like_the_all_tled_one_where_the_tool_is() {
+        // The same block under gravity, bottom held, with the tool over its middle: the TLED cells
+        // under the tool sag as in the all-TLED model. FLSM is not the material (its stiffness
+        // follows its step), but matched to the material (see `HybridParams::resolve`), with the
+        // interface pull matched too, the sag agrees within 10%.
+        let size = Vector3::new(0.06, 0.02, 0.02);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let top_middle = |sim: &CutSim| -> f32 {
+            let nodes = sim.node_positions();
+            let i = nodes
+                .iter()
+                .position(|p| (p.x - 0.03).abs() < 1e-4 && (p.y - 0.01).abs() < 1e-4 && (p.z - 0.02).abs() < 0.004)
+                .expect("node");
+            0.02 - nodes[i].z
+        };
+        let block = || Lattice::block(Point3::origin(), 0.005, [12, 4, 4]);
+        let mut all = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).unwrap();
+        all.advance(1.0).expect("stable");
+        let mut hyb = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).unwrap();
+        hyb.set_tool(&[Point3::new(0.03, 0.01, 0.025)]);
+        hyb.advance(1.0).expect("stable");
+        assert!(hyb.tled_cells() > 0 && hyb.tled_cells() < hyb.lattice().cells.len());
+        let (a, h) = (top_middle(&all), top_middle(&hyb));
+        assert!(a > 1e-4, "it sags: {a}");
+        assert!((h - a).abs() < 0.1 * a, "hybrid {h} m vs TLED {a} m");
+        // All FLSM (no tool): the block sags as the TLED block does, within 10%.
+        let mut flsm = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).unwrap();
+        flsm.advance(1.0).expect("stable");
+        assert_eq!(flsm.tled_cells(), 0);
+        let f = top_middle(&flsm);
+        assert!((f - a).abs() < 0.1 * a, "FLSM {f} m vs TLED {a} m");
+        // An operational region that holds every cell is the all-TLED model, step for step.
+        let mut whole = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(1.0)).unwrap();
+        whole.set_tool(&[Point3::new(0.03, 0.01, 0.025)]);
+        let mut again =
+            CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).unwrap();
+        let steps = whole.advance(0.1).expect("stable");
+        again.advance(steps as f64 * again.dt() * 0.999).expect("stable");
+        assert_eq!(whole.displacements(), again.displacements());
+    }
+
+    #[test]
+    fn a_hybrid_bar_cut_through_drops_its_free_end_moved_by_flsm() {
+        // As the all-TLED bar test, with an operational region of 1 cm around the cut: the free
+        // end beyond it is FLSM, its regions rebuilt from the cut lattice, so it falls away.
+        let size = Vector3::new(0.06, 0.03, 0.03);
+        let lattice = Lattice::block(Point3::origin(), 0.01, [6, 3, 3]);
+        let material = Material::from_young_poisson(5.0e4, 0.45, 1000.0);
+        let params = CutSimParams { samples_per_cell: 4, ..hybrid(0.01) };
+        let mut sim = CutSim::new(lattice, &box_sdf(size), material, |p| p.x < 1e-9, params).expect("sim");
+        sim.advance(0.2).expect("stable");
+        let stroke = vertical_stroke(0.037, 0.05, -0.01);
+        sim.set_tool(&stroke.vertices);
+        let cut = sim.cut(&stroke).expect("cut");
+        assert_eq!(cut.pieces, 2);
+        // Cut cells and their neighbours are TLED; the far end is not.
+        let roles = sim.node_roles();
+        let far: Vec<usize> = (0..sim.lattice().node_count()).filter(|&n| sim.lattice().rest[n].x > 0.055).collect();
+        assert!(far.iter().all(|&n| roles[n] == NodeRole::Flsm), "the free end is FLSM");
+        let lowest_far = |sim: &CutSim| far.iter().map(|&n| sim.node_positions()[n].z).fold(f32::MAX, f32::min);
+        let before = lowest_far(&sim);
+        sim.set_tool(&[]);
+        sim.advance(0.1).expect("stable");
+        let fall = before - lowest_far(&sim);
+        assert!(fall > 0.01, "the cut-off end fell {fall} m");
+        for s in sim.surfaces() {
+            assert!(s.is_closed());
+        }
+    }
+    #[test]
+    fn a_free_hybrid_body_falls_as_the_tled_one_does() {
+        // Nothing held: TLED, FLSM and the hybrid must all fall as a damped point mass does
+        // (x = (g/c) (t − (1 − e^{−ct})/c), 18.5 mm in 0.1 s at c = 40/s). The interface pull
+        // must not drag: with a goal fixed over the FLSM step, the hybrid fell 6.5 mm.
+        let size = Vector3::new(0.06, 0.03, 0.03);
+        let material = Material::from_young_poisson(5.0e4, 0.45, 1000.0);
+        let (g, c, t) = (9.81, 40.0, 0.1);
+        let expected = (g / c) * (t - (1.0 - f64::exp(-c * t)) / c);
+        for (params, tool) in [(CutSimParams::default(), false), (hybrid(0.01), false), (hybrid(0.01), true)] {
+            let lattice = Lattice::block(Point3::origin(), 0.01, [6, 3, 3]);
+            let mut sim = CutSim::new(lattice, &box_sdf(size), material, |_| false, params).expect("sim");
+            if tool {
+                sim.set_tool(&[Point3::new(0.03, 0.015, 0.03)]);
+            }
+            let steps = sim.advance(t).expect("stable");
+            let elapsed = steps as f64 * sim.dt();
+            let expected = expected + (g / c) * (elapsed - t);
+            let fell = -f64::from(sim.node_positions().iter().map(|p| p.z).fold(f32::MAX, f32::min));
+            let kind = (sim.tled_cells(), sim.lattice().cells.len());
+            assert!(
+                (fell - expected).abs() < 0.05 * expected,
+                "{kind:?} TLED cells: fell {fell} m, expected {expected}"
+            );
+        }
     }
 }

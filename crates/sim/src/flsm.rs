@@ -69,7 +69,7 @@ const COLLAPSED: f64 = 1e-12;
 const MIN_LEN: usize = 512;
 
 /// Parameters of FLSM, the scenario's `[flsm]` table.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct FlsmParams {
     /// Region half-width in cells (`flsm.w`), at least 1. Larger regions are stiffer and propagate
     /// deformation further per step; the cost per step does not depend on it.

@@ -8,8 +8,9 @@
 //! a [`SpatialHash`] (the lattice edges it crosses), [`CutTopology`] (the virtual node algorithm's
 //! cell copies and virtual nodes, and the cut lattice that TLED runs on),
 //! [`cut_surface::piece_surfaces`] (a closed surface per piece, cut faces included) and
-//! [`CutSim`], which puts them together with TLED under gravity. The scenario-driven
-//! [`Simulation`] (hybrid TLED/FLSM) does not cut yet.
+//! [`CutSim`], which puts them together under gravity: TLED everywhere, or the hybrid model with
+//! an operational region that follows the tool ([`operational`]). The scenario-driven
+//! [`Simulation`] (hybrid TLED/FLSM with a fixed operational region) does not cut.
 //!
 //! No feature flags yet (the `gpu` feature comes with the wgpu backend).
 #![warn(missing_docs)]
@@ -26,6 +27,7 @@ pub mod lattice;
 pub mod material;
 pub mod mesh;
 pub mod obstacle;
+pub mod operational;
 pub mod scenario;
 pub mod simulation;
 pub mod stability;
@@ -44,6 +46,7 @@ pub use lattice::{CORNERS, Cell, Lattice};
 pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
+pub use operational::{HybridParams, HybridSteps};
 pub use scenario::Scenario;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};

@@ -33,6 +33,11 @@ impl Material {
         self.lambda / (2.0 * (self.lambda + self.mu))
     }
 
+    /// Young's modulus E = μ (3λ + 2μ) / (λ + μ), pascals.
+    pub fn young_modulus(&self) -> f64 {
+        self.mu * (3.0 * self.lambda + 2.0 * self.mu) / (self.lambda + self.mu)
+    }
+
     /// Dilatational wave speed `c = √((λ + 2μ)/ρ)`, m/s.
     pub fn wave_speed(&self) -> f64 {
         ((self.lambda + 2.0 * self.mu) / self.density).sqrt()

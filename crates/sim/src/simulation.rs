@@ -23,6 +23,17 @@ pub enum NodeRole {
     Interface,
 }
 
+impl NodeRole {
+    /// RGBA colour of the role in recordings: TLED green, FLSM yellow, interface white.
+    pub fn color(self) -> [u8; 4] {
+        match self {
+            NodeRole::Tled => [40, 200, 60, 255],
+            NodeRole::Flsm => [240, 210, 40, 255],
+            NodeRole::Interface => [255, 255, 255, 255],
+        }
+    }
+}
+
 /// Power-iteration budget for the stability estimate.
 const STABILITY_ITERATIONS: usize = 300;
 /// Stop the power iteration when the Rayleigh quotient changes by less than this.

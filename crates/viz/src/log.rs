@@ -178,6 +178,18 @@ pub fn log_points3d(
     log_at(rec, EntityPath::from(path), &points, false)
 }
 
+/// Logs 3-D points at `path`, each with its own colour (`colors` one per point).
+pub fn log_points3d_colored(
+    rec: &RecordingStream,
+    path: &str,
+    points: &[[f32; 3]],
+    colors: &[[u8; 4]],
+    radius_m: f32,
+) -> Result<(), VizError> {
+    let points = Points3D::new(points.iter().copied()).with_colors(colors.iter().copied()).with_radii([radius_m]);
+    log_at(rec, EntityPath::from(path), &points, false)
+}
+
 /// Logs a triangle mesh in world coordinates at `path` (e.g. `world/tissue/surface`), one colour,
 /// with vertex normals computed here so it shades in the viewer.
 pub fn log_mesh3d(

@@ -290,11 +290,7 @@ fn log_state(
     hullcut_viz::set_frame(rec, k as i64);
     hullcut_viz::set_capture_time_ns(rec, (sim.time() * 1e9) as i64);
     let x = sim.positions();
-    for (role, name, color) in [
-        (NodeRole::Tled, "tled", [40, 200, 60, 255]),
-        (NodeRole::Flsm, "flsm", [240, 210, 40, 255]),
-        (NodeRole::Interface, "interface", [255, 255, 255, 255]),
-    ] {
+    for (role, name) in [(NodeRole::Tled, "tled"), (NodeRole::Flsm, "flsm"), (NodeRole::Interface, "interface")] {
         let pts: Vec<[f32; 3]> =
             x.iter().zip(&sim.roles).filter(|(_, r)| **r == role).map(|(p, _)| [p.x, p.y, p.z]).collect();
         if !pts.is_empty() {
@@ -302,7 +298,7 @@ fn log_state(
                 rec,
                 &format!("world/tissue/nodes/{name}"),
                 &pts,
-                color,
+                role.color(),
                 (sim.lattice.cell * 0.1) as f32,
             )?;
         }
