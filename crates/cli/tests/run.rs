@@ -121,6 +121,66 @@ fn run_paced_with_a_short_queue_counts_what_it_drops_and_processes_the_rest() {
 }
 
 #[test]
+fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let args = ["--dataset", CUT_SMALL, "--rrd", &p(&rrd), "--report", &p(&report), "--cell", "0.01"];
+    let o = hullcut(&[&["run", "--operational-radius", "0.02"][..], &args].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let t = json(&report)["tissue"].clone();
+    assert_eq!(t["operational_radius_m"].as_f64(), Some(0.02), "{t}");
+    assert!(t["hybrid"]["substeps"].as_u64().expect("substeps") >= 1, "{t}");
+    let (mean, cells) = (t["tled_cells_mean"].as_f64().expect("mean"), t["cells"].as_f64().expect("cells"));
+    assert!(mean > 0.0 && mean < 0.5 * cells, "TLED only near the blade: {mean} of {cells} cells");
+    assert!(t["region_changes"].as_u64().expect("changes") >= 1, "{t}");
+    // Without it, every cell is TLED.
+    let o = hullcut(&[&["run"][..], &args].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let t = json(&report)["tissue"].clone();
+    assert_eq!(t["tled_cells_mean"].as_f64(), t["cells"].as_f64(), "{t}");
+    assert!(t["hybrid"].is_null(), "{t}");
+}
+
+#[test]
+fn run_repeated_replays_every_frame_set_on_after_the_last_and_samples_memory() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let o = hullcut(&[
+        "run",
+        "--dataset",
+        CUT_SMALL,
+        "--rrd",
+        &p(&rrd),
+        "--report",
+        &p(&report),
+        "--cell",
+        "0.01",
+        "--repeat",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["repeat"].as_u64(), Some(3));
+    assert_eq!(r["counters"]["frame_sets_processed"].as_u64(), Some(27), "{}", r["counters"]);
+    assert_eq!(r["interrupted"].as_bool(), Some(false));
+    // Capture times go on across passes: after settling (0.5 s) the tissue advanced 26 frame
+    // periods (each at most 0.2 s), not 8.
+    let simulated = r["tissue"]["simulated_s"].as_f64().expect("simulated");
+    let step = (1.0 / r["capture_fps"].as_f64().expect("fps")).min(0.2);
+    assert!(simulated > 0.5 + 25.0 * step, "{simulated} s simulated");
+    // The end of the run is always sampled (Linux).
+    let memory = r["memory"].as_array().expect("memory");
+    let last = memory.last().expect("a sample");
+    assert_eq!(last["frame_sets"].as_u64(), Some(27));
+    assert!(last["peak_rss_mib"].as_f64() >= last["rss_mib"].as_f64(), "{last}");
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", &p(&rrd), "--repeat", "0"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("--repeat"), "{}", text(&o));
+}
+
+#[test]
 fn run_names_what_is_wrong_with_its_input() {
     let dir = tempfile::tempdir().expect("tempdir");
     let rrd = dir.path().join("run.rrd");
@@ -134,6 +194,9 @@ fn run_names_what_is_wrong_with_its_input() {
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--voxel=0"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("--voxel"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--operational-radius=-0.01"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("--operational-radius"), "{}", text(&o));
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--masks", "guess"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("--masks guess"), "{}", text(&o));
@@ -244,19 +307,28 @@ fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
     let header: Vec<&str> = summary.lines().next().expect("header").split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
     let rows: Vec<Vec<&str>> = summary.lines().skip(1).map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 4, "two hull leaves x two tissue cells");
+    assert_eq!(rows.len(), 6, "two hull leaves x two tissue cells, TLED; the coarse hull with the hybrid");
+    let hybrid: Vec<&Vec<&str>> = rows.iter().filter(|r| r[col("model")] == "hybrid").collect();
+    assert_eq!(hybrid.len(), 2);
     for r in &rows {
         // Truth masks: the quick run's twelve frames are all trusted, within a millimetre.
         assert_eq!(r[col("trusted")], "12", "{r:?}");
         assert!(r[col("tip_mm_mean")].parse::<f64>().expect("tip") < 1.0, "{r:?}");
         assert!(r[col("fps")].parse::<f64>().expect("fps") > 0.0);
+        // The hybrid runs TLED on part of the lattice only; the TLED model on every cell.
+        let tled_cells: f64 = r[col("tled_cells_mean")].parse().expect("tled cells");
+        let nodes: f64 = r[col("nodes")].parse().expect("nodes");
+        match r[col("model")] {
+            "hybrid" => assert!(tled_cells < 0.5 * nodes, "{r:?}"),
+            model => assert_eq!((model, tled_cells > 0.7 * nodes), ("tled", true), "{r:?}"),
+        }
     }
     let paper_scale = rows.iter().find(|r| r[col("cell_mm")] == "6").expect("6 mm row");
     let nodes: usize = paper_scale[col("nodes")].parse().expect("nodes");
     assert!((2_500..3_500).contains(&nodes), "the seed paper's size is 2,250-2,886 nodes: {nodes}");
     let stages = std::fs::read_to_string(dir.path().join("pipeline_stages.csv")).expect("stages");
     for stage in ["carve", "pose", "collide", "cut_topology", "cut_surface", "deform", "total"] {
-        assert_eq!(stages.lines().filter(|l| l.contains(&format!(",{stage},"))).count(), 4, "{stage}");
+        assert_eq!(stages.lines().filter(|l| l.contains(&format!(",{stage},"))).count(), 6, "{stage}");
     }
     assert!(std::fs::read(dir.path().join("pipeline.png")).expect("png").starts_with(b"\x89PNG"));
 }

@@ -10,6 +10,7 @@ use anyhow::Context as _;
 use hullcut_dataset::label;
 use hullcut_hull::{DenseGrid, HullParams, carve, silhouettes};
 use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
+use hullcut_sim::HybridParams;
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
 use image::GrayImage;
 
@@ -18,6 +19,10 @@ use super::run::tissue::{self, Sweeper};
 use crate::chart::{Scale, Series, line_chart};
 use crate::progress::bar;
 use crate::report::StageTiming;
+
+/// Operational radius of the hybrid configurations, metres: cells within 2 cm of the blade's
+/// sweep run TLED (about four cells on each side at 5 mm).
+const HYBRID_RADIUS_M: f64 = 0.02;
 
 /// The seed paper's Table II (GeForce 9800, 2,250-2,886 nodes), milliseconds per frame:
 /// reconstruction, collision, cutting, deformation.
@@ -30,6 +35,15 @@ struct Config {
     voxel: f64,
     /// Tissue lattice spacing, metres.
     cell: f64,
+    /// The hybrid model's operational radius, metres (`None`: TLED everywhere).
+    hybrid: Option<f64>,
+}
+
+impl Config {
+    /// `tled` or `hybrid`, as the CSV files name the tissue model.
+    fn model(&self) -> &'static str {
+        if self.hybrid.is_some() { "hybrid" } else { "tled" }
+    }
 }
 
 /// Runs the benchmark into `out`.
@@ -67,22 +81,26 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     let decode = StageTiming::from_durations(&decode);
     let extent = HullParams::default().workspace.extent();
     let configs = [
-        Config { voxel: extent / 64.0, cell: 0.006 },
-        Config { voxel: extent / 128.0, cell: 0.006 },
-        Config { voxel: extent / 64.0, cell: 0.005 },
-        Config { voxel: extent / 128.0, cell: 0.005 },
+        Config { voxel: extent / 64.0, cell: 0.006, hybrid: None },
+        Config { voxel: extent / 128.0, cell: 0.006, hybrid: None },
+        Config { voxel: extent / 64.0, cell: 0.005, hybrid: None },
+        Config { voxel: extent / 128.0, cell: 0.005, hybrid: None },
+        Config { voxel: extent / 64.0, cell: 0.006, hybrid: Some(HYBRID_RADIUS_M) },
+        Config { voxel: extent / 64.0, cell: 0.005, hybrid: Some(HYBRID_RADIUS_M) },
     ];
     let template = Template::new(&scene.scalpel().geometry)?;
     let stages =
         ["carve", "surface", "pose", "collide", "cut_topology", "cut_surface", "contact", "deform", "tissue_surface"];
-    let mut csv = String::from("voxel_mm,cell_mm,nodes,frames,stage,mean_ms,p95_ms\n");
+    let mut csv = String::from("voxel_mm,cell_mm,model,nodes,frames,stage,mean_ms,p95_ms\n");
     let mut summary = String::from(
-        "voxel_mm,cell_mm,nodes,frames,total_mean_ms,total_p95_ms,fps,decode_mean_ms,tip_mm_mean,normal_deg_mean,trusted,pieces\n",
+        "voxel_mm,cell_mm,model,nodes,frames,total_mean_ms,total_p95_ms,fps,decode_mean_ms,tip_mm_mean,normal_deg_mean,trusted,pieces,tled_cells_mean\n",
     );
     let mut series: Vec<Series> = Vec::new();
     for config in &configs {
         let hull = HullParams { leaf_size: config.voxel, ..HullParams::default() };
-        let mut sim = tissue::build("organ", config.cell)?;
+        let hybrid = config.hybrid.map(|radius| HybridParams { radius, ..HybridParams::default() });
+        let mut sim = tissue::build("organ", config.cell, hybrid)?;
+        let mut tled_cells = Vec::new();
         let nodes = sim.sim.lattice().node_count();
         let mut tracker = Tracker::new(template.clone(), TrackerParams::default());
         let mut sweeper = Sweeper::default();
@@ -90,7 +108,10 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let mut totals = Vec::new();
         let (mut tips, mut normals, mut trusted) = (Vec::new(), Vec::new(), 0);
         let mut last_ts = None;
-        let pb = bar(count, &format!("voxel {:.2} mm, cell {} mm", config.voxel * 1e3, config.cell * 1e3));
+        let pb = bar(
+            count,
+            &format!("voxel {:.2} mm, cell {} mm, {}", config.voxel * 1e3, config.cell * 1e3, config.model()),
+        );
         for (f, frame_masks) in masks.iter().enumerate() {
             let f = f as u64;
             let started = Instant::now();
@@ -132,6 +153,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             last_ts = Some(ts);
             let mut step = sweeper.next(Some(&estimate), Some(&template), config.cell);
             sim.step(&mut step, seconds, hand.as_ref(), &mut times).with_context(|| format!("frame {f}"))?;
+            tled_cells.push(step.tled_cells as f64);
             totals.push(started.elapsed());
             pb.inc(1);
         }
@@ -141,9 +163,10 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let row = |name: &str, d: &[Duration]| {
             let t = StageTiming::from_durations(d);
             format!(
-                "{:.3},{},{nodes},{count},{name},{:.3},{:.3}\n",
+                "{:.3},{},{},{nodes},{count},{name},{:.3},{:.3}\n",
                 config.voxel * 1e3,
                 config.cell * 1e3,
+                config.model(),
                 t.mean_ms,
                 t.p95_ms
             )
@@ -166,20 +189,25 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let fps = 1e3 / total.mean_ms;
         writeln!(
             summary,
-            "{:.3},{},{nodes},{count},{:.3},{:.3},{fps:.2},{:.3},{:.3},{:.3},{trusted},{}",
+            "{:.3},{},{},{nodes},{count},{:.3},{:.3},{fps:.2},{:.3},{:.3},{:.3},{trusted},{},{:.1}",
             config.voxel * 1e3,
             config.cell * 1e3,
+            config.model(),
             total.mean_ms,
             total.p95_ms,
             decode.mean_ms,
             mean(&tips),
             mean(&normals),
-            sim.sim.pieces()
+            sim.sim.pieces(),
+            mean(&tled_cells)
         )?;
         println!(
-            "voxel {:.2} mm, cell {} mm ({nodes} nodes): {:.1} ms per frame set (p95 {:.1}), {fps:.1} fps; tip {:.2} mm; {} piece(s)",
+            "voxel {:.2} mm, cell {} mm, {} ({nodes} nodes, {:.0} TLED cells mean): deformation {:.1} ms; {:.1} ms per frame set (p95 {:.1}), {fps:.1} fps; tip {:.2} mm; {} piece(s)",
             config.voxel * 1e3,
             config.cell * 1e3,
+            config.model(),
+            mean(&tled_cells),
+            StageTiming::from_durations(&times.deform).mean_ms,
             total.mean_ms,
             total.p95_ms,
             mean(&tips),
@@ -200,6 +228,16 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             ("total", total.mean_ms),
         ];
         let coarse = config.voxel > extent / 100.0;
+        if config.hybrid.is_some() {
+            // The hybrid model changes the deformation only: one line for it.
+            let label = "deformation, hybrid".to_owned();
+            let point = (nodes as f64, StageTiming::from_durations(&times.deform).mean_ms);
+            match series.iter_mut().find(|s| s.label == label) {
+                Some(s) => s.points.push(point),
+                None => series.push(Series { label, points: vec![point] }),
+            }
+            continue;
+        }
         for (stage, ms) in charted {
             // Cutting and deformation do not depend on the hull: one line each, from the coarse hull.
             let per_leaf = matches!(stage, "reconstruction" | "total");

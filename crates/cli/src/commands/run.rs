@@ -13,6 +13,7 @@ use anyhow::{Context as _, bail};
 use hullcut_dataset::Dataset;
 use hullcut_hull::HullParams;
 use hullcut_pose::{Template, isometry_from_matrix, pose_error};
+use hullcut_sim::{HybridParams, HybridSteps};
 use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use serde::Serialize;
 
@@ -86,12 +87,22 @@ pub struct Args {
     /// Lattice spacing of the tissue, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.005)]
     cell: f64,
+    /// The hybrid model: lattice cells within this distance of the blade's sweep (and cut cells
+    /// and their neighbours) run TLED, the others FLSM, matched to the material; cells return to
+    /// FLSM once the blade has left and they have come to rest. Without it every cell is TLED.
+    #[arg(long, value_name = "METRES")]
+    operational_radius: Option<f64>,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
     masks: String,
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
+    /// Replay the frame sets this many times, each pass's capture times following the last
+    /// pass's (a long run from a short recording: memory over 10 minutes). Later passes log on
+    /// the `frame` timeline after the first; snapshots come from the first pass only.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    repeat: u64,
     /// Frame sets of the built-in scene (at 30 fps).
     #[arg(long, value_name = "N", default_value_t = 180)]
     scene_frames: u64,
@@ -191,6 +202,15 @@ struct TissueReport {
     simulated_s: f64,
     /// Why the tissue stopped, if it diverged.
     failure: Option<String>,
+    /// The hybrid model's operational radius, metres (absent: TLED everywhere).
+    operational_radius_m: Option<f64>,
+    /// Its TLED steps per FLSM step, FLSM stiffness and interface pull.
+    hybrid: Option<HybridSteps>,
+    /// Lattice cells run by TLED per frame set (all of them without the hybrid).
+    tled_cells_mean: f64,
+    tled_cells_max: usize,
+    /// Times the operational region changed.
+    region_changes: usize,
 }
 
 #[derive(Debug, Serialize)]
@@ -201,6 +221,8 @@ struct Report<'a> {
     source: String,
     seed: Option<u64>,
     frames: [u64; 2],
+    /// Times the frames were replayed (`--repeat`).
+    repeat: u64,
     backend: &'a str,
     masks: &'static str,
     voxel_m: f64,
@@ -215,10 +237,45 @@ struct Report<'a> {
     capture_fps: f64,
     counters: Counters,
     tissue: TissueReport,
+    /// Resident memory at every full minute of the run and at its end (Linux; empty elsewhere).
+    memory: Vec<MemorySample>,
     pose: PoseReport,
     timings: Timings,
     /// Entities logged to the recording.
     entities: Vec<String>,
+}
+
+/// How often the run samples its memory.
+const MEMORY_SAMPLE: Duration = Duration::from_secs(60);
+
+/// The process's memory at one moment of a run.
+#[derive(Debug, Clone, Copy, Serialize)]
+struct MemorySample {
+    /// Wall time since processing started, seconds.
+    wall_s: f64,
+    /// Frame sets processed by then.
+    frame_sets: u64,
+    /// Resident set size then, MiB.
+    rss_mib: f64,
+    /// Largest resident set size so far, MiB.
+    peak_rss_mib: f64,
+}
+
+impl MemorySample {
+    /// The process's memory now, from /proc/self/status (`None` where there is none).
+    fn now(wall: Duration, frame_sets: u64) -> Option<Self> {
+        let status = std::fs::read_to_string("/proc/self/status").ok()?;
+        let kib = |key: &str| -> Option<f64> {
+            let line = status.lines().find(|l| l.starts_with(key))?;
+            line[key.len()..].trim().trim_end_matches("kB").trim().parse::<f64>().ok()
+        };
+        Some(Self {
+            wall_s: wall.as_secs_f64(),
+            frame_sets,
+            rss_mib: kib("VmRSS:")? / 1024.0,
+            peak_rss_mib: kib("VmHWM:")? / 1024.0,
+        })
+    }
 }
 
 /// How far below `ORGAN_TOP` the built-in scene's strokes press the blade's tip, metres.
@@ -263,6 +320,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
     }
     checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
+    if let Some(r) = args.operational_radius
+        && !(r.is_finite() && r >= 0.0)
+    {
+        bail!("--operational-radius {r}: must be a length in metres, 0 or more");
+    }
     if !(args.cell.is_finite() && args.cell > 0.0) {
         bail!("--cell {}: must be a positive length in metres", args.cell);
     }
@@ -313,6 +375,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if frames.is_empty() {
         bail!("{}: no frame sets in {}..{}", dataset_path.display(), range.start, range.end);
     }
+    if args.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    // A pass spans its frames' numbers and one frame period more, so the next pass's first frame
+    // set follows the last one's as the next frame would.
+    let (first, last) = (frames[0], frames[frames.len() - 1]);
+    let pass_frames = last + 1;
+    let pass_span_ns = ((last - first + 1) as f64 * 1e9 / ds.meta().fps).round() as i64;
     let tool = ds.tool()?;
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
@@ -320,7 +390,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let hull = HullParams { leaf_size: args.voxel, ..HullParams::default() };
 
     let clock = Instant::now();
-    let tissue = tissue::build(&args.tissue, args.cell)?;
+    let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });
+    let tissue = tissue::build(&args.tissue, args.cell, hybrid)?;
     let setup_s = clock.elapsed().as_secs_f64();
     for warning in &tissue.warnings {
         eprintln!("warning: {warning}");
@@ -360,6 +431,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pipeline = stages::spawn(stages::Setup {
         ds: Arc::clone(&ds),
         frames: frames.clone(),
+        repeat: args.repeat,
+        pass_span_ns,
         use_files,
         hull,
         template: template.clone(),
@@ -371,18 +444,24 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         stop: Arc::clone(&stop),
     })?;
 
-    let pb = bar(frames.len() as u64, "running");
+    let total = frames.len() as u64 * args.repeat;
+    let pb = bar(total, "running");
+    let mut memory = Vec::new();
+    let mut next_sample = MEMORY_SAMPLE;
     let mut counters = Counters::default();
     let mut pose_report = PoseReport::new(template.is_some());
     let mut times = StageTimes::default();
     let mut logging = Vec::new();
     let mut latency = Vec::new();
     let mut surface_log = tissue::SurfaceLog::default();
+    let mut tled_cells: Vec<usize> = Vec::new();
     for work in pipeline.output.iter() {
         let clock = Instant::now();
         counters.frame_sets_processed += 1;
         counters.views_missing += work.set.views.iter().filter(|v| v.is_none()).count() as u64;
-        let Work { frame, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
+        let Work { frame, pass, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
+        // Where this frame set goes on the `frame` timeline (later passes follow the first).
+        let shown = frame + pass * pass_frames;
         times.extend(&t);
         let truth_iso = truth.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
         match (&template, &estimate) {
@@ -409,9 +488,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             counters.edges_cut += step.cut.map_or(0, |c| c.new_edges as u64);
             counters.frames_with_contact += u64::from(step.contacts > 0);
             counters.max_contact_nodes = counters.max_contact_nodes.max(step.contacts as u64);
+            tled_cells.push(step.tled_cells);
         }
         // rerun: everything on the frame and capture-time timelines.
-        hullcut_viz::set_frame(&rec, frame as i64);
+        hullcut_viz::set_frame(&rec, shown as i64);
         hullcut_viz::set_capture_time_ns(&rec, set.timestamp_ns);
         if let Some(occ) = &occ {
             crate::commands::reconstruct::log_hull(
@@ -420,7 +500,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 &set,
                 occ,
                 &grids,
-                frame,
+                shown,
                 args.rrd_every,
                 args.rrd_every,
             )?;
@@ -444,12 +524,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
         if let Some(step) = &step {
-            tissue::log(&rec, step, frame, args.rrd_every, &mut surface_log)?;
+            tissue::log(&rec, step, shown, args.rrd_every, &mut surface_log)?;
             if let Some(dir) = &args.export_meshes {
-                counters.meshes_exported += tissue::export(dir, frame, &step.surfaces)?;
+                counters.meshes_exported += tissue::export(dir, shown, &step.surfaces)?;
             }
         }
-        if let Some(snaps) = snapshots.as_mut().filter(|s| s.wants(frame)) {
+        if let Some(snaps) = snapshots.as_mut().filter(|s| pass == 0 && s.wants(frame)) {
             let blade = estimate.as_ref().and_then(|e| e.pose.as_ref()).filter(|p| p.is_finite());
             let pieces = step.as_ref().map_or(&[][..], |s| &s.surfaces[..]);
             snaps.write(ds.rig(), &set, &grids, blade, pieces)?;
@@ -459,12 +539,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         logging.push(clock.elapsed());
         latency.push(started.elapsed());
+        if t0.elapsed() >= next_sample {
+            memory.extend(MemorySample::now(t0.elapsed(), counters.frame_sets_processed));
+            next_sample += MEMORY_SAMPLE;
+        }
         pb.inc(1);
     }
     pb.finish_and_clear();
     let wall = t0.elapsed();
+    memory.extend(MemorySample::now(wall, counters.frame_sets_processed));
     let outcome = pipeline.join()?;
-    let interrupted = stop.load(Ordering::SeqCst) && outcome.read < frames.len() as u64;
+    let interrupted = stop.load(Ordering::SeqCst) && outcome.read < total;
     counters.frame_sets_read = outcome.read;
     counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
     counters.snapshots_written = snapshots.as_ref().map_or(0, |s| s.written);
@@ -482,6 +567,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ds.meta().fps,
         counters.frame_sets_dropped
     );
+    if let (Some(first), Some(last)) = (memory.first(), memory.last()) {
+        println!(
+            "memory: {:.0} MiB resident after {:.0} s, {:.0} MiB after {:.0} s (peak {:.0} MiB)",
+            first.rss_mib, first.wall_s, last.rss_mib, last.wall_s, last.peak_rss_mib
+        );
+    }
     println!("{}", pose_report.summary());
     println!(
         "tissue: {} sweeps cut {} lattice edges; {} piece(s), {} cell copies, {} virtual nodes{}",
@@ -504,6 +595,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 .map_or_else(|| "built-in scene (resect)".to_owned(), |p| p.display().to_string()),
             seed,
             frames: [range.start, range.end],
+            repeat: args.repeat,
             backend: &args.backend,
             masks: if use_files { "files" } else { "segment" },
             voxel_m: args.voxel,
@@ -514,6 +606,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             sustained_fps,
             capture_fps: ds.meta().fps,
             counters,
+            memory,
             tissue: TissueReport {
                 source: args.tissue.clone(),
                 cell_m: args.cell,
@@ -530,6 +623,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 kinetic_energy_j: sim.kinetic_energy(),
                 simulated_s: sim.time(),
                 failure: outcome.failure.clone(),
+                operational_radius_m: args.operational_radius,
+                hybrid: sim.hybrid_steps(),
+                tled_cells_mean: tled_cells.iter().sum::<usize>() as f64 / tled_cells.len().max(1) as f64,
+                tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),
+                region_changes: sim.region_changes(),
             },
             pose: pose_report,
             timings: Timings {

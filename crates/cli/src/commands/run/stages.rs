@@ -37,6 +37,11 @@ pub struct Setup {
     pub ds: Arc<Dataset>,
     /// Frame numbers to process, in order.
     pub frames: Vec<u64>,
+    /// Times to replay them, each pass's capture times following the last pass's by
+    /// `pass_span_ns`.
+    pub repeat: u64,
+    /// Capture time from one pass's first frame set to the next pass's, nanoseconds.
+    pub pass_span_ns: i64,
     /// Masks from files (else segmented from the images).
     pub use_files: bool,
     /// Carving.
@@ -62,8 +67,10 @@ pub type LabelGrid = (u8, &'static str, Option<DenseGrid>, Option<Mesh>);
 
 /// One frame set on its way through the stages.
 pub struct Work {
-    /// Frame number.
+    /// Frame number in the dataset.
     pub frame: u64,
+    /// Which replay of the frames it belongs to (0 without `--repeat`).
+    pub pass: u64,
     /// The images and masks (segmented ones when segmenting).
     pub set: FrameSet,
     /// The carved hull.
@@ -178,7 +185,21 @@ impl Pipeline {
 
 /// Starts the stages.
 pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
-    let Setup { ds, frames, use_files, hull, template, tissue, queue, policy, dropped, realtime, stop } = setup;
+    let Setup {
+        ds,
+        frames,
+        repeat,
+        pass_span_ns,
+        use_files,
+        hull,
+        template,
+        tissue,
+        queue,
+        policy,
+        dropped,
+        realtime,
+        stop,
+    } = setup;
     let segmenter = if use_files {
         None
     } else {
@@ -194,7 +215,8 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         let oldest = read_rx.clone();
         std::thread::Builder::new().name("read".into()).spawn(move || {
             let pace = Pace { realtime, policy, stop: &stop, dropped: &dropped };
-            read_stage(&ds, &frames, use_files, &pace, &read_tx, &oldest)
+            let passes = Passes { frames: &frames, repeat, span_ns: pass_span_ns };
+            read_stage(&ds, &passes, use_files, &pace, &read_tx, &oldest)
         })?
     };
     let hull = {
@@ -223,10 +245,17 @@ struct Pace<'a> {
     dropped: &'a AtomicU64,
 }
 
+/// The frame sets the reader replays: `frames`, `repeat` times, each pass `span_ns` later.
+struct Passes<'a> {
+    frames: &'a [u64],
+    repeat: u64,
+    span_ns: i64,
+}
+
 /// Reads frame sets; with `realtime` keeps to their timestamps.
 fn read_stage(
     ds: &Dataset,
-    frames: &[u64],
+    passes: &Passes<'_>,
     use_files: bool,
     pace: &Pace,
     tx: &Sender<Work>,
@@ -236,12 +265,14 @@ fn read_stage(
     let mut read = 0;
     let start = Instant::now();
     let mut first_ts = None;
-    for &frame in frames {
+    let replays = (0..passes.repeat).flat_map(|pass| passes.frames.iter().map(move |&frame| (pass, frame)));
+    for (pass, frame) in replays {
         if stop.load(Ordering::Relaxed) {
             break;
         }
         let started = Instant::now();
-        let set = ds.read_frame_set(frame, use_files)?;
+        let mut set = ds.read_frame_set(frame, use_files)?;
+        set.timestamp_ns += pass as i64 * passes.span_ns;
         let took = started.elapsed();
         read += 1;
         if realtime {
@@ -252,7 +283,8 @@ fn read_stage(
             }
         }
         let times = StageTimes { read: vec![took], ..StageTimes::default() };
-        let mut work = Work { frame, set, occ: None, grids: Vec::new(), estimate: None, tissue: None, times, started };
+        let mut work =
+            Work { frame, pass, set, occ: None, grids: Vec::new(), estimate: None, tissue: None, times, started };
         loop {
             match (policy, tx.try_send(work)) {
                 (_, Ok(())) => break,

@@ -7,8 +7,8 @@ use anyhow::Context as _;
 use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
-    Body, CutOutcome, CutSim, CutSimParams, Material, Obstacle, SweptSurface, TriMesh, VoxelizeParams, WindingTree,
-    organ_sdf, voxelize,
+    Body, CutOutcome, CutSim, CutSimParams, HybridParams, Material, NodeRole, Obstacle, SweptSurface, TriMesh,
+    VoxelizeParams, WindingTree, organ_sdf, voxelize,
 };
 use nalgebra::{Isometry3, Point3};
 
@@ -23,8 +23,6 @@ pub const DENSITY: f64 = 1000.0;
 /// Simulated time the tissue settles under gravity before the first frame set, seconds.
 pub const SETTLE_S: f64 = 0.5;
 
-/// RGBA of lattice nodes run by TLED (DESIGN's colours: TLED green).
-const TLED_GREEN: [u8; 4] = [60, 200, 80, 255];
 /// RGBA of the organ's surface.
 const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
 /// RGBA of the swept blade surface.
@@ -56,6 +54,10 @@ pub struct TissueStep {
     pub surfaces: Vec<TriMesh>,
     /// The lattice nodes, deformed (real nodes, then virtual ones).
     pub nodes: Vec<Point3<f32>>,
+    /// What moves each node: TLED, FLSM or both (the interface).
+    pub roles: Vec<NodeRole>,
+    /// Lattice cells run by TLED in this step.
+    pub tled_cells: usize,
     /// Separate pieces.
     pub pieces: usize,
     /// Lattice nodes the hand's hull pushed at the end of the step.
@@ -97,8 +99,8 @@ impl Sweeper {
 
 /// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
 /// at lattice spacing `cell`, its lowest layer of nodes held (it rests on the table), settled
-/// under gravity.
-pub fn build(name: &str, cell: f64) -> anyhow::Result<Tissue> {
+/// under gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere.
+pub fn build(name: &str, cell: f64, hybrid: Option<HybridParams>) -> anyhow::Result<Tissue> {
     let material = Material::from_young_poisson(YOUNG_PA, POISSON, DENSITY);
     let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
         (Body::Organ, Box::new(organ_sdf))
@@ -114,7 +116,8 @@ pub fn build(name: &str, cell: f64) -> anyhow::Result<Tissue> {
     let lattice = voxelized.lattice;
     let floor = lattice.rest.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
     let fixed = move |p: &Point3<f64>| p.z < floor + 0.25 * cell;
-    let mut sim = CutSim::new(lattice, &*signed, material, fixed, CutSimParams::default())
+    let params = CutSimParams { hybrid, ..CutSimParams::default() };
+    let mut sim = CutSim::new(lattice, &*signed, material, fixed, params)
         .with_context(|| format!("setting up the tissue ({name})"))?;
     sim.advance(SETTLE_S).map_err(|d| anyhow::anyhow!("the tissue diverged while settling: {}", d.reason))?;
     Ok(Tissue { sim, cell, warnings: voxelized.warnings })
@@ -145,6 +148,8 @@ impl Tissue {
         self.sim.set_obstacles(obstacles);
         times.contact.push(clock.elapsed());
         let clock = Instant::now();
+        // The operational region (hybrid model) follows the blade's sweep since the last frame.
+        self.sim.set_tool(step.swept.as_ref().map_or(&[], |s| &s.vertices[..]));
         self.sim.advance(seconds).map_err(|d| {
             anyhow::anyhow!(
                 "the tissue diverged at step {} (t = {:.3} s, node {}): {}",
@@ -158,6 +163,8 @@ impl Tissue {
         let clock = Instant::now();
         step.surfaces = self.sim.surfaces();
         step.nodes = self.sim.node_positions();
+        step.roles = self.sim.node_roles();
+        step.tled_cells = self.sim.tled_cells();
         step.pieces = self.sim.pieces();
         step.contacts = self.sim.contacts();
         times.tissue_surface.push(clock.elapsed());
@@ -251,7 +258,8 @@ pub fn log(
     }
     if frame.is_multiple_of(every) {
         let nodes: Vec<[f32; 3]> = step.nodes.iter().map(|p| [p.x, p.y, p.z]).collect();
-        hullcut_viz::log_points3d(rec, "world/tissue/nodes", &nodes, TLED_GREEN, 0.0008)?;
+        let colors: Vec<[u8; 4]> = step.roles.iter().map(|r| r.color()).collect();
+        hullcut_viz::log_points3d_colored(rec, "world/tissue/nodes", &nodes, &colors, 0.0008)?;
     }
     match &step.swept {
         Some(swept) => {
