@@ -20,7 +20,7 @@ use rayon::prelude::*;
 
 use crate::lattice::Lattice;
 use crate::mesh::{TriMesh, push_quad};
-use crate::vna::CutTopology;
+use crate::vna::{CellSplit, CutTopology};
 
 /// A sample's copy: none outside the lattice.
 const NO_COPY: u32 = u32::MAX;
@@ -110,6 +110,11 @@ impl PieceSurface {
 
 /// The surfaces of every piece of a cut body.
 pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodySamples) -> Vec<PieceSurface> {
+    // How each split cell's material is divided, once per cell (not once per sample).
+    let splits: Vec<Option<CellSplit>> = (0..lattice.cells.len())
+        .into_par_iter()
+        .map(|c| (topology.copies_of(c).len() > 1).then(|| topology.split(lattice, c)))
+        .collect();
     // Copy and cut distance (metres, negative on the copy's side) of every sample.
     let owner: Vec<(u32, f64)> = (0..samples.body.len())
         .into_par_iter()
@@ -119,10 +124,9 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
                 return (NO_COPY, f64::INFINITY);
             }
             let range = topology.copies_of(c as usize);
-            if range.len() == 1 {
+            let Some(split) = &splits[c as usize] else {
                 return (range.start as u32, f64::NEG_INFINITY);
-            }
-            let split = topology.split(lattice, c as usize);
+            };
             let p = samples.position(g);
             let ijk = lattice.cells[c as usize].ijk;
             let local = (p - lattice.origin) / lattice.cell - Vector3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64);
@@ -231,8 +235,12 @@ impl Field<'_> {
         let node = |g: [usize; 3]| g[0] + n[0] * (g[1] + n[1] * g[2]);
         let cn = [n[0] - 1, n[1] - 1, n[2] - 1];
         let cube = |c: [usize; 3]| c[0] + cn[0] * (c[1] + cn[1] * c[2]);
-        // Per crossed cube: the vertex of each corner's group (u32::MAX for outside corners).
-        let mut vertex_of: std::collections::HashMap<usize, [u32; 8]> = std::collections::HashMap::new();
+        // Per cube: UNSEEN, PLAIN (no surface through it) or an index into `groups`, which holds for
+        // each crossed cube the vertex of each corner's group (u32::MAX for outside corners).
+        const UNSEEN: u32 = u32::MAX;
+        const PLAIN: u32 = u32::MAX - 1;
+        let mut cube_state = vec![UNSEEN; cn[0] * cn[1] * cn[2]];
+        let mut groups: Vec<[u32; 8]> = Vec::new();
         let mut vertices = Vec::new();
         let mut held_by = Vec::new();
         for g in (0..self.values.len()).filter(|&g| self.inside(g)) {
@@ -240,7 +248,7 @@ impl Field<'_> {
             for c in 0..8 {
                 let lo =
                     [gi[0].wrapping_sub(c & 1), gi[1].wrapping_sub((c >> 1) & 1), gi[2].wrapping_sub((c >> 2) & 1)];
-                if (0..3).any(|a| lo[a] >= cn[a]) || vertex_of.contains_key(&cube(lo)) {
+                if (0..3).any(|a| lo[a] >= cn[a]) || cube_state[cube(lo)] != UNSEEN {
                     continue;
                 }
                 let corner = |k: usize| node([lo[0] + (k & 1), lo[1] + ((k >> 1) & 1), lo[2] + ((k >> 2) & 1)]);
@@ -272,6 +280,7 @@ impl Field<'_> {
                     }
                 }
                 if !crossed {
+                    cube_state[cube(lo)] = PLAIN;
                     continue;
                 }
                 let mut ids = [u32::MAX; 8];
@@ -307,7 +316,8 @@ impl Field<'_> {
                         ids[k] = id;
                     }
                 }
-                vertex_of.insert(cube(lo), ids);
+                cube_state[cube(lo)] = groups.len() as u32;
+                groups.push(ids);
             }
         }
         let mut triangles = Vec::new();
@@ -328,7 +338,7 @@ impl Field<'_> {
                         c[u] = low[u] + du - 1;
                         c[w] = low[w] + dw - 1;
                         let k = (0..3).map(|a| (gi[a] - c[a]) << a).sum::<usize>();
-                        vertex_of[&cube(c)][k]
+                        groups[cube_state[cube(c)] as usize][k]
                     };
                     let mut q = [quad_vertex(0, 0), quad_vertex(1, 0), quad_vertex(1, 1), quad_vertex(0, 1)];
                     if dir < 0 {
