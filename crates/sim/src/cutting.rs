@@ -880,9 +880,10 @@ mod tests {
             0.02 - nodes[i].z
         };
         let block = || Lattice::block(Point3::origin(), 0.005, [12, 4, 4]);
-        let mut all = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).unwrap();
+        let mut all =
+            CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim");
         all.advance(1.0).expect("stable");
-        let mut hyb = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).unwrap();
+        let mut hyb = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).expect("sim");
         hyb.set_tool(&[Point3::new(0.03, 0.01, 0.025)]);
         hyb.advance(1.0).expect("stable");
         assert!(hyb.tled_cells() > 0 && hyb.tled_cells() < hyb.lattice().cells.len());
@@ -890,16 +891,16 @@ mod tests {
         assert!(a > 1e-4, "it sags: {a}");
         assert!((h - a).abs() < 0.1 * a, "hybrid {h} m vs TLED {a} m");
         // All FLSM (no tool): the block sags as the TLED block does, within 10%.
-        let mut flsm = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).unwrap();
+        let mut flsm = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(0.012)).expect("sim");
         flsm.advance(1.0).expect("stable");
         assert_eq!(flsm.tled_cells(), 0);
         let f = top_middle(&flsm);
         assert!((f - a).abs() < 0.1 * a, "FLSM {f} m vs TLED {a} m");
         // An operational region that holds every cell is the all-TLED model, step for step.
-        let mut whole = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(1.0)).unwrap();
+        let mut whole = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, hybrid(1.0)).expect("sim");
         whole.set_tool(&[Point3::new(0.03, 0.01, 0.025)]);
         let mut again =
-            CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).unwrap();
+            CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim");
         let steps = whole.advance(0.1).expect("stable");
         again.advance(steps as f64 * again.dt() * 0.999).expect("stable");
         assert_eq!(whole.displacements(), again.displacements());
