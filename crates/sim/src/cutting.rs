@@ -341,7 +341,7 @@ impl CutSim {
                 self.integrator.implicit_stiffness[part.node[p as usize] as usize] = steps.beta;
             }
         }
-        if self.cell_tled != wanted {
+        if !self.cell_tled.is_empty() && self.cell_tled != wanted {
             self.region_changes += 1;
         }
         self.cell_tled = wanted;

@@ -567,11 +567,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ds.meta().fps,
         counters.frame_sets_dropped
     );
-    if let (Some(first), Some(last)) = (memory.first(), memory.last()) {
-        println!(
-            "memory: {:.0} MiB resident after {:.0} s, {:.0} MiB after {:.0} s (peak {:.0} MiB)",
+    match memory.as_slice() {
+        [] => {}
+        [last] => println!("memory: {:.0} MiB resident at the end (peak {:.0} MiB)", last.rss_mib, last.peak_rss_mib),
+        [first, .., last] => println!(
+            "memory: {:.0} MiB resident after {:.0} s, {:.0} MiB at the end, {:.0} s (peak {:.0} MiB)",
             first.rss_mib, first.wall_s, last.rss_mib, last.wall_s, last.peak_rss_mib
-        );
+        ),
     }
     println!("{}", pose_report.summary());
     println!(
