@@ -18,6 +18,18 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("JSON")
 }
 
+/// `hullcut run` on the shipped dataset at 1 cm cells with `extra` arguments, recording and
+/// reporting into `dir`; the output and the report (null when none was written).
+fn run_cut_small(dir: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
+    let (rrd, report) = (dir.join("run.rrd"), dir.join("run.json"));
+    let _ = std::fs::remove_file(&report);
+    let (rrd, report_arg) = (rrd.to_str().expect("utf-8"), report.to_str().expect("utf-8"));
+    let base = ["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--report", report_arg, "--cell", "0.01"];
+    let o = hullcut(&[&base[..], extra].concat());
+    let r = if report.exists() { json(&report) } else { serde_json::Value::Null };
+    (o, r)
+}
+
 #[test]
 fn run_cuts_the_organ_with_trusted_poses_and_exports_closed_pieces_every_frame() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -96,24 +108,9 @@ fn run_cuts_the_organ_with_trusted_poses_and_exports_closed_pieces_every_frame()
 #[test]
 fn run_paced_with_a_short_queue_counts_what_it_drops_and_processes_the_rest() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
-    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let o = hullcut(&[
-        "run",
-        "--dataset",
-        CUT_SMALL,
-        "--rrd",
-        &p(&rrd),
-        "--report",
-        &p(&report),
-        "--realtime",
-        "--queue",
-        "1",
-        "--cell",
-        "0.01",
-    ]);
+    let (o, r) = run_cut_small(dir.path(), &["--realtime", "--queue", "1"]);
     assert!(o.status.success(), "{}", text(&o));
-    let c = json(&report)["counters"].clone();
+    let c = &r["counters"];
     let (read, processed, dropped) =
         (c["frame_sets_read"].as_u64(), c["frame_sets_processed"].as_u64(), c["frame_sets_dropped"].as_u64());
     assert_eq!(read, Some(9));
@@ -123,21 +120,18 @@ fn run_paced_with_a_short_queue_counts_what_it_drops_and_processes_the_rest() {
 #[test]
 fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
-    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let args = ["--dataset", CUT_SMALL, "--rrd", &p(&rrd), "--report", &p(&report), "--cell", "0.01"];
-    let o = hullcut(&[&["run", "--operational-radius", "0.02"][..], &args].concat());
+    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02"]);
     assert!(o.status.success(), "{}", text(&o));
-    let t = json(&report)["tissue"].clone();
+    let t = &r["tissue"];
     assert_eq!(t["operational_radius_m"].as_f64(), Some(0.02), "{t}");
     assert!(t["hybrid"]["substeps"].as_u64().expect("substeps") >= 1, "{t}");
     let (mean, cells) = (t["tled_cells_mean"].as_f64().expect("mean"), t["cells"].as_f64().expect("cells"));
     assert!(mean > 0.0 && mean < 0.5 * cells, "TLED only near the blade: {mean} of {cells} cells");
     assert!(t["region_changes"].as_u64().expect("changes") >= 1, "{t}");
     // Without it, every cell is TLED.
-    let o = hullcut(&[&["run"][..], &args].concat());
+    let (o, r) = run_cut_small(dir.path(), &[]);
     assert!(o.status.success(), "{}", text(&o));
-    let t = json(&report)["tissue"].clone();
+    let t = &r["tissue"];
     assert_eq!(t["tled_cells_mean"].as_f64(), t["cells"].as_f64(), "{t}");
     assert!(t["hybrid"].is_null(), "{t}");
 }
@@ -145,23 +139,8 @@ fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
 #[test]
 fn run_repeated_replays_every_frame_set_on_after_the_last_and_samples_memory() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
-    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let o = hullcut(&[
-        "run",
-        "--dataset",
-        CUT_SMALL,
-        "--rrd",
-        &p(&rrd),
-        "--report",
-        &p(&report),
-        "--cell",
-        "0.01",
-        "--repeat",
-        "3",
-    ]);
+    let (o, r) = run_cut_small(dir.path(), &["--repeat", "3"]);
     assert!(o.status.success(), "{}", text(&o));
-    let r = json(&report);
     assert_eq!(r["repeat"].as_u64(), Some(3));
     assert_eq!(r["counters"]["frame_sets_processed"].as_u64(), Some(27), "{}", r["counters"]);
     assert_eq!(r["interrupted"].as_bool(), Some(false));
@@ -175,9 +154,10 @@ fn run_repeated_replays_every_frame_set_on_after_the_last_and_samples_memory() {
     let last = memory.last().expect("a sample");
     assert_eq!(last["frame_sets"].as_u64(), Some(27));
     assert!(last["peak_rss_mib"].as_f64() >= last["rss_mib"].as_f64(), "{last}");
-    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", &p(&rrd), "--repeat", "0"]);
+    let (o, r) = run_cut_small(dir.path(), &["--repeat", "0"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("--repeat"), "{}", text(&o));
+    assert!(r.is_null(), "no report for a refused run");
 }
 
 #[test]
