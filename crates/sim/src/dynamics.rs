@@ -123,16 +123,18 @@ impl Integrator {
         let a = 1.0 / (1.0 + 0.5 * self.damping * dt);
         let b = 1.0 - 0.5 * self.damping * dt;
         let dt2 = dt * dt;
-        // Per node in parallel slabs; each slab reports its fastest node (NaN counts as fastest).
+        // Per node in parallel slabs; each slab reports its highest squared speed, and whether it
+        // saw a non-finite one, without branches so the loop vectorizes. The fastest node is looked
+        // up only when the step fails.
         let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
         let (u, u_prev, mass, stiff, frozen) =
             (&self.u, &self.u_prev, &self.mass, &self.implicit_stiffness, &self.frozen);
-        let (max_speed2, fastest) = self
+        let (max_speed2, finite) = self
             .next
             .par_chunks_mut(chunk)
             .enumerate()
             .map(|(c, next)| {
-                let mut worst = (0.0f32, c * chunk);
+                let (mut worst, mut finite) = (0.0f32, true);
                 for (j, out) in next.iter_mut().enumerate() {
                     let i = c * chunk + j;
                     let m = mass[i];
@@ -145,13 +147,13 @@ impl Integrator {
                     };
                     *out = x;
                     let v2 = ((x - u[i]) / dt).norm_squared();
-                    if !worst.0.is_nan() && (v2.is_nan() || v2 > worst.0) {
-                        worst = (v2, i);
-                    }
+                    finite &= v2.is_finite();
+                    worst = worst.max(v2);
                 }
-                worst
+                (worst, finite)
             })
-            .reduce(|| (0.0, 0), |p, q| if p.0.is_nan() || (!q.0.is_nan() && p.0 >= q.0) { p } else { q });
+            .reduce(|| (0.0, true), |p, q| (p.0.max(q.0), p.1 && q.1));
+        let max_speed2 = if finite { max_speed2 } else { f32::NAN };
         // Prescribed components, and the reactions they exert: r = m (ü + α u̇) + f_int − f_ext.
         let t_next = (self.step + 1) as f32 * dt;
         for r in &mut self.reactions {
@@ -170,6 +172,7 @@ impl Integrator {
             }
         }
         if !max_speed2.is_finite() || max_speed2.sqrt() > self.speed_limit {
+            let fastest = fastest_node(&self.next, &self.u, dt);
             return Err(Divergence {
                 step: self.step + 1,
                 time: f64::from(t_next),
@@ -201,6 +204,14 @@ impl Integrator {
             .map(|((u, p), &m)| 0.5 * f64::from(m) * ((u - p).cast::<f64>() / dt).norm_squared())
             .sum()
     }
+}
+
+/// The node with a non-finite speed, or else the fastest one, between `u` and `next`.
+fn fastest_node(next: &[Vector3<f32>], u: &[Vector3<f32>], dt: f32) -> usize {
+    let speed2 = |i: usize| ((next[i] - u[i]) / dt).norm_squared();
+    (0..u.len())
+        .find(|&i| !speed2(i).is_finite())
+        .unwrap_or_else(|| (0..u.len()).max_by(|&i, &j| speed2(i).total_cmp(&speed2(j))).unwrap_or(0))
 }
 
 #[cfg(test)]

@@ -55,27 +55,44 @@ impl Lattice {
         let gx = nx + 1;
         let gy = ny + 1;
         let grid_nodes = (nx + 1) * (ny + 1) * (dims[2] + 1);
+        let kept = |i: usize, j: usize, k: usize| {
+            let f = fraction[i + nx * (j + ny * k)];
+            f >= min_fraction && f > 0.0
+        };
+        // Nodes are numbered in grid order (x fastest), so the nodes of a run of cells along x are
+        // runs of consecutive indices: TLED loads such cells' corners as contiguous slices.
         let mut grid_to_node = vec![u32::MAX; grid_nodes];
+        for k in 0..dims[2] {
+            for j in 0..ny {
+                for i in 0..nx {
+                    if kept(i, j, k) {
+                        for off in &CORNERS {
+                            grid_to_node[(i + off[0]) + gx * ((j + off[1]) + gy * (k + off[2]))] = 0;
+                        }
+                    }
+                }
+            }
+        }
         let mut node_ijk = Vec::new();
+        for (g, slot) in grid_to_node.iter_mut().enumerate() {
+            if *slot == 0 {
+                *slot = node_ijk.len() as u32;
+                node_ijk.push([(g % gx) as u32, ((g / gx) % gy) as u32, (g / (gx * gy)) as u32]);
+            }
+        }
         let mut cells = Vec::new();
         for k in 0..dims[2] {
             for j in 0..ny {
                 for i in 0..nx {
-                    let f = fraction[i + nx * (j + ny * k)];
-                    if f < min_fraction || f <= 0.0 {
+                    if !kept(i, j, k) {
                         continue;
                     }
-                    let mut nodes = [0u32; 8];
-                    for (c, off) in CORNERS.iter().enumerate() {
-                        let (a, b, d) = (i + off[0], j + off[1], k + off[2]);
-                        let g = a + gx * (b + gy * d);
-                        if grid_to_node[g] == u32::MAX {
-                            grid_to_node[g] = node_ijk.len() as u32;
-                            node_ijk.push([a as u32, b as u32, d as u32]);
-                        }
-                        nodes[c] = grid_to_node[g];
-                    }
-                    cells.push(Cell { ijk: [i as u32, j as u32, k as u32], nodes, fraction: f.min(1.0) });
+                    let nodes = CORNERS.map(|off| grid_to_node[(i + off[0]) + gx * ((j + off[1]) + gy * (k + off[2]))]);
+                    cells.push(Cell {
+                        ijk: [i as u32, j as u32, k as u32],
+                        nodes,
+                        fraction: fraction[i + nx * (j + ny * k)].min(1.0),
+                    });
                 }
             }
         }

@@ -3,15 +3,15 @@
 //! Every cell of the lattice is a cube of the same side, so all cells share their shape-function
 //! derivatives and hourglass vectors: per-cell storage is the node list and the material volume.
 //! Forces are computed in two passes without atomics or locks: an element pass (in parallel over
-//! slabs of cells) writes each cell's eight nodal forces, then a node pass gathers them through the
-//! node → (cell, corner) list.
+//! slabs of cells, eight cells per SIMD batch) writes each cell's eight nodal forces, then a node pass
+//! gathers them through the node → (cell, corner) list. Both run under `pulp`'s runtime dispatch.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::lattice::{CORNERS, Lattice};
 use crate::material::{first_piola, regularize};
-use crate::tled_batch::{LANES, OnePointConstants};
+use crate::tled_batch::{BatchForces, LANES, OnePointConstants};
 use crate::{Material, SimError};
 
 /// Quadrature of the hexahedra.
@@ -89,11 +89,15 @@ pub struct Tled {
     /// ν = 0.45 with λ + 2μ, 0.94x with 4μ; at ν = 0.3 the two differ by 14%).
     hg_kappa_full: f32,
     cell_volume_full: f32,
-    /// Node → (cell, corner) gather list.
+    /// Node → (cell, corner) gather list, as offsets into the flattened batch forces.
     gather_offsets: Vec<u32>,
-    gather_entries: Vec<(u32, u8)>,
-    /// Scratch: each cell's eight nodal forces.
-    cell_forces: Vec<[Vector3<f32>; 8]>,
+    gather_entries: Vec<u32>,
+    /// Per batch of [`LANES`] cells: whether its corners load as contiguous runs.
+    contiguous: Vec<bool>,
+    /// Scratch: each batch's nodal forces.
+    cell_forces: Vec<BatchForces>,
+    /// The SIMD instruction sets found at run time.
+    arch: pulp::Arch,
     /// Cells regularized in the last force evaluation.
     inverted: usize,
     node_count: usize,
@@ -136,7 +140,9 @@ impl Tled {
             params,
             lambda,
             mu,
-            cell_forces: vec![[Vector3::zeros(); 8]; cell_nodes.len()],
+            cell_forces: vec![[[[0.0; LANES]; 3]; 8]; cell_nodes.len().div_ceil(LANES)],
+            contiguous: cell_nodes.chunks(LANES).map(crate::tled_batch::is_contiguous).collect(),
+            arch: pulp::Arch::new(),
             cell_nodes,
             volume,
             dndx,
@@ -166,11 +172,11 @@ impl Tled {
             offsets[i] += offsets[i - 1];
         }
         let mut fill = offsets.clone();
-        let mut entries = vec![(0u32, 0u8); offsets[n] as usize];
+        let mut entries = vec![0u32; offsets[n] as usize];
         for (ci, c) in self.cell_nodes.iter().enumerate() {
             for (corner, &node) in c.iter().enumerate() {
                 let slot = &mut fill[node as usize];
-                entries[*slot as usize] = (ci as u32, corner as u8);
+                entries[*slot as usize] = crate::tled_batch::force_offset(ci, corner) as u32;
                 *slot += 1;
             }
         }
@@ -203,61 +209,75 @@ impl Tled {
     /// `out` (nodes outside the simulated cells get zero).
     pub fn internal_forces(&mut self, u: &[Vector3<f32>], out: &mut [Vector3<f32>]) {
         let threads = rayon::current_num_threads().max(1);
-        // Contiguous slabs of cells (cells are in grid order): a few per thread, so work balances
+        // Contiguous slabs of batches (cells are in grid order): a few per thread, so work balances
         // without the per-task overhead of fine chunks.
-        let chunk = (self.cell_nodes.len().div_ceil(4 * threads).max(64)).next_multiple_of(LANES);
+        let chunk = self.cell_forces.len().div_ceil(4 * threads).max(8);
         // Take the scratch buffer out so the element pass can read `self` while writing it.
         let mut cell_forces = std::mem::take(&mut self.cell_forces);
         let this = &*self;
+        let arch = self.arch;
         let inverted: usize = cell_forces
             .par_chunks_mut(chunk)
             .enumerate()
-            .map(|(k, forces)| {
-                let start = k * chunk;
-                let mut inv = 0;
-                let mut i = 0;
-                if this.params.integration == Integration::OnePoint {
-                    let consts = this.one_point_constants();
-                    while i + LANES <= forces.len() {
-                        let range = start + i..start + i + LANES;
-                        let done = crate::tled_batch::forces(
-                            &consts,
-                            &this.cell_nodes[range.clone()],
-                            &this.volume[range],
-                            u,
-                            &mut forces[i..i + LANES],
-                        );
-                        if !done {
-                            for l in 0..LANES {
-                                inv += usize::from(this.cell_force(start + i + l, u, &mut forces[i + l]));
-                            }
-                        }
-                        i += LANES;
-                    }
-                }
-                for (offset, f) in forces[i..].iter_mut().enumerate() {
-                    inv += usize::from(this.cell_force(start + i + offset, u, f));
-                }
-                inv
-            })
+            .map(|(k, forces)| arch.dispatch(ElementPass { tled: this, first: k * chunk, u, out: forces }))
             .sum();
         self.cell_forces = cell_forces;
         self.inverted = inverted;
-        let offsets = &self.gather_offsets;
-        let entries = &self.gather_entries;
-        let cf = &self.cell_forces;
+        let this = &*self;
+        let cf = self.cell_forces.as_flattened().as_flattened().as_flattened();
         let node_chunk = out.len().div_ceil(4 * threads).max(256);
         out.par_chunks_mut(node_chunk).enumerate().for_each(|(k, nodes)| {
-            let start = k * node_chunk;
-            for (i, f) in nodes.iter_mut().enumerate() {
-                let n = start + i;
-                let mut sum = Vector3::zeros();
-                for &(c, corner) in &entries[offsets[n] as usize..offsets[n + 1] as usize] {
-                    sum += cf[c as usize][corner as usize];
-                }
-                *f = sum;
-            }
+            arch.dispatch(NodePass { tled: this, forces: cf, first: k * node_chunk, out: nodes })
         });
+    }
+
+    /// Node `n`'s force from the flattened batch forces `cf`.
+    #[inline(always)]
+    fn gather(&self, n: usize, cf: &[f32]) -> Vector3<f32> {
+        let (mut x, mut y, mut z) = (0.0, 0.0, 0.0);
+        for &o in &self.gather_entries[self.gather_offsets[n] as usize..self.gather_offsets[n + 1] as usize] {
+            let o = o as usize;
+            // One bounds check for the three components.
+            let v = &cf[o..=o + 2 * LANES];
+            x += v[0];
+            y += v[LANES];
+            z += v[2 * LANES];
+        }
+        Vector3::new(x, y, z)
+    }
+
+    /// The element pass over batches `first..first + out.len()`; returns the number of cells whose
+    /// F was regularized.
+    #[inline(always)]
+    fn element_batches(&self, first: usize, u: &[Vector3<f32>], out: &mut [BatchForces]) -> usize {
+        let consts = self.one_point_constants();
+        let one_point = self.params.integration == Integration::OnePoint;
+        let cells = self.cell_nodes.len();
+        let mut inverted = 0;
+        for (i, batch) in out.iter_mut().enumerate() {
+            let b = first + i;
+            let (lo, hi) = (b * LANES, ((b + 1) * LANES).min(cells));
+            if one_point && hi - lo == LANES {
+                let ue = crate::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
+                let mut volume = [0.0; LANES];
+                volume.copy_from_slice(&self.volume[lo..hi]);
+                if crate::tled_batch::forces(&consts, &ue, &volume, batch) {
+                    continue;
+                }
+            }
+            // Scalar: a short last batch, a batch with a cell to regularize, or Gauss quadrature.
+            *batch = [[[0.0; LANES]; 3]; 8];
+            for c in lo..hi {
+                let mut f = [Vector3::zeros(); 8];
+                inverted += usize::from(self.cell_force(c, u, &mut f));
+                for a in 0..8 {
+                    for r in 0..3 {
+                        batch[a][r][c - lo] = f[a][r];
+                    }
+                }
+            }
+        }
+        inverted
     }
 
     fn one_point_constants(&self) -> OnePointConstants {
@@ -341,15 +361,52 @@ impl Tled {
     }
 }
 
+/// The element pass over one slab of batches, as a `pulp` operation: dispatched to the widest SIMD
+/// instruction set the CPU has, with the kernel inlined into it.
+struct ElementPass<'a> {
+    tled: &'a Tled,
+    first: usize,
+    u: &'a [Vector3<f32>],
+    out: &'a mut [BatchForces],
+}
+
+impl pulp::WithSimd for ElementPass<'_> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> usize {
+        self.tled.element_batches(self.first, self.u, self.out)
+    }
+}
+
+/// The node pass over one run of nodes: each node sums its cells' corner forces.
+struct NodePass<'a> {
+    tled: &'a Tled,
+    forces: &'a [f32],
+    first: usize,
+    out: &'a mut [Vector3<f32>],
+}
+
+impl pulp::WithSimd for NodePass<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        for (i, f) in self.out.iter_mut().enumerate() {
+            *f = self.tled.gather(self.first + i, self.forces);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Point3;
 
-    #[test]
-    fn batched_kernel_matches_scalar_kernel() {
-        // 5x4x3 = 60 cells: seven batches of eight and a scalar tail of four.
-        let lattice = Lattice::block(Point3::origin(), 0.01, [5, 4, 3]);
+    /// Checks every cell's batched forces against the scalar kernel; returns how many batches
+    /// loaded their corners as contiguous runs.
+    fn check_batched_against_scalar(dims: [usize; 3]) -> usize {
+        let lattice = Lattice::block(Point3::origin(), 0.01, dims);
         let material = Material::default();
         let mut tled = Tled::new(&lattice, None, &material, TledParams::default()).expect("tled");
         // A smooth large deformation plus node-wise noise (hourglass content).
@@ -362,18 +419,37 @@ mod tests {
                 Vector3::new(0.2 * p.y + 1e-3 * noise, 0.1 * p.z * p.x * 10.0, -0.15 * p.x - 5e-4 * noise).cast::<f32>()
             })
             .collect();
-        let mut batched = vec![Vector3::zeros(); lattice.node_count()];
-        tled.internal_forces(&u, &mut batched);
+        let mut gathered = vec![Vector3::zeros(); lattice.node_count()];
+        tled.internal_forces(&u, &mut gathered);
+        let mut expected = vec![Vector3::zeros(); lattice.node_count()];
         let mut scale = 0.0f32;
+        let flat = tled.cell_forces.as_flattened().as_flattened().as_flattened();
         for c in 0..tled.cell_count() {
             let mut scalar = [Vector3::zeros(); 8];
             tled.cell_force(c, &u, &mut scalar);
             for a in 0..8 {
-                let diff = (scalar[a] - tled.cell_forces[c][a]).norm();
+                let o = crate::tled_batch::force_offset(c, a);
+                let batched = Vector3::new(flat[o], flat[o + LANES], flat[o + 2 * LANES]);
+                let diff = (scalar[a] - batched).norm();
                 scale = scale.max(scalar[a].norm());
-                assert!(diff <= 1e-5 * scalar[a].norm().max(1e-3), "cell {c} corner {a}: {diff}");
+                assert!(diff <= 1e-5 * scalar[a].norm().max(1e-3), "{dims:?} cell {c} corner {a}: {diff}");
+                expected[tled.cell_nodes[c][a] as usize] += scalar[a];
             }
         }
         assert!(scale > 0.0);
+        // The node pass sums each node's cells.
+        for (n, (g, e)) in gathered.iter().zip(&expected).enumerate() {
+            assert!((g - e).norm() <= 1e-4 * scale, "{dims:?} node {n}: {g} vs {e}");
+        }
+        tled.contiguous.iter().filter(|&&c| c).count()
+    }
+
+    #[test]
+    fn batched_kernel_matches_scalar_kernel() {
+        // 5x4x3 = 60 cells: rows of five, so no batch is a contiguous run; seven batches of eight
+        // and a scalar tail of four.
+        assert_eq!(check_batched_against_scalar([5, 4, 3]), 0);
+        // Rows of 16 cells: two contiguous batches per row.
+        assert_eq!(check_batched_against_scalar([16, 3, 2]), 12);
     }
 }

@@ -1,8 +1,12 @@
 //! The one-point TLED element kernel for eight cells at once.
 //!
 //! Each quantity is an array over [`LANES`] cells and every operation a loop over lanes, which LLVM
-//! turns into SIMD instructions on any target (no `target-cpu=native`, no unsafe). A batch with an
-//! inverted or nearly inverted cell is left to the scalar kernel, which regularizes it.
+//! turns into SIMD instructions on any target (no `target-cpu=native`, no unsafe); the caller runs
+//! it under `pulp`'s runtime dispatch, so on a CPU with AVX2 and FMA the same loops use them. A batch
+//! with an inverted or nearly inverted cell is left to the scalar kernel, which regularizes it.
+//!
+//! Forces are written lane-major ([`BatchForces`]): a batch's results are plain vector stores, and
+//! the node pass reads each (cell, corner) force as three scalars eight floats apart.
 
 use nalgebra::Vector3;
 
@@ -12,6 +16,55 @@ use crate::tled::INVERSION_J;
 pub const LANES: usize = 8;
 
 type L = [f32; LANES];
+
+/// A batch's nodal forces: `[corner][component][lane]`.
+pub(crate) type BatchForces = [[L; 3]; 8];
+
+/// A batch's corner displacements: `[component][corner][lane]`.
+pub(crate) type BatchDisplacements = [[L; 8]; 3];
+
+/// Floats in one [`BatchForces`].
+pub(crate) const BATCH_FLOATS: usize = 8 * 3 * LANES;
+
+/// Offset of cell `c`'s corner `a` force (its x component; y and z follow `LANES` apart) in the
+/// flattened forces of all batches.
+pub(crate) fn force_offset(c: usize, a: usize) -> usize {
+    (c / LANES) * BATCH_FLOATS + a * 3 * LANES + c % LANES
+}
+
+/// Whether a batch's cells are a run along x of one lattice row with nodes numbered in grid order:
+/// then corner `a` of lane `l` is node `nodes[0][a] + l`, and the corner displacements of the batch
+/// load as eight contiguous runs instead of 64 scattered nodes.
+pub(crate) fn is_contiguous(nodes: &[[u32; 8]]) -> bool {
+    nodes.len() == LANES && (0..LANES).all(|l| (0..8).all(|a| nodes[l][a] == nodes[0][a] + l as u32))
+}
+
+/// Loads the corner displacements of a batch.
+#[inline(always)]
+pub(crate) fn load(nodes: &[[u32; 8]], contiguous: bool, u: &[Vector3<f32>]) -> BatchDisplacements {
+    let mut ue = [[[0.0f32; LANES]; 8]; 3];
+    if contiguous {
+        for a in 0..8 {
+            let first = nodes[0][a] as usize;
+            let run = &u[first..first + LANES];
+            for l in 0..LANES {
+                ue[0][a][l] = run[l].x;
+                ue[1][a][l] = run[l].y;
+                ue[2][a][l] = run[l].z;
+            }
+        }
+    } else {
+        for l in 0..LANES {
+            for a in 0..8 {
+                let v = u[nodes[l][a] as usize];
+                ue[0][a][l] = v.x;
+                ue[1][a][l] = v.y;
+                ue[2][a][l] = v.z;
+            }
+        }
+    }
+    ue
+}
 
 /// Shared, per-lattice constants of the one-point kernel.
 #[derive(Debug, Clone, Copy)]
@@ -40,32 +93,19 @@ macro_rules! lanes {
     }};
 }
 
-/// Computes the eight nodal forces of cells `nodes[0..8]` (all must be valid) into `out`; returns
-/// `false`, writing nothing, when some cell's det F is below [`INVERSION_J`].
-#[inline]
-pub(crate) fn forces(
-    k: &OnePointConstants,
-    nodes: &[[u32; 8]],
-    volume: &[f32],
-    u: &[Vector3<f32>],
-    out: &mut [[Vector3<f32>; 8]],
-) -> bool {
-    debug_assert!(nodes.len() == LANES && volume.len() == LANES && out.len() == LANES);
-    // Gather: u[r][a][lane].
-    let mut ue = [[[0.0f32; LANES]; 8]; 3];
-    for l in 0..LANES {
-        for a in 0..8 {
-            let v = u[nodes[l][a] as usize];
-            ue[0][a][l] = v.x;
-            ue[1][a][l] = v.y;
-            ue[2][a][l] = v.z;
-        }
-    }
+/// Computes the eight nodal forces of a batch of cells with corner displacements `ue` and material
+/// volumes `volume` into `out`; returns `false`, writing nothing, when some cell's det F is below
+/// [`INVERSION_J`].
+#[inline(always)]
+pub(crate) fn forces(k: &OnePointConstants, ue: &BatchDisplacements, volume: &L, out: &mut BatchForces) -> bool {
     // F = I + (1/4h) Σ_a u_a s_aᵀ, and hourglass sums q_m = Σ_a h_am u_a.
     let mut f = [[splat(0.0); 3]; 3];
+    for r in 0..3 {
+        f[r][r] = splat(1.0);
+    }
     let mut q = [[splat(0.0); 3]; 4];
     for a in 0..8 {
-        let s = k.signs[a];
+        let s = k.signs[a].map(|x| x * k.inv4h);
         let h = k.hg[a];
         for r in 0..3 {
             let ur = ue[r][a];
@@ -75,12 +115,6 @@ pub(crate) fn forces(
             for m in 0..4 {
                 q[m][r] = lanes!(|l| q[m][r][l] + h[m] * ur[l]);
             }
-        }
-    }
-    for r in 0..3 {
-        for c in 0..3 {
-            let diag = if r == c { 1.0 } else { 0.0 };
-            f[r][c] = lanes!(|l| diag + f[r][c][l] * k.inv4h);
         }
     }
     // J = det F.
@@ -132,9 +166,7 @@ pub(crate) fn forces(
                 + sa[2] * p[r][2][l]
                 + kappa[l] * (h[0] * q[0][r][l] + h[1] * q[1][r][l] + h[2] * q[2][r][l] + h[3] * q[3][r][l]));
         }
-        for l in 0..LANES {
-            out[l][a] = Vector3::new(fa[0][l], fa[1][l], fa[2][l]);
-        }
+        out[a] = fa;
     }
     true
 }

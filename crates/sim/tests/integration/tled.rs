@@ -192,23 +192,27 @@ fn computed_stability_limit_separates_stable_from_unstable() {
 #[test]
 #[ignore = "timing probe; run by hand"]
 fn throughput_probe() {
-    let lattice = Lattice::block(Point3::origin(), 0.005, [30, 30, 30]);
+    let side: usize = std::env::var("PROBE_SIDE").ok().and_then(|s| s.parse().ok()).unwrap_or(30);
+    let lattice = Lattice::block(Point3::origin(), 0.005, [side; 3]);
     let material = Material::default();
     let mut tled = Tled::new(&lattice, None, &material, TledParams::default()).expect("tled");
     let u: Vec<Vector3<f32>> =
         lattice.rest.iter().map(|p| Vector3::new(0.01 * p.y as f32, 0.0, 0.02 * p.x as f32)).collect();
     let mut f = vec![Vector3::zeros(); lattice.node_count()];
+    let reps = (8e6 / lattice.cells.len() as f64).ceil() as usize;
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
         pool.install(|| {
             tled.internal_forces(&u, &mut f);
             let t = std::time::Instant::now();
-            let reps = 50;
             for _ in 0..reps {
                 tled.internal_forces(&u, &mut f);
             }
             let s = t.elapsed().as_secs_f64();
-            eprintln!("{threads} threads: {:.1} M element-steps/s", (lattice.cells.len() * reps) as f64 / s / 1e6);
+            eprintln!(
+                "{side}^3 cells, {threads} threads: {:.1} M element-steps/s",
+                (lattice.cells.len() * reps) as f64 / s / 1e6
+            );
         });
     }
 }
