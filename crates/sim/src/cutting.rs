@@ -522,8 +522,9 @@ impl CutSim {
                 for &(n, goal, beta_v) in &self.anchors {
                     self.f_ext[n] = self.f_gravity[n] + goal * beta + beta_v * tau;
                 }
-                self.tled.internal_forces(&self.integrator.u, &mut self.f_int);
-                self.integrator.advance(&self.f_int, &self.f_ext)?;
+                self.tled.element_pass(&self.integrator.u);
+                let tled = &self.tled;
+                self.integrator.advance_with(|i| tled.node_force(i), &self.f_ext)?;
                 if !self.obstacles.is_empty() {
                     self.contacts = self.resolve_contacts();
                 }

@@ -119,6 +119,15 @@ impl Integrator {
 
     /// Advances one step given internal and external forces at the current state.
     pub fn advance(&mut self, f_int: &[Vector3<f32>], f_ext: &[Vector3<f32>]) -> Result<(), Divergence> {
+        self.advance_with(|i| f_int[i], f_ext)
+    }
+
+    /// Advances one step, asking `f_int` for each node's internal force as the update reaches it:
+    /// with [`crate::Tled::node_force`] the force gather and the update are one pass over the nodes.
+    pub fn advance_with<F>(&mut self, f_int: F, f_ext: &[Vector3<f32>]) -> Result<(), Divergence>
+    where
+        F: Fn(usize) -> Vector3<f32> + Sync,
+    {
         let dt = self.dt;
         let a = 1.0 / (1.0 + 0.5 * self.damping * dt);
         let b = 1.0 - 0.5 * self.damping * dt;
@@ -127,32 +136,18 @@ impl Integrator {
         // saw a non-finite one, without branches so the loop vectorizes. The fastest node is looked
         // up only when the step fails.
         let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
-        let (u, u_prev, mass, stiff, frozen) =
-            (&self.u, &self.u_prev, &self.mass, &self.implicit_stiffness, &self.frozen);
-        let (max_speed2, finite) = self
-            .next
+        let arch = pulp::Arch::new();
+        // Take the output out so the runs can read `self` while writing it.
+        let mut next = std::mem::take(&mut self.next);
+        let this = &*self;
+        let (max_speed2, finite) = next
             .par_chunks_mut(chunk)
             .enumerate()
             .map(|(c, next)| {
-                let (mut worst, mut finite) = (0.0f32, true);
-                for (j, out) in next.iter_mut().enumerate() {
-                    let i = c * chunk + j;
-                    let m = mass[i];
-                    let x = if m > 0.0 && !frozen[i] {
-                        let k = stiff[i];
-                        let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
-                        ((f_ext[i] - f_int[i]) * (dt2 / m) + u[i] * 2.0 - u_prev[i] * b) * denom
-                    } else {
-                        u[i]
-                    };
-                    *out = x;
-                    let v2 = ((x - u[i]) / dt).norm_squared();
-                    finite &= v2.is_finite();
-                    worst = worst.max(v2);
-                }
-                (worst, finite)
+                arch.dispatch(UpdateRun { it: this, f_int: &f_int, f_ext, coeffs: [a, b, dt2], first: c * chunk, next })
             })
             .reduce(|| (0.0, true), |p, q| (p.0.max(q.0), p.1 && q.1));
+        self.next = next;
         let max_speed2 = if finite { max_speed2 } else { f32::NAN };
         // Prescribed components, and the reactions they exert: r = m (ü + α u̇) + f_int − f_ext.
         let t_next = (self.step + 1) as f32 * dt;
@@ -167,7 +162,7 @@ impl Integrator {
                 let m = self.mass[n];
                 let acc = (value - 2.0 * self.u[n][k] + self.u_prev[n][k]) / dt2;
                 let vel = (value - self.u_prev[n][k]) / (2.0 * dt);
-                let r = m * (acc + self.damping * vel) + f_int[n][k] - f_ext[n][k] + self.implicit_stiffness[n] * value;
+                let r = m * (acc + self.damping * vel) + f_int(n)[k] - f_ext[n][k] + self.implicit_stiffness[n] * value;
                 self.reactions[g as usize][k] += f64::from(r);
             }
         }
@@ -203,6 +198,47 @@ impl Integrator {
             .zip(&self.mass)
             .map(|((u, p), &m)| 0.5 * f64::from(m) * ((u - p).cast::<f64>() / dt).norm_squared())
             .sum()
+    }
+}
+
+/// The central-difference update of one run of nodes, as a `pulp` operation (so it and the force
+/// gather it calls run with the CPU's widest SIMD instructions). Returns the run's highest squared
+/// speed and whether every speed was finite, computed without branches.
+struct UpdateRun<'a, F> {
+    it: &'a Integrator,
+    f_int: &'a F,
+    f_ext: &'a [Vector3<f32>],
+    /// 1 / (1 + αdt/2), 1 − αdt/2 and dt².
+    coeffs: [f32; 3],
+    first: usize,
+    next: &'a mut [Vector3<f32>],
+}
+
+impl<F: Fn(usize) -> Vector3<f32> + Sync> pulp::WithSimd for UpdateRun<'_, F> {
+    type Output = (f32, bool);
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> (f32, bool) {
+        let UpdateRun { it, f_int, f_ext, coeffs: [a, b, dt2], first, next } = self;
+        let inv_dt = 1.0 / it.dt;
+        let (mut worst, mut finite) = (0.0f32, true);
+        for (j, out) in next.iter_mut().enumerate() {
+            let i = first + j;
+            let m = it.mass[i];
+            let u = it.u[i];
+            let x = if m > 0.0 && !it.frozen[i] {
+                let k = it.implicit_stiffness[i];
+                let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
+                ((f_ext[i] - f_int(i)) * (dt2 / m) + u * 2.0 - it.u_prev[i] * b) * denom
+            } else {
+                u
+            };
+            *out = x;
+            let v2 = ((x - u) * inv_dt).norm_squared();
+            finite &= v2.is_finite();
+            worst = worst.max(v2);
+        }
+        (worst, finite)
     }
 }
 

@@ -63,7 +63,6 @@ pub struct Simulation {
     tled: Tled,
     flsm: Option<FlsmPart>,
     rest: Vec<Vector3<f32>>,
-    f_int: Vec<Vector3<f32>>,
     f_ext: Vec<Vector3<f32>>,
     f_applied: Vec<Vector3<f32>>,
     probes: Vec<([f64; 3], Option<Located>)>,
@@ -486,7 +485,6 @@ impl Simulation {
             tled,
             flsm,
             rest,
-            f_int: vec![Vector3::zeros(); n],
             f_ext: vec![Vector3::zeros(); n],
             f_applied,
             probes,
@@ -559,7 +557,7 @@ impl Simulation {
 
     /// One TLED step; in the hybrid, FLSM nodes are held and interface nodes pulled to their goals.
     fn tled_step(&mut self, hybrid: bool) -> Result<(), Divergence> {
-        self.tled.internal_forces(&self.integrator.u, &mut self.f_int);
+        self.tled.element_pass(&self.integrator.u);
         self.inverted_max = self.inverted_max.max(self.tled.inverted_cells());
         self.f_ext.copy_from_slice(&self.f_applied);
         if hybrid && let Some(part) = &self.flsm {
@@ -570,7 +568,8 @@ impl Simulation {
                 self.f_ext[i] += (part.goals[i] - self.rest[i]) * part.beta;
             }
         }
-        self.integrator.advance(&self.f_int, &self.f_ext)?;
+        let tled = &self.tled;
+        self.integrator.advance_with(|i| tled.node_force(i), &self.f_ext)?;
         Ok(())
     }
 

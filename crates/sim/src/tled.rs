@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use crate::lattice::{CORNERS, Lattice};
 use crate::material::{first_piola, regularize};
-use crate::tled_batch::{BatchForces, LANES, OnePointConstants};
+use crate::tled_batch::{BatchForces, COMPONENT_STRIDE, LANES, OnePointConstants};
 use crate::{Material, SimError};
 
 /// Quadrature of the hexahedra.
@@ -140,7 +140,7 @@ impl Tled {
             params,
             lambda,
             mu,
-            cell_forces: vec![[[[0.0; LANES]; 3]; 8]; cell_nodes.len().div_ceil(LANES)],
+            cell_forces: vec![[[[0.0; LANES]; 8]; 3]; cell_nodes.len().div_ceil(LANES)],
             contiguous: cell_nodes.chunks(LANES).map(crate::tled_batch::is_contiguous).collect(),
             arch: pulp::Arch::new(),
             cell_nodes,
@@ -208,6 +208,19 @@ impl Tled {
     /// Internal nodal forces `f_int(u)` for displacements `u` (one per lattice node), written into
     /// `out` (nodes outside the simulated cells get zero).
     pub fn internal_forces(&mut self, u: &[Vector3<f32>], out: &mut [Vector3<f32>]) {
+        self.element_pass(u);
+        let threads = rayon::current_num_threads().max(1);
+        let this = &*self;
+        let arch = self.arch;
+        let node_chunk = out.len().div_ceil(4 * threads).max(256);
+        out.par_chunks_mut(node_chunk)
+            .enumerate()
+            .for_each(|(k, nodes)| arch.dispatch(NodePass { tled: this, first: k * node_chunk, out: nodes }));
+    }
+
+    /// The element pass alone: every cell's nodal forces for displacements `u`, kept for
+    /// [`Tled::node_force`] (which an integrator can call as it updates each node, saving a pass).
+    pub fn element_pass(&mut self, u: &[Vector3<f32>]) {
         let threads = rayon::current_num_threads().max(1);
         // Contiguous slabs of batches (cells are in grid order): a few per thread, so work balances
         // without the per-task overhead of fine chunks.
@@ -223,12 +236,12 @@ impl Tled {
             .sum();
         self.cell_forces = cell_forces;
         self.inverted = inverted;
-        let this = &*self;
-        let cf = self.cell_forces.as_flattened().as_flattened().as_flattened();
-        let node_chunk = out.len().div_ceil(4 * threads).max(256);
-        out.par_chunks_mut(node_chunk).enumerate().for_each(|(k, nodes)| {
-            arch.dispatch(NodePass { tled: this, forces: cf, first: k * node_chunk, out: nodes })
-        });
+    }
+
+    /// Node `n`'s internal force from the last [`Tled::element_pass`] (zero outside the cells).
+    #[inline]
+    pub fn node_force(&self, n: usize) -> Vector3<f32> {
+        self.gather(n, self.cell_forces.as_flattened().as_flattened().as_flattened())
     }
 
     /// Node `n`'s force from the flattened batch forces `cf`.
@@ -238,10 +251,10 @@ impl Tled {
         for &o in &self.gather_entries[self.gather_offsets[n] as usize..self.gather_offsets[n + 1] as usize] {
             let o = o as usize;
             // One bounds check for the three components.
-            let v = &cf[o..=o + 2 * LANES];
+            let v = &cf[o..=o + 2 * COMPONENT_STRIDE];
             x += v[0];
-            y += v[LANES];
-            z += v[2 * LANES];
+            y += v[COMPONENT_STRIDE];
+            z += v[2 * COMPONENT_STRIDE];
         }
         Vector3::new(x, y, z)
     }
@@ -261,18 +274,18 @@ impl Tled {
                 let ue = crate::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
                 let mut volume = [0.0; LANES];
                 volume.copy_from_slice(&self.volume[lo..hi]);
-                if crate::tled_batch::forces(&consts, &ue, &volume, batch) {
+                if crate::tled_batch::forces(&consts, ue, &volume, batch) {
                     continue;
                 }
             }
             // Scalar: a short last batch, a batch with a cell to regularize, or Gauss quadrature.
-            *batch = [[[0.0; LANES]; 3]; 8];
+            *batch = [[[0.0; LANES]; 8]; 3];
             for c in lo..hi {
                 let mut f = [Vector3::zeros(); 8];
                 inverted += usize::from(self.cell_force(c, u, &mut f));
                 for a in 0..8 {
                     for r in 0..3 {
-                        batch[a][r][c - lo] = f[a][r];
+                        batch[r][a][c - lo] = f[a][r];
                     }
                 }
             }
@@ -282,8 +295,6 @@ impl Tled {
 
     fn one_point_constants(&self) -> OnePointConstants {
         OnePointConstants {
-            signs: self.signs,
-            hg: self.hg,
             inv4h: self.dndx[7][0],
             lambda: self.lambda,
             mu: self.mu,
@@ -382,7 +393,6 @@ impl pulp::WithSimd for ElementPass<'_> {
 /// The node pass over one run of nodes: each node sums its cells' corner forces.
 struct NodePass<'a> {
     tled: &'a Tled,
-    forces: &'a [f32],
     first: usize,
     out: &'a mut [Vector3<f32>],
 }
@@ -392,8 +402,9 @@ impl pulp::WithSimd for NodePass<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let forces = self.tled.cell_forces.as_flattened().as_flattened().as_flattened();
         for (i, f) in self.out.iter_mut().enumerate() {
-            *f = self.tled.gather(self.first + i, self.forces);
+            *f = self.tled.gather(self.first + i, forces);
         }
     }
 }
@@ -429,7 +440,7 @@ mod tests {
             tled.cell_force(c, &u, &mut scalar);
             for a in 0..8 {
                 let o = crate::tled_batch::force_offset(c, a);
-                let batched = Vector3::new(flat[o], flat[o + LANES], flat[o + 2 * LANES]);
+                let batched = Vector3::new(flat[o], flat[o + COMPONENT_STRIDE], flat[o + 2 * COMPONENT_STRIDE]);
                 let diff = (scalar[a] - batched).norm();
                 scale = scale.max(scalar[a].norm());
                 assert!(diff <= 1e-5 * scalar[a].norm().max(1e-3), "{dims:?} cell {c} corner {a}: {diff}");

@@ -88,12 +88,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let quick = args.quick || std::env::var("HULLCUT_BENCH_QUICK").is_ok_and(|v| v == "1");
     match args.target {
-        Target::Sim => {
+        // On a rayon worker, so each step's parallel passes start on the stepping thread (as in
+        // `hullcut sim`).
+        Target::Sim => rayon::scope(|_| -> anyhow::Result<()> {
             scaling(&args.out, quick)?;
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
-            collision(&args.out)?;
-        }
+            collision(&args.out)
+        })?,
         Target::Hull => super::bench_hull::run(&args.out, quick)?,
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
         Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,

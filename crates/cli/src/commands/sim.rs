@@ -161,23 +161,28 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut step_times = Vec::with_capacity(advances as usize);
     let mut failure = None;
     let t_run = Instant::now();
-    for k in 0..advances {
-        let t = Instant::now();
-        let r = sim.advance();
-        step_times.push(t.elapsed());
-        if let Err(d) = r {
-            failure = Some(d);
-            break;
+    // The loop runs on a rayon worker: each step's parallel passes then start on the stepping
+    // thread, instead of handing every pass to the pool and sleeping until it is done.
+    rayon::scope(|_| -> anyhow::Result<()> {
+        for k in 0..advances {
+            let t = Instant::now();
+            let r = sim.advance();
+            step_times.push(t.elapsed());
+            if let Err(d) = r {
+                failure = Some(d);
+                break;
+            }
+            if let Some(rec) = &rec
+                && (k % log_stride == 0 || k + 1 == advances)
+            {
+                log_state(rec, &mut sim, k, step_times.last().copied().unwrap_or_default())?;
+            }
+            if k % 64 == 0 {
+                pb.set_position(k);
+            }
         }
-        if let Some(rec) = &rec
-            && (k % log_stride == 0 || k + 1 == advances)
-        {
-            log_state(rec, &mut sim, k, step_times.last().copied().unwrap_or_default())?;
-        }
-        if k % 64 == 0 {
-            pb.set_position(k);
-        }
-    }
+        Ok(())
+    })?;
     let run_time = t_run.elapsed();
     pb.finish_and_clear();
     if let Some(rec) = &rec {
