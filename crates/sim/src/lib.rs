@@ -46,7 +46,7 @@ pub use lattice::{CORNERS, Cell, Lattice};
 pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
-pub use operational::{HybridParams, HybridSteps};
+pub use operational::{HybridParams, HybridSteps, match_flsm};
 pub use scenario::Scenario;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};

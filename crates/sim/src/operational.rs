@@ -106,16 +106,40 @@ impl HybridParams {
     /// all-TLED body does (measured on the test's block with 12 and 64 TLED cells: within 5%;
     /// 1.5 E cell sags 21–39% more, 3 E cell 9–11% less; the test checks 10%).
     pub fn resolve(&self, dt: f64, cell: f64, material: &crate::Material) -> HybridSteps {
-        let young = material.young_modulus();
-        let beta = self.beta.unwrap_or((BETA_MATCH * young * cell) as f32);
-        let h_match = FLSM_MATCH * cell * (material.density / young).sqrt();
-        match self.substeps {
-            Some(substeps) => HybridSteps { substeps, alpha: self.flsm.alpha, beta },
-            None => {
-                let substeps = (h_match / dt).floor().max(1.0) as usize;
-                let alpha = ((substeps as f64 * dt / h_match).powi(2)).min(1.0) as f32;
-                HybridSteps { substeps, alpha, beta }
-            }
+        match_flsm(dt, cell, material, self.substeps.map(|s| (s, self.flsm.alpha)), None, self.beta)
+    }
+}
+
+/// FLSM's step and stiffness and the interface pull for a body of `material` on a lattice of
+/// spacing `cell` stepped by TLED at `dt` (see [`HybridParams::resolve`] for the model):
+/// - `given = Some((substeps, alpha))`: both as given;
+/// - else, with `alpha`: the longest FLSM step (whole TLED steps) at which that `alpha` is as stiff
+///   as the material or stiffer;
+/// - else the longest FLSM step within the match at `α = 1`, and `α` set to match the material at
+///   it.
+///
+/// `beta`, when not given, is `2.5 E cell`.
+pub fn match_flsm(
+    dt: f64,
+    cell: f64,
+    material: &crate::Material,
+    given: Option<(usize, f32)>,
+    alpha: Option<f32>,
+    beta: Option<f32>,
+) -> HybridSteps {
+    let young = material.young_modulus();
+    let beta = beta.unwrap_or((BETA_MATCH * young * cell) as f32);
+    // The FLSM step at which goal stiffness α matches the material.
+    let h_match = |alpha: f64| FLSM_MATCH * cell * (alpha * material.density / young).sqrt();
+    match (given, alpha) {
+        (Some((substeps, alpha)), _) => HybridSteps { substeps, alpha, beta },
+        (None, Some(alpha)) => {
+            HybridSteps { substeps: (h_match(f64::from(alpha)) / dt).floor().max(1.0) as usize, alpha, beta }
+        }
+        (None, None) => {
+            let substeps = (h_match(1.0) / dt).floor().max(1.0) as usize;
+            let alpha = ((substeps as f64 * dt / h_match(1.0)).powi(2)).min(1.0) as f32;
+            HybridSteps { substeps, alpha, beta }
         }
     }
 }

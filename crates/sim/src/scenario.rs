@@ -111,9 +111,9 @@ pub struct FlsmSpec {
     /// Region half-width, cells.
     #[serde(default = "w_default")]
     pub w: usize,
-    /// Goal stiffness.
-    #[serde(default = "alpha_default")]
-    pub alpha: f32,
+    /// Goal stiffness; default: matched to the material with the FLSM step (see
+    /// [`crate::match_flsm`]), or 0.8 when `hybrid.substeps` is given.
+    pub alpha: Option<f32>,
     /// Per-region damping.
     #[serde(default = "region_damping_default")]
     pub region_damping: f32,
@@ -122,16 +122,15 @@ pub struct FlsmSpec {
 fn w_default() -> usize {
     1
 }
-fn alpha_default() -> f32 {
-    0.8
-}
+/// `flsm.alpha` when `hybrid.substeps` is given and `flsm.alpha` is not.
+pub const ALPHA_DEFAULT: f32 = 0.8;
 fn region_damping_default() -> f32 {
     0.1
 }
 
 impl Default for FlsmSpec {
     fn default() -> Self {
-        Self { w: w_default(), alpha: alpha_default(), region_damping: region_damping_default() }
+        Self { w: w_default(), alpha: None, region_damping: region_damping_default() }
     }
 }
 
@@ -144,24 +143,15 @@ pub struct HybridSpec {
     pub ratio: f64,
     /// Operational region; default centre: the body's centroid, radius from `ratio`.
     pub operational: Option<OperationalSpec>,
-    /// Interface pull, N/m.
-    #[serde(default = "beta_default")]
-    pub beta: f64,
-    /// TLED steps per FLSM step.
-    #[serde(default = "substeps_default")]
-    pub substeps: usize,
-}
-
-fn beta_default() -> f64 {
-    200.0
-}
-fn substeps_default() -> usize {
-    10
+    /// Interface pull, N/m; default `2.5 E cell` (see [`crate::match_flsm`]).
+    pub beta: Option<f64>,
+    /// TLED steps per FLSM step; default: the FLSM step matched to the material.
+    pub substeps: Option<usize>,
 }
 
 impl Default for HybridSpec {
     fn default() -> Self {
-        Self { ratio: 1.0, operational: None, beta: beta_default(), substeps: substeps_default() }
+        Self { ratio: 1.0, operational: None, beta: None, substeps: None }
     }
 }
 

@@ -7,6 +7,7 @@ use crate::dynamics::{Divergence, Integrator, Prescribed};
 use crate::embed::Embedding;
 use crate::flsm::{Flsm, FlsmParams};
 use crate::mesh::TriMesh;
+use crate::operational::HybridSteps;
 use crate::scenario::{BoxSpec, Scenario};
 use crate::stability::{self, StabilityLimit};
 use crate::tled::{Integration, Tled, TledParams};
@@ -80,8 +81,8 @@ struct FlsmPart {
     flsm: Flsm,
     active: Vec<bool>,
     interface: Vec<u32>,
-    beta: f32,
-    substeps: usize,
+    /// FLSM's step and stiffness and the interface pull.
+    steps: HybridSteps,
     x: Vec<Vector3<f32>>,
     v: Vec<Vector3<f32>>,
     goals: Vec<Vector3<f32>>,
@@ -441,13 +442,23 @@ impl Simulation {
             Integrator::new(mass, prescribed, s.report.reaction.len(), s.run.damping as f32, dt as f32, speed_limit);
 
         let flsm = if roles.iter().any(|&r| r != NodeRole::Tled) && cells.len() < lattice.cells.len() {
-            if !(s.hybrid.beta.is_finite() && s.hybrid.beta >= 0.0) {
-                return Err(invalid("hybrid.beta", format!("must be >= 0, got {}", s.hybrid.beta)));
+            if let Some(beta) = s.hybrid.beta
+                && !(beta.is_finite() && beta >= 0.0)
+            {
+                return Err(invalid("hybrid.beta", format!("must be >= 0, got {beta}")));
             }
-            if s.hybrid.substeps == 0 {
+            if s.hybrid.substeps == Some(0) {
                 return Err(invalid("hybrid.substeps", "must be at least 1"));
             }
-            let fp = FlsmParams { w: s.flsm.w, alpha: s.flsm.alpha, region_damping: s.flsm.region_damping };
+            if let Some(alpha) = s.flsm.alpha
+                && !(alpha > 0.0 && alpha <= 1.0)
+            {
+                return Err(invalid("flsm.alpha", format!("must be in (0, 1], got {alpha}")));
+            }
+            let given = s.hybrid.substeps.map(|n| (n, s.flsm.alpha.unwrap_or(crate::scenario::ALPHA_DEFAULT)));
+            let steps =
+                crate::match_flsm(dt, lattice.cell, &material, given, s.flsm.alpha, s.hybrid.beta.map(|b| b as f32));
+            let fp = FlsmParams { w: s.flsm.w, alpha: steps.alpha, region_damping: s.flsm.region_damping };
             let flsm = Flsm::new(&lattice, &masses64, fp).map_err(|e| invalid("flsm", e.to_string()))?;
             let active: Vec<bool> = roles.iter().map(|&r| r == NodeRole::Flsm).collect();
             let interface = (0..n as u32).filter(|&i| roles[i as usize] == NodeRole::Interface).collect();
@@ -455,8 +466,7 @@ impl Simulation {
                 flsm,
                 active,
                 interface,
-                beta: s.hybrid.beta as f32,
-                substeps: s.hybrid.substeps,
+                steps,
                 x: vec![Vector3::zeros(); n],
                 v: vec![Vector3::zeros(); n],
                 goals: vec![Vector3::zeros(); n],
@@ -467,7 +477,7 @@ impl Simulation {
         let mut integrator = integrator;
         if let Some(part) = &flsm {
             for &i in &part.interface {
-                integrator.implicit_stiffness[i as usize] = part.beta;
+                integrator.implicit_stiffness[i as usize] = part.steps.beta;
             }
             integrator.frozen.clone_from(&part.active);
         }
@@ -508,7 +518,12 @@ impl Simulation {
 
     /// TLED steps per call of [`Simulation::advance`].
     pub fn steps_per_advance(&self) -> usize {
-        self.flsm.as_ref().map_or(1, |f| f.substeps)
+        self.flsm.as_ref().map_or(1, |f| f.steps.substeps)
+    }
+
+    /// The hybrid's FLSM step, FLSM stiffness and interface pull (`None`: all TLED).
+    pub fn hybrid_steps(&self) -> Option<HybridSteps> {
+        self.flsm.as_ref().map(|f| f.steps)
     }
 
     /// Cells simulated by TLED.
@@ -527,7 +542,7 @@ impl Simulation {
             return self.tled_step(false);
         };
         // FLSM step over the whole lattice, moving only FLSM nodes.
-        let dt_f = self.integrator.dt * part.substeps as f32;
+        let dt_f = self.integrator.dt * part.steps.substeps as f32;
         for i in 0..self.rest.len() {
             part.x[i] = self.rest[i] + self.integrator.u[i];
         }
@@ -549,7 +564,7 @@ impl Simulation {
                 self.integrator.u_prev[i] = u - part.v[i] * self.integrator.dt;
             }
         }
-        for _ in 0..part.substeps {
+        for _ in 0..part.steps.substeps {
             self.tled_step(true)?;
         }
         Ok(())
@@ -565,7 +580,7 @@ impl Simulation {
             // frozen in the integrator during the sub-steps.
             for &i in &part.interface {
                 let i = i as usize;
-                self.f_ext[i] += (part.goals[i] - self.rest[i]) * part.beta;
+                self.f_ext[i] += (part.goals[i] - self.rest[i]) * part.steps.beta;
             }
         }
         let tled = &self.tled;

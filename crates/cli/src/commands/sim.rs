@@ -97,6 +97,8 @@ struct Report<'a> {
     scenario: &'a Path,
     backend: &'a str,
     lattice: LatticeInfo,
+    /// The hybrid's FLSM step (in TLED steps), FLSM stiffness and interface pull; null: all TLED.
+    hybrid: Option<hullcut_sim::HybridSteps>,
     stability: Stability,
     steps: u64,
     simulated_time_s: f64,
@@ -220,6 +222,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             realtime_factor: simulated / secs,
         },
         lattice,
+        hybrid: sim.hybrid_steps(),
         steps,
         simulated_time_s: simulated,
         stable: failure.is_none(),
@@ -261,6 +264,12 @@ fn print_summary(r: &Report) {
         l.interface_nodes,
         l.cell_m * 1e3
     );
+    if let Some(h) = &r.hybrid {
+        println!(
+            "hybrid: an FLSM step every {} TLED steps, FLSM alpha {:.3}, interface beta {:.1} N/m",
+            h.substeps, h.alpha, h.beta
+        );
+    }
     let s = &r.stability;
     println!(
         "dt {:.4e} s (critical {:.4e} s = {:.3} L/c, omega_max {:.4e} rad/s)",

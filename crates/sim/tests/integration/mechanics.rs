@@ -129,3 +129,37 @@ fn hybrid_with_everything_operational_equals_tled() {
     let sag = hybrid.integrator.u.iter().map(|u| -u.z).fold(0.0f32, f32::max);
     assert!(sag > 0.0, "the hybrid does not sag");
 }
+
+/// RMS and largest node displacement difference between two runs of one lattice, metres.
+fn displacement_difference(a: &Simulation, b: &Simulation) -> (f64, f64) {
+    let d: Vec<f64> = a.integrator.u.iter().zip(&b.integrator.u).map(|(p, q)| f64::from((p - q).norm())).collect();
+    ((d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt(), d.iter().copied().fold(0.0, f64::max))
+}
+
+#[test]
+fn a_hybrid_with_flsm_matched_to_the_material_sags_like_tled() {
+    // The organ sagging under gravity (0.3 s, nearly settled at damping 30/s). By default FLSM's
+    // step and stiffness and the interface pull are matched to the material (`match_flsm`); the
+    // seed's settings (an FLSM step every 10 TLED steps, β = 200 N/m) make FLSM hundreds of times
+    // softer than the tissue, and its nodes sag far more.
+    let scenario = |ratio: f64, extra: &str| {
+        let text = format!(
+            "[body]\nshape = \"organ\"\ncell = 0.01\n[hybrid]\nratio = {ratio}\n{extra}\
+             [[boundary]]\nbox = {{ min = [-1.0, -1.0, -0.001], max = [1.0, 1.0, 0.004] }}\nfix = [\"x\", \"y\", \"z\"]\n\
+             [run]\nduration = 0.3\ndamping = 30.0\ngravity = [0.0, 0.0, -9.81]\n"
+        );
+        Scenario::parse(&text, "organ").expect("scenario")
+    };
+    let tled = run(&scenario(1.0, ""));
+    let sag = tled.integrator.u.iter().map(|u| f64::from(-u.z)).fold(0.0, f64::max);
+    let matched = run(&scenario(0.4, ""));
+    let steps = matched.hybrid_steps().expect("a hybrid");
+    let seed = run(&scenario(0.4, "substeps = 10\nbeta = 200.0\n"));
+    let (rms_matched, max_matched) = displacement_difference(&tled, &matched);
+    let (rms_seed, max_seed) = displacement_difference(&tled, &seed);
+    eprintln!(
+        "sag {sag:.3e} m; matched ({steps:?}): rms {rms_matched:.3e} max {max_matched:.3e}; seed: rms {rms_seed:.3e} max {max_seed:.3e}"
+    );
+    assert!(rms_matched < 0.15 * sag, "matched hybrid: rms {rms_matched} m against a sag of {sag} m");
+    assert!(rms_seed > 3.0 * rms_matched, "seed settings: rms {rms_seed} m, matched {rms_matched} m");
+}
