@@ -55,9 +55,11 @@ const NONE: u32 = u32::MAX;
 const POLAR_MAX_ITER: u32 = 12;
 /// Polar decomposition stops when the rotation update is below this angle, radians.
 const POLAR_TOL: f64 = 1e-10;
-/// ... or when a full Newton step was below this angle: what is left is of its square, ~1e-10 rad
-/// (1e-12 m of goal in a 5 mm region).
-const POLAR_NEWTON_TOL: f64 = 1e-5;
+/// ... or when a full Newton step was below this angle: it is taken without a check, and what is
+/// left is of its square, ~1e-6 rad (5e-9 m of goal in a 5 mm region), removed by the next call
+/// from this warm start. Between FLSM steps regions turn by less than this, so one iteration per
+/// region and step is the rule (1e-5 took two: 2x the cost).
+const POLAR_NEWTON_TOL: f64 = 1e-3;
 /// Halvings of a polar-decomposition step that would lower `tr(Rᵀ A)` before giving up.
 const POLAR_BACKTRACK: usize = 8;
 /// Smallest curvature allowed in a Newton step of the polar decomposition (`|A| = 1`, where a
@@ -546,7 +548,7 @@ fn extract_rotation(a: &Matrix3<f64>, floor: f64, q: &mut UnitQuaternion<f64>) -
     if !(norm.is_finite() && norm > floor) {
         return 0;
     }
-    let a = a / norm;
+    let a = a * (1.0 / norm);
     // q ⊗ (1, δ/2), renormalised: a turn by 2 atan(|δ|/2), which is |δ| to third order.
     let turn = |q: &UnitQuaternion<f64>, delta: Vector3<f64>| {
         let half = delta * 0.5;
@@ -601,33 +603,32 @@ fn ascent_step(h: &Matrix3<f64>, g: &Vector3<f64>) -> (Vector3<f64>, bool) {
     (step, false)
 }
 
-/// Solves `h x = g` for symmetric `h` (lower triangle read) by Cholesky, if every pivot is positive
-/// and at least `min_pivot`.
+/// Solves `h x = g` for symmetric `h` (lower triangle read) by `L D Lᵀ` (Cholesky without its
+/// square roots), if every pivot `D_k` is positive and at least `min_pivot`.
 fn cholesky_solve(h: &Matrix3<f64>, g: &Vector3<f64>, min_pivot: f64) -> Option<Vector3<f64>> {
     let pivot_ok = |d: f64| d > 0.0 && d >= min_pivot;
     let d0 = h[(0, 0)];
     if !pivot_ok(d0) {
         return None;
     }
-    let l00 = d0.sqrt();
-    let (l10, l20) = (h[(1, 0)] / l00, h[(2, 0)] / l00);
-    let d1 = h[(1, 1)] - l10 * l10;
+    let inv0 = 1.0 / d0;
+    let (l10, l20) = (h[(1, 0)] * inv0, h[(2, 0)] * inv0);
+    let d1 = h[(1, 1)] - l10 * h[(1, 0)];
     if !pivot_ok(d1) {
         return None;
     }
-    let l11 = d1.sqrt();
-    let l21 = (h[(2, 1)] - l20 * l10) / l11;
-    let d2 = h[(2, 2)] - l20 * l20 - l21 * l21;
+    let inv1 = 1.0 / d1;
+    let l21 = (h[(2, 1)] - l20 * h[(1, 0)]) * inv1;
+    let d2 = h[(2, 2)] - l20 * h[(2, 0)] - l21 * l21 * d1;
     if !pivot_ok(d2) {
         return None;
     }
-    let l22 = d2.sqrt();
-    let y0 = g.x / l00;
-    let y1 = (g.y - l10 * y0) / l11;
-    let y2 = (g.z - l20 * y0 - l21 * y1) / l22;
-    let x2 = y2 / l22;
-    let x1 = (y1 - l21 * x2) / l11;
-    let x0 = (y0 - l10 * x1 - l20 * x2) / l00;
+    let z0 = g.x;
+    let z1 = g.y - l10 * z0;
+    let z2 = g.z - l20 * z0 - l21 * z1;
+    let x2 = z2 / d2;
+    let x1 = z1 * inv1 - l21 * x2;
+    let x0 = z0 * inv0 - l10 * x1 - l20 * x2;
     Some(Vector3::new(x0, x1, x2))
 }
 

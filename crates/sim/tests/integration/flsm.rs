@@ -313,18 +313,23 @@ fn flsm_throughput() {
     let x0 = rest(&lattice);
     let f = vec![V::zeros(); x0.len()];
     println!("threads: {}", rayon::current_num_threads());
+    // On a rayon worker, as `hullcut sim` steps: parallel passes start on the stepping thread.
+    rayon::scope(|_| flsm_throughput_on(&lattice, &x0, &f, &mut rnd));
+}
+
+fn flsm_throughput_on(lattice: &Lattice, x0: &[V], f: &[V], rnd: &mut impl FnMut() -> f32) {
     for w in [1, 2, 4] {
-        let (mut flsm, _) = setup(&lattice, FlsmParams { w, ..FlsmParams::default() });
+        let (mut flsm, _) = setup(lattice, FlsmParams { w, ..FlsmParams::default() });
         let mut x: Vec<V> = x0.iter().map(|p| p + V::new(rnd(), rnd(), rnd()) * 0.0005).collect();
         let mut v = vec![V::zeros(); x.len()];
         for _ in 0..5 {
-            flsm.step(&mut x, &mut v, &f, 0.01, None);
+            flsm.step(&mut x, &mut v, f, 0.01, None);
         }
         let steps = 100;
         let start = Instant::now();
         let mut iterations = 0;
         for _ in 0..steps {
-            flsm.step(&mut x, &mut v, &f, 0.01, None);
+            flsm.step(&mut x, &mut v, f, 0.01, None);
             iterations += flsm.polar_iterations();
         }
         let secs = start.elapsed().as_secs_f64();
