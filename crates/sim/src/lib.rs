@@ -34,6 +34,7 @@ pub mod stability;
 pub mod sweep;
 pub mod tled;
 mod tled_batch;
+mod tled_slabs;
 pub mod vna;
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};

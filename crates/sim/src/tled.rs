@@ -3,15 +3,17 @@
 //! Every cell of the lattice is a cube of the same side, so all cells share their shape-function
 //! derivatives and hourglass vectors: per-cell storage is the node list and the material volume.
 //! Forces are computed in two passes without atomics or locks: an element pass (in parallel over
-//! slabs of cells, eight cells per SIMD batch) writes each cell's eight nodal forces, then a node pass
-//! gathers them through the node → (cell, corner) list. Both run under `pulp`'s runtime dispatch.
+//! slabs of cells, eight cells per SIMD batch) adds each cell's eight nodal forces into its slab's
+//! node accumulators ([`crate::tled_slabs`]), then a node pass gathers each node's one or two slab
+//! sums. Both run under `pulp`'s runtime dispatch.
 
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::lattice::{CORNERS, Lattice};
 use crate::material::{first_piola, regularize};
-use crate::tled_batch::{BatchForces, COMPONENT_STRIDE, LANES, OnePointConstants};
+use crate::tled_batch::{BatchForces, LANES, OnePointConstants};
+use crate::tled_slabs::{SlabAccumulators, Slabs};
 use crate::{Material, SimError};
 
 /// Quadrature of the hexahedra.
@@ -89,13 +91,10 @@ pub struct Tled {
     /// ν = 0.45 with λ + 2μ, 0.94x with 4μ; at ν = 0.3 the two differ by 14%).
     hg_kappa_full: f32,
     cell_volume_full: f32,
-    /// Node → (cell, corner) gather list, as offsets into the flattened batch forces.
-    gather_offsets: Vec<u32>,
-    gather_entries: Vec<u32>,
     /// Per batch of [`LANES`] cells: whether its corners load as contiguous runs.
     contiguous: Vec<bool>,
-    /// Scratch: each batch's nodal forces.
-    cell_forces: Vec<BatchForces>,
+    /// The slabs' node accumulators, for the slab size last used.
+    slabs: Slabs,
     /// The SIMD instruction sets found at run time.
     arch: pulp::Arch,
     /// Cells regularized in the last force evaluation.
@@ -140,7 +139,7 @@ impl Tled {
             params,
             lambda,
             mu,
-            cell_forces: vec![[[[0.0; LANES]; 8]; 3]; cell_nodes.len().div_ceil(LANES)],
+            slabs: Slabs::default(),
             contiguous: cell_nodes.chunks(LANES).map(crate::tled_batch::is_contiguous).collect(),
             arch: pulp::Arch::new(),
             cell_nodes,
@@ -151,37 +150,18 @@ impl Tled {
             signs: corner_signs(),
             hg_kappa_full,
             cell_volume_full: full,
-            gather_offsets: Vec::new(),
-            gather_entries: Vec::new(),
             inverted: 0,
             node_count: lattice.node_count(),
         };
-        tled.build_gather();
+        tled.slabs = Slabs::new(&tled.cell_nodes, tled.node_count, tled.slab_batches());
         Ok(tled)
     }
 
-    fn build_gather(&mut self) {
-        let n = self.node_count;
-        let mut offsets = vec![0u32; n + 1];
-        for c in &self.cell_nodes {
-            for &node in c {
-                offsets[node as usize + 1] += 1;
-            }
-        }
-        for i in 1..=n {
-            offsets[i] += offsets[i - 1];
-        }
-        let mut fill = offsets.clone();
-        let mut entries = vec![0u32; offsets[n] as usize];
-        for (ci, c) in self.cell_nodes.iter().enumerate() {
-            for (corner, &node) in c.iter().enumerate() {
-                let slot = &mut fill[node as usize];
-                entries[*slot as usize] = crate::tled_batch::force_offset(ci, corner) as u32;
-                *slot += 1;
-            }
-        }
-        self.gather_offsets = offsets;
-        self.gather_entries = entries;
+    /// Batches per slab of the element pass: a few slabs per thread, so work balances without the
+    /// per-task overhead of fine chunks.
+    fn slab_batches(&self) -> usize {
+        let threads = rayon::current_num_threads().max(1);
+        self.cell_nodes.len().div_ceil(LANES).div_ceil(4 * threads).max(8)
     }
 
     /// Number of simulated cells.
@@ -210,83 +190,65 @@ impl Tled {
     pub fn internal_forces(&mut self, u: &[Vector3<f32>], out: &mut [Vector3<f32>]) {
         self.element_pass(u);
         let threads = rayon::current_num_threads().max(1);
-        let this = &*self;
-        let arch = self.arch;
+        let slabs = &self.slabs;
         let node_chunk = out.len().div_ceil(4 * threads).max(256);
-        out.par_chunks_mut(node_chunk)
-            .enumerate()
-            .for_each(|(k, nodes)| arch.dispatch(NodePass { tled: this, first: k * node_chunk, out: nodes }));
+        out.par_chunks_mut(node_chunk).enumerate().for_each(|(k, nodes)| {
+            for (i, f) in nodes.iter_mut().enumerate() {
+                *f = slabs.node_force(k * node_chunk + i);
+            }
+        });
     }
 
-    /// The element pass alone: every cell's nodal forces for displacements `u`, kept for
-    /// [`Tled::node_force`] (which an integrator can call as it updates each node, saving a pass).
+    /// The element pass alone: every cell's nodal forces for displacements `u`, summed per slab,
+    /// for [`Tled::node_force`] (which an integrator can call as it updates each node, saving a
+    /// pass).
     pub fn element_pass(&mut self, u: &[Vector3<f32>]) {
-        let threads = rayon::current_num_threads().max(1);
-        // Contiguous slabs of batches (cells are in grid order): a few per thread, so work balances
-        // without the per-task overhead of fine chunks.
-        let chunk = self.cell_forces.len().div_ceil(4 * threads).max(8);
-        // Take the scratch buffer out so the element pass can read `self` while writing it.
-        let mut cell_forces = std::mem::take(&mut self.cell_forces);
+        let chunk = self.slab_batches();
+        if self.slabs.chunk != chunk {
+            self.slabs = Slabs::new(&self.cell_nodes, self.node_count, chunk);
+        }
+        // Take the accumulators out so the slabs can read `self` while writing them.
+        let mut slabs = std::mem::take(&mut self.slabs);
         let this = &*self;
         let arch = self.arch;
-        let inverted: usize = cell_forces
-            .par_chunks_mut(chunk)
+        let inverted: usize = slabs
+            .split()
+            .into_par_iter()
             .enumerate()
-            .map(|(k, forces)| arch.dispatch(ElementPass { tled: this, first: k * chunk, u, out: forces }))
+            .map(|(k, out)| arch.dispatch(SlabPass { tled: this, first: k * chunk, batches: chunk, u, out }))
             .sum();
-        self.cell_forces = cell_forces;
+        self.slabs = slabs;
         self.inverted = inverted;
     }
 
     /// Node `n`'s internal force from the last [`Tled::element_pass`] (zero outside the cells).
     #[inline]
     pub fn node_force(&self, n: usize) -> Vector3<f32> {
-        self.gather(n, self.cell_forces.as_flattened().as_flattened().as_flattened())
+        self.slabs.node_force(n)
     }
 
-    /// Node `n`'s force from the flattened batch forces `cf`.
+    /// Batch `b`'s nodal forces into `out`; returns the number of cells whose F was regularized.
     #[inline(always)]
-    fn gather(&self, n: usize, cf: &[f32]) -> Vector3<f32> {
-        let (mut x, mut y, mut z) = (0.0, 0.0, 0.0);
-        for &o in &self.gather_entries[self.gather_offsets[n] as usize..self.gather_offsets[n + 1] as usize] {
-            let o = o as usize;
-            // One bounds check for the three components.
-            let v = &cf[o..=o + 2 * COMPONENT_STRIDE];
-            x += v[0];
-            y += v[COMPONENT_STRIDE];
-            z += v[2 * COMPONENT_STRIDE];
-        }
-        Vector3::new(x, y, z)
-    }
-
-    /// The element pass over batches `first..first + out.len()`; returns the number of cells whose
-    /// F was regularized.
-    #[inline(always)]
-    fn element_batches(&self, first: usize, u: &[Vector3<f32>], out: &mut [BatchForces]) -> usize {
-        let consts = self.one_point_constants();
-        let one_point = self.params.integration == Integration::OnePoint;
+    fn batch_forces(&self, consts: &OnePointConstants, b: usize, u: &[Vector3<f32>], out: &mut BatchForces) -> usize {
         let cells = self.cell_nodes.len();
-        let mut inverted = 0;
-        for (i, batch) in out.iter_mut().enumerate() {
-            let b = first + i;
-            let (lo, hi) = (b * LANES, ((b + 1) * LANES).min(cells));
-            if one_point && hi - lo == LANES {
-                let ue = crate::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
-                let mut volume = [0.0; LANES];
-                volume.copy_from_slice(&self.volume[lo..hi]);
-                if crate::tled_batch::forces(&consts, ue, &volume, batch) {
-                    continue;
-                }
+        let (lo, hi) = (b * LANES, ((b + 1) * LANES).min(cells));
+        if self.params.integration == Integration::OnePoint && hi - lo == LANES {
+            let ue = crate::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
+            let mut volume = [0.0; LANES];
+            volume.copy_from_slice(&self.volume[lo..hi]);
+            if crate::tled_batch::forces(consts, ue, &volume, out) {
+                return 0;
             }
-            // Scalar: a short last batch, a batch with a cell to regularize, or Gauss quadrature.
-            *batch = [[[0.0; LANES]; 8]; 3];
-            for c in lo..hi {
-                let mut f = [Vector3::zeros(); 8];
-                inverted += usize::from(self.cell_force(c, u, &mut f));
-                for a in 0..8 {
-                    for r in 0..3 {
-                        batch[r][a][c - lo] = f[a][r];
-                    }
+        }
+        // Scalar: a short last batch, a batch with a cell to regularize, or Gauss quadrature.
+        *out = [[[0.0; LANES]; 8]; 3];
+        let mut inverted = 0;
+        for c in lo..hi {
+            let mut f = [Vector3::zeros(); 8];
+            inverted += usize::from(self.cell_force(c, u, &mut f));
+            for a in 0..8 {
+                for r in 0..3 {
+                    out[r][a][c - lo] = f[a][r];
                 }
             }
         }
@@ -373,39 +335,59 @@ impl Tled {
 }
 
 /// The element pass over one slab of batches, as a `pulp` operation: dispatched to the widest SIMD
-/// instruction set the CPU has, with the kernel inlined into it.
-struct ElementPass<'a> {
+/// instruction set the CPU has, with the kernel inlined into it. Returns the number of cells whose
+/// F was regularized.
+struct SlabPass<'a> {
     tled: &'a Tled,
+    /// First batch of the slab.
     first: usize,
+    batches: usize,
     u: &'a [Vector3<f32>],
-    out: &'a mut [BatchForces],
+    out: SlabAccumulators<'a>,
 }
 
-impl pulp::WithSimd for ElementPass<'_> {
+impl pulp::WithSimd for SlabPass<'_> {
     type Output = usize;
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> usize {
-        self.tled.element_batches(self.first, self.u, self.out)
-    }
-}
-
-/// The node pass over one run of nodes: each node sums its cells' corner forces.
-struct NodePass<'a> {
-    tled: &'a Tled,
-    first: usize,
-    out: &'a mut [Vector3<f32>],
-}
-
-impl pulp::WithSimd for NodePass<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let forces = self.tled.cell_forces.as_flattened().as_flattened().as_flattened();
-        for (i, f) in self.out.iter_mut().enumerate() {
-            *f = self.tled.gather(self.first + i, forces);
+        let SlabPass { tled, first, batches, u, out } = self;
+        let SlabAccumulators { first_node, acc: [ax, ay, az] } = out;
+        let mut acc = [ax, ay, az];
+        for a in &mut acc {
+            a.fill(0.0);
         }
+        let consts = tled.one_point_constants();
+        let cells = tled.cell_nodes.len();
+        let end = (first + batches).min(cells.div_ceil(LANES));
+        let mut inverted = 0;
+        let mut f: BatchForces = [[[0.0; LANES]; 8]; 3];
+        for b in first..end {
+            inverted += tled.batch_forces(&consts, b, u, &mut f);
+            let (lo, hi) = (b * LANES, ((b + 1) * LANES).min(cells));
+            if hi - lo == LANES && tled.contiguous[b] {
+                // Corner a of lane l is node nodes[lo][a] + l: eight consecutive accumulators.
+                for a in 0..8 {
+                    let n0 = tled.cell_nodes[lo][a] as usize - first_node;
+                    for r in 0..3 {
+                        let run = &mut acc[r][n0..n0 + LANES];
+                        for l in 0..LANES {
+                            run[l] += f[r][a][l];
+                        }
+                    }
+                }
+            } else {
+                for c in lo..hi {
+                    for a in 0..8 {
+                        let n = tled.cell_nodes[c][a] as usize - first_node;
+                        for r in 0..3 {
+                            acc[r][n] += f[r][a][c - lo];
+                        }
+                    }
+                }
+            }
+        }
+        inverted
     }
 }
 
@@ -434,17 +416,28 @@ mod tests {
         tled.internal_forces(&u, &mut gathered);
         let mut expected = vec![Vector3::zeros(); lattice.node_count()];
         let mut scale = 0.0f32;
-        let flat = tled.cell_forces.as_flattened().as_flattened().as_flattened();
         for c in 0..tled.cell_count() {
             let mut scalar = [Vector3::zeros(); 8];
             tled.cell_force(c, &u, &mut scalar);
             for a in 0..8 {
-                let o = crate::tled_batch::force_offset(c, a);
-                let batched = Vector3::new(flat[o], flat[o + COMPONENT_STRIDE], flat[o + 2 * COMPONENT_STRIDE]);
-                let diff = (scalar[a] - batched).norm();
                 scale = scale.max(scalar[a].norm());
-                assert!(diff <= 1e-5 * scalar[a].norm().max(1e-3), "{dims:?} cell {c} corner {a}: {diff}");
                 expected[tled.cell_nodes[c][a] as usize] += scalar[a];
+            }
+        }
+        // Each batch's forces against the scalar kernel.
+        let consts = tled.one_point_constants();
+        for b in 0..tled.cell_count().div_ceil(LANES) {
+            let mut batch = [[[0.0; LANES]; 8]; 3];
+            tled.batch_forces(&consts, b, &u, &mut batch);
+            for c in b * LANES..((b + 1) * LANES).min(tled.cell_count()) {
+                let mut scalar = [Vector3::zeros(); 8];
+                tled.cell_force(c, &u, &mut scalar);
+                for a in 0..8 {
+                    let l = c - b * LANES;
+                    let batched = Vector3::new(batch[0][a][l], batch[1][a][l], batch[2][a][l]);
+                    let diff = (scalar[a] - batched).norm();
+                    assert!(diff <= 1e-5 * scalar[a].norm().max(1e-3), "{dims:?} cell {c} corner {a}: {diff}");
+                }
             }
         }
         assert!(scale > 0.0);

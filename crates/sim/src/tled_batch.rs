@@ -23,12 +23,6 @@ pub(crate) type BatchForces = [[L; 8]; 3];
 /// A batch's corner displacements: `[component][corner][lane]`.
 pub(crate) type BatchDisplacements = [[L; 8]; 3];
 
-/// Floats in one [`BatchForces`].
-pub(crate) const BATCH_FLOATS: usize = 8 * 3 * LANES;
-
-/// Floats between the components of one force in the flattened batch forces.
-pub(crate) const COMPONENT_STRIDE: usize = 8 * LANES;
-
 #[inline(always)]
 fn splat(x: f32) -> L {
     [x; LANES]
@@ -42,12 +36,6 @@ macro_rules! lanes {
         }
         out
     }};
-}
-
-/// Offset of cell `c`'s corner `a` force (its x component; y and z follow [`COMPONENT_STRIDE`]
-/// apart) in the flattened forces of all batches.
-pub(crate) fn force_offset(c: usize, a: usize) -> usize {
-    (c / LANES) * BATCH_FLOATS + a * LANES + c % LANES
 }
 
 /// Whether a batch's cells are a run along x of one lattice row with nodes numbered in grid order:
