@@ -91,6 +91,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         // On a rayon worker, so each step's parallel passes start on the stepping thread (as in
         // `hullcut sim`).
         Target::Sim => rayon::scope(|_| -> anyhow::Result<()> {
+            kernels(&args.out, quick)?;
             scaling(&args.out, quick)?;
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
@@ -129,6 +130,84 @@ fn block(n: usize, ratio: f64) -> anyhow::Result<Scenario> {
          [[boundary]]\nfaces = [\"z-\"]\nfix = [\"x\", \"y\", \"z\"]\n[run]\ndamping = 20.0\ngravity = [0.0, 0.0, -9.81]\n"
     );
     Ok(Scenario::parse(&text, "bench block")?)
+}
+
+/// Kernel throughput on one and on two threads (the thread-scaling check): TLED internal forces
+/// (element pass and node pass), a whole TLED step, and an FLSM step (w = 1), on a cube of
+/// 5 mm cells of the liver material with a smooth deformation.
+fn kernels(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let side = if quick { 10 } else { 30 };
+    let lattice = Lattice::block(Point3::origin(), 0.005, [side; 3]);
+    let material = Material::default();
+    let u: Vec<Vector3<f32>> = lattice
+        .rest
+        .iter()
+        .map(|p| Vector3::new(0.05 * p.y, 0.02 * p.z, 0.04 * p.x * p.x / (side as f64 * 0.005)).cast::<f32>())
+        .collect();
+    let masses = lattice.lumped_masses(material.density);
+    let min_wall = if quick { 0.02 } else { 1.0 };
+    // Calls per second of `op`, over at least `min_wall` seconds.
+    let rate = |op: &mut dyn FnMut()| {
+        op();
+        let t0 = Instant::now();
+        let mut calls = 0u64;
+        while calls < 3 || t0.elapsed().as_secs_f64() < min_wall {
+            op();
+            calls += 1;
+        }
+        calls as f64 / t0.elapsed().as_secs_f64()
+    };
+    let mut csv = String::from("kernel,threads,nodes,cells,ms_per_call,million_per_s\n");
+    let mut single = std::collections::HashMap::new();
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("a thread pool")?;
+        let rows = pool.install(|| -> anyhow::Result<Vec<(&'static str, f64, f64)>> {
+            let mut tled = Tled::new(&lattice, None, &material, TledParams::default())?;
+            let mut forces = vec![Vector3::zeros(); lattice.node_count()];
+            let forces_rate = rate(&mut || tled.internal_forces(&u, &mut forces));
+            let mass32: Vec<f32> = masses.iter().map(|&m| m as f32).collect();
+            let mut it = hullcut_sim::dynamics::Integrator::new(mass32, Vec::new(), 0, 0.0, 1e-5, f32::INFINITY);
+            it.u.clone_from(&u);
+            it.u_prev.clone_from(&u);
+            let zero = vec![Vector3::zeros(); lattice.node_count()];
+            let mut failed = false;
+            let step_rate = rate(&mut || {
+                tled.element_pass(&it.u);
+                let model = &tled;
+                failed |= it.advance_with(|i| model.node_force(i), &zero).is_err();
+            });
+            anyhow::ensure!(!failed, "the benchmark step diverged");
+            let mut flsm = hullcut_sim::Flsm::new(&lattice, &masses, hullcut_sim::FlsmParams::default())?;
+            let mut x: Vec<Vector3<f32>> =
+                lattice.rest.iter().zip(&u).map(|(p, d)| p.coords.cast::<f32>() + d).collect();
+            let mut v = zero.clone();
+            let flsm_rate = rate(&mut || flsm.step(&mut x, &mut v, &zero, 5e-4, None));
+            let cells = lattice.cells.len() as f64;
+            let nodes = lattice.node_count() as f64;
+            Ok(vec![
+                ("tled_internal_forces", forces_rate, cells),
+                ("tled_step", step_rate, cells),
+                ("flsm_step", flsm_rate, nodes),
+            ])
+        })?;
+        for (kernel, calls_per_s, items) in rows {
+            let per_s = calls_per_s * items / 1e6;
+            let _ = writeln!(
+                csv,
+                "{kernel},{threads},{},{},{:.4},{per_s:.2}",
+                lattice.node_count(),
+                lattice.cells.len(),
+                1e3 / calls_per_s
+            );
+            if threads == 1 {
+                single.insert(kernel, per_s);
+            } else {
+                let one = single.get(kernel).copied().unwrap_or(f64::NAN);
+                println!("{kernel}: {one:.1} M/s on 1 thread, {per_s:.1} M/s on 2 ({:.2}x)", per_s / one);
+            }
+        }
+    }
+    write(&out.join("kernels.csv"), &csv)
 }
 
 fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
@@ -222,8 +301,13 @@ fn collision(out: &Path) -> anyhow::Result<()> {
 }
 
 fn organ(cell: f64, ratio: f64, duration: f64) -> anyhow::Result<Scenario> {
+    organ_with(cell, ratio, duration, "")
+}
+
+/// [`organ`] with more `[hybrid]` keys.
+fn organ_with(cell: f64, ratio: f64, duration: f64, hybrid: &str) -> anyhow::Result<Scenario> {
     let text = format!(
-        "[body]\nshape = \"organ\"\ncell = {cell}\n[hybrid]\nratio = {ratio}\n\
+        "[body]\nshape = \"organ\"\ncell = {cell}\n[hybrid]\nratio = {ratio}\n{hybrid}\
          [[boundary]]\nbox = {{ min = [-1.0, -1.0, -0.001], max = [1.0, 1.0, 0.004] }}\nfix = [\"x\", \"y\", \"z\"]\n\
          [[load]]\nbox = {{ min = [-0.02, -0.02, 0.03], max = [0.02, 0.02, 0.1] }}\nforce = [0.0, 0.0, -0.5]\n\
          [run]\nduration = {duration}\ndamping = 30.0\ngravity = [0.0, 0.0, -9.81]\n"
@@ -233,14 +317,21 @@ fn organ(cell: f64, ratio: f64, duration: f64) -> anyhow::Result<Scenario> {
 
 fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
     let (cell, duration) = if quick { (0.01, 0.05) } else { (0.0062, 0.3) };
-    let ratios = [1.0, 0.8, 0.6, 0.4, 0.2, 0.0];
+    // FLSM matched to the material (the default), then the seed's settings (an FLSM step every 10
+    // TLED steps, β = 200 N/m): faster, and far softer than the tissue.
+    const SEED: &str = "substeps = 10\nbeta = 200.0\n";
+    let runs: Vec<(f64, &str, &str)> = [1.0, 0.8, 0.6, 0.4, 0.2, 0.0]
+        .iter()
+        .map(|&r| (r, "matched", ""))
+        .chain([0.8, 0.4, 0.0].iter().map(|&r| (r, "seed", SEED)))
+        .collect();
     let mut reference: Option<Vec<Vector3<f32>>> = None;
-    let mut csv = String::from("ratio,nodes,tled_cells,rms_error_mm,max_error_mm,ms_per_60hz_frame\n");
+    let mut csv = String::from("ratio,settings,nodes,tled_cells,rms_error_mm,max_error_mm,ms_per_60hz_frame\n");
     let mut series = Vec::new();
     let mut reference_ms = f64::NAN;
-    let pb = bar(ratios.len() as u64, "ratio");
-    for &r in &ratios {
-        let scenario = organ(cell, r, duration)?;
+    let pb = bar(runs.len() as u64, "ratio");
+    for &(r, settings, hybrid) in &runs {
+        let scenario = organ_with(cell, r, duration, hybrid)?;
         let mut sim = Simulation::from_scenario(&scenario)?;
         let t0 = Instant::now();
         while sim.time() < duration {
@@ -252,12 +343,17 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
         let errors: Vec<f64> = u.iter().zip(reference.iter()).map(|(a, b)| f64::from((a - b).norm()) * 1e3).collect();
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
         let max = errors.iter().copied().fold(0.0, f64::max);
-        let _ =
-            writeln!(csv, "{r},{},{},{rms:.6},{max:.6},{ms_per_frame:.4}", sim.lattice.node_count(), sim.tled_cells());
+        let _ = writeln!(
+            csv,
+            "{r},{settings},{},{},{rms:.6},{max:.6},{ms_per_frame:.4}",
+            sim.lattice.node_count(),
+            sim.tled_cells()
+        );
         // The all-TLED run is the reference (zero error by definition): it is in the CSV and the
         // chart's title, not on the log axis.
         if r < 1.0 {
-            series.push(Series { label: format!("ratio {r}"), points: vec![(ms_per_frame, rms)] });
+            let label = if settings == "seed" { format!("ratio {r}, seed's FLSM") } else { format!("ratio {r}") };
+            series.push(Series { label, points: vec![(ms_per_frame, rms)] });
         } else {
             reference_ms = ms_per_frame;
         }
