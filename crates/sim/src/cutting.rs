@@ -234,7 +234,7 @@ impl CutSim {
         let prescribed: Vec<Prescribed> = (0..cut.node_count())
             .filter(|&n| held(n))
             .flat_map(|n| {
-                (0..3).map(move |axis| Prescribed { node: n as u32, axis, target: 0.0, ramp: 0.0, group: None })
+                (0..3).map(move |axis| Prescribed { node: n as u32, axis, target: 0.0, ramp: 0.0, groups: 0 })
             })
             .collect();
         let g = Vector3::from(self.params.gravity).cast::<f32>();

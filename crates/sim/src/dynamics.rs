@@ -23,8 +23,9 @@ pub struct Prescribed {
     pub target: f32,
     /// Ramp duration, seconds (0: applied at once).
     pub ramp: f32,
-    /// Reaction group this component reports into, if any.
-    pub group: Option<u16>,
+    /// Reaction groups this component reports into, as a bit set (bit `g` for group `g`): a node
+    /// on two reaction faces counts toward both.
+    pub groups: u32,
 }
 
 /// The smooth ramp `s ↦ s³ (10 − 15 s + 6 s²)` (zero velocity and acceleration at both ends).
@@ -158,12 +159,16 @@ impl Integrator {
             let (n, k) = (p.node as usize, p.axis as usize);
             let value = p.target * ramp(t_next, p.ramp);
             self.next[n][k] = value;
-            if let Some(g) = p.group {
+            if p.groups != 0 {
                 let m = self.mass[n];
                 let acc = (value - 2.0 * self.u[n][k] + self.u_prev[n][k]) / dt2;
                 let vel = (value - self.u_prev[n][k]) / (2.0 * dt);
                 let r = m * (acc + self.damping * vel) + f_int(n)[k] - f_ext[n][k] + self.implicit_stiffness[n] * value;
-                self.reactions[g as usize][k] += f64::from(r);
+                for (g, reaction) in self.reactions.iter_mut().enumerate().take(32) {
+                    if p.groups & (1 << g) != 0 {
+                        reaction[k] += f64::from(r);
+                    }
+                }
             }
         }
         if !max_speed2.is_finite() || max_speed2.sqrt() > self.speed_limit {

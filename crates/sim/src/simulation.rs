@@ -305,14 +305,14 @@ impl Simulation {
             }
         }
         // Reaction groups.
-        let mut group_of = vec![None; 3 * n];
+        if s.report.reaction.len() > 32 {
+            return Err(invalid("report.reaction", format!("at most 32 faces, got {}", s.report.reaction.len())));
+        }
+        let mut group_of = vec![0u32; 3 * n];
         for (gi, face) in s.report.reaction.iter().enumerate() {
             for node in face_nodes(&lattice, face, "report.reaction")? {
                 for k in 0..3 {
-                    let i = 3 * node as usize + k;
-                    if group_of[i].is_none() {
-                        group_of[i] = Some(gi as u16);
-                    }
+                    group_of[3 * node as usize + k] |= 1 << gi;
                 }
             }
         }
@@ -325,7 +325,7 @@ impl Simulation {
                     axis: (i % 3) as u8,
                     target,
                     ramp,
-                    group: group_of[i],
+                    groups: group_of[i],
                 })
             })
             .collect();

@@ -440,7 +440,7 @@ mod tests {
         let held: Vec<u32> = (0..cut.node_count() as u32).filter(|&n| cut.rest[n as usize].x == 0.0).collect();
         let prescribed: Vec<Prescribed> = held
             .iter()
-            .flat_map(|&node| (0..3).map(move |axis| Prescribed { node, axis, target: 0.0, ramp: 0.0, group: None }))
+            .flat_map(|&node| (0..3).map(move |axis| Prescribed { node, axis, target: 0.0, ramp: 0.0, groups: 0 }))
             .collect();
         let dt = 2e-4;
         let mut integrator = Integrator::new(mass.clone(), prescribed, 0, 0.0, dt, 100.0);

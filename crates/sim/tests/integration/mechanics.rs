@@ -163,3 +163,22 @@ fn a_hybrid_with_flsm_matched_to_the_material_sags_like_tled() {
     assert!(rms_matched < 0.15 * sag, "matched hybrid: rms {rms_matched} m against a sag of {sag} m");
     assert!(rms_seed > 3.0 * rms_matched, "seed settings: rms {rms_seed} m, matched {rms_matched} m");
 }
+
+#[test]
+fn a_node_on_two_reaction_faces_counts_toward_both() {
+    // A 4 cm cube clamped at its base, settling under gravity: the base's reaction carries the
+    // weight. Listing the base twice reports it twice; the x- face (held only along its bottom
+    // edge, which it shares with the base) reports that edge's share, which used to go to the
+    // first face only.
+    let text = "[body]\nshape = \"box\"\nsize = [0.04, 0.04, 0.04]\ncell = 0.01\n\
+                [[boundary]]\nfaces = [\"z-\"]\nfix = [\"x\", \"y\", \"z\"]\n\
+                [run]\nduration = 0.4\ndamping = 60.0\ngravity = [0.0, 0.0, -9.81]\n\
+                [report]\nreaction = [\"z-\", \"z-\", \"x-\"]\n";
+    let scenario = Scenario::parse(text, "cube").expect("scenario");
+    let sim = run(&scenario);
+    let r = &sim.integrator.reactions;
+    let weight = 1000.0 * 0.04f64.powi(3) * 9.81;
+    assert_eq!(r[0], r[1], "the same face listed twice");
+    assert!((r[0].z - weight).abs() < 0.01 * weight, "base reaction {} N, weight {weight} N", r[0].z);
+    assert!(r[2].z > 0.0 && r[2].z < r[0].z, "the shared edge's share: {} N of {} N", r[2].z, r[0].z);
+}

@@ -63,10 +63,10 @@ fn single_hexahedron_reaction_through_the_integrator() {
             axis: 0,
             target: if plus { 0.03 } else { 0.0 },
             ramp: 0.05,
-            group: plus.then_some(0),
+            groups: u32::from(plus),
         });
         for axis in 1..3 {
-            prescribed.push(Prescribed { node: n, axis, target: 0.0, ramp: 0.0, group: None });
+            prescribed.push(Prescribed { node: n, axis, target: 0.0, ramp: 0.0, groups: 0 });
         }
     }
     let mut it = Integrator::new(mass, prescribed, 1, 0.0, 1e-4, 1e3);
@@ -117,7 +117,7 @@ fn patch_test_reproduces_affine_field() {
                         axis,
                         target: exact[n][axis as usize],
                         ramp: 0.0,
-                        group: None,
+                        groups: 0,
                     });
                 }
             }
