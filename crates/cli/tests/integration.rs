@@ -201,10 +201,28 @@ fn bench_sim_quick_writes_tables_and_charts() {
         let png = std::fs::read(dir.path().join(format!("{name}.png"))).expect("png");
         assert!(png.starts_with(b"\x89PNG"), "{name}.png is a PNG");
     }
-    // The all-TLED reference has zero error against itself.
+    // The all-TLED reference has zero error against itself, and at ratio 0.4 FLSM matched to the
+    // material is closer to it than the seed's FLSM settings.
     let ratio = std::fs::read_to_string(dir.path().join("ratio.csv")).expect("csv");
-    let first = ratio.lines().nth(1).expect("row");
-    assert!(first.starts_with("1,") && first.split(',').nth(3) == Some("0.000000"), "{first}");
+    let rows: Vec<Vec<&str>> = ratio.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert!(rows[0][..2] == ["1", "matched"] && rows[0][4] == "0.000000", "{:?}", rows[0]);
+    let rms = |settings: &str| -> f64 {
+        let row = rows.iter().find(|r| r[0] == "0.4" && r[1] == settings).expect("a ratio 0.4 row");
+        row[4].parse().expect("rms")
+    };
+    assert!(rms("matched") < rms("seed"), "{ratio}");
+    // Kernel throughput on one and two threads.
+    let kernels = std::fs::read_to_string(dir.path().join("kernels.csv")).expect("kernels.csv");
+    for kernel in ["tled_internal_forces", "tled_step", "flsm_step"] {
+        for threads in ["1", "2"] {
+            let row = kernels
+                .lines()
+                .map(|l| l.split(',').collect::<Vec<_>>())
+                .find(|r| r[0] == kernel && r[1] == threads)
+                .unwrap_or_else(|| panic!("{kernel} on {threads} threads: {kernels}"));
+            assert!(row[5].parse::<f64>().expect("rate") > 0.0, "{row:?}");
+        }
+    }
 }
 
 #[test]
