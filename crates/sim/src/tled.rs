@@ -398,8 +398,20 @@ mod tests {
 
     /// Checks every cell's batched forces against the scalar kernel; returns how many batches
     /// loaded their corners as contiguous runs.
-    fn check_batched_against_scalar(dims: [usize; 3]) -> usize {
-        let lattice = Lattice::block(Point3::origin(), 0.01, dims);
+    fn check_batched_against_scalar(dims: [usize; 3], holes: bool) -> usize {
+        // With holes: every 13th cell missing, so runs break and slabs cover ragged node ranges.
+        let fractions: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|c| {
+                if holes && c % 13 == 3 {
+                    0.0
+                } else if c % 7 == 2 {
+                    0.4
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        let lattice = Lattice::from_fractions(Point3::origin(), 0.01, dims, &fractions, 0.0);
         let material = Material::default();
         let mut tled = Tled::new(&lattice, None, &material, TledParams::default()).expect("tled");
         // A smooth large deformation plus node-wise noise (hourglass content).
@@ -452,8 +464,24 @@ mod tests {
     fn batched_kernel_matches_scalar_kernel() {
         // 5x4x3 = 60 cells: rows of five, so no batch is a contiguous run; seven batches of eight
         // and a scalar tail of four.
-        assert_eq!(check_batched_against_scalar([5, 4, 3]), 0);
-        // Rows of 16 cells: two contiguous batches per row.
-        assert_eq!(check_batched_against_scalar([16, 3, 2]), 12);
+        assert_eq!(check_batched_against_scalar([5, 4, 3], false), 0);
+        // Rows of 16 cells: two contiguous batches per row, and more than one slab (eight batches
+        // per slab at most), so slabs share a node layer.
+        assert_eq!(check_batched_against_scalar([16, 3, 2], false), 12);
+        // Rows of 24 cells with holes: some batches are still runs, the others scatter per cell.
+        let contiguous = check_batched_against_scalar([24, 4, 3], true);
+        assert!(contiguous > 0 && contiguous < 33, "{contiguous} contiguous batches of 33");
+    }
+
+    #[test]
+    fn slabs_share_nodes_and_cover_every_cell() {
+        let lattice = Lattice::block(Point3::origin(), 0.01, [16, 3, 2]);
+        let tled = Tled::new(&lattice, None, &Material::default(), TledParams::default()).expect("tled");
+        let slabs = Slabs::new(&tled.cell_nodes, tled.node_count, 8);
+        // 96 cells: slabs of 64 and 32 cells. The nodes both slabs' cells touch have two slots,
+        // every other node one.
+        let two = (0..tled.node_count).filter(|&n| slabs.slot_count(n) == 2).count();
+        assert!(two > 0, "no node shared by the two slabs");
+        assert!((0..tled.node_count).all(|n| (1..=2).contains(&slabs.slot_count(n))));
     }
 }

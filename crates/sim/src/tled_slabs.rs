@@ -90,6 +90,12 @@ impl Slabs {
         parts
     }
 
+    /// Number of slabs whose cells touch node `n`.
+    #[cfg(test)]
+    pub fn slot_count(&self, n: usize) -> usize {
+        (self.offsets[n + 1] - self.offsets[n]) as usize
+    }
+
     /// Node `n`'s force: the sum of its slabs' accumulators.
     #[inline(always)]
     pub fn node_force(&self, n: usize) -> Vector3<f32> {

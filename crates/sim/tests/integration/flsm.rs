@@ -303,12 +303,14 @@ fn parameter_errors_name_the_key() {
     assert!(FlsmParams { w: 4, alpha: 1.0, region_damping: 0.0 }.validate().is_ok());
 }
 
-/// Throughput on a 30 x 30 x 30-cell block (29,791 nodes) for w = 1, 2, 4; prints, asserts nothing.
+/// Throughput on a 30 x 30 x 30-cell block (29,791 nodes; `PROBE_SIDE` sets the side) for w = 1, 2, 4;
+/// prints, asserts nothing.
 /// `cargo test --release -p hullcut-sim --test integration flsm_throughput -- --ignored --nocapture`
 #[test]
 #[ignore = "timing, run by hand in release"]
 fn flsm_throughput() {
-    let lattice = Lattice::block(Point3::origin(), 0.005, [30, 30, 30]);
+    let side: usize = std::env::var("PROBE_SIDE").ok().and_then(|s| s.parse().ok()).unwrap_or(30);
+    let lattice = Lattice::block(Point3::origin(), 0.005, [side; 3]);
     let mut rnd = noise(1);
     let x0 = rest(&lattice);
     let f = vec![V::zeros(); x0.len()];
