@@ -512,15 +512,28 @@ fn slide(src: &[f64], len: usize, stride: usize, dst: &mut [f64], n: usize, w: u
     }
     for t in 1..n {
         let (done, rest) = dst.split_at_mut(t * len);
+        let previous = &done[(t - 1) * len..];
         let current = &mut rest[..len];
-        current.copy_from_slice(&done[(t - 1) * len..]);
-        if t + w < n {
-            add(current, element(t + w));
-        }
-        if t > w {
-            for (d, s) in current.iter_mut().zip(element(t - w - 1)) {
-                *d -= s;
+        // One pass per element: the window's sum moves on by the element entering it and the one
+        // leaving it, (previous + entering) − leaving.
+        match (t + w < n, t > w) {
+            (true, true) => {
+                let (entering, leaving) = (element(t + w), element(t - w - 1));
+                for (((c, p), e), l) in current.iter_mut().zip(previous).zip(entering).zip(leaving) {
+                    *c = (p + e) - l;
+                }
             }
+            (true, false) => {
+                for ((c, p), e) in current.iter_mut().zip(previous).zip(element(t + w)) {
+                    *c = p + e;
+                }
+            }
+            (false, true) => {
+                for ((c, p), l) in current.iter_mut().zip(previous).zip(element(t - w - 1)) {
+                    *c = p - l;
+                }
+            }
+            (false, false) => current.copy_from_slice(previous),
         }
     }
 }
