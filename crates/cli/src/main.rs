@@ -31,6 +31,7 @@ struct Cli {
 enum Command {
     Bench(commands::bench::Args),
     Calibrate(commands::calibrate::Args),
+    GpuInfo(commands::gpu_info::Args),
     Reconstruct(commands::reconstruct::Args),
     Rig(commands::rig::Args),
     Run(commands::run::Args),
@@ -52,6 +53,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bench(args) => commands::bench::run(&args),
         Command::Calibrate(args) => commands::calibrate::run(&args),
+        Command::GpuInfo(args) => commands::gpu_info::run(&args),
         Command::Reconstruct(args) => commands::reconstruct::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
         Command::Run(args) => commands::run::run(&args),

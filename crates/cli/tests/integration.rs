@@ -637,3 +637,26 @@ fn bench_pose_quick_writes_errors_refusals_and_charts() {
         assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
     }
 }
+
+#[test]
+fn gpu_info_names_the_adapter_it_would_use_or_says_there_is_none() {
+    let o = hullcut(&["gpu-info"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    if o.status.success() {
+        assert!(out.contains("using ") && out.contains("storage buffer binding up to"), "{out}");
+    } else {
+        // CI has Mesa's software adapter: none there is a broken setup, not a pass.
+        assert!(std::env::var_os("CI").is_none(), "no adapter in CI: {}", stderr(&o));
+        assert_eq!(o.status.code(), Some(1));
+        assert!(stderr(&o).contains("no GPU adapter"), "{}", stderr(&o));
+    }
+    // A name that matches nothing lists what there is.
+    let o = Command::new(env!("CARGO_BIN_EXE_hullcut"))
+        .arg("gpu-info")
+        .env("HULLCUT_GPU_ADAPTER", "no-such-adapter-xyz")
+        .output()
+        .expect("run hullcut");
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("no-such-adapter-xyz") || err.contains("no GPU adapter"), "{err}");
+}

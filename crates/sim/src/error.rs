@@ -19,4 +19,7 @@ pub enum SimError {
         /// What is wrong (with the key or line where known).
         message: String,
     },
+    /// The GPU backend failed (no adapter, limits, a lost device) or cannot run this model.
+    #[error("GPU backend: {0}")]
+    Gpu(String),
 }

@@ -23,6 +23,8 @@ pub mod dynamics;
 pub mod embed;
 mod error;
 pub mod flsm;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod lattice;
 pub mod material;
 pub mod mesh;

@@ -4,7 +4,7 @@
 //! derivatives and hourglass vectors: per-cell storage is the node list and the material volume.
 //! Forces are computed in two passes without atomics or locks: an element pass (in parallel over
 //! slabs of cells, eight cells per SIMD batch) adds each cell's eight nodal forces into its slab's
-//! node accumulators ([`crate::tled_slabs`]), then a node pass gathers each node's one or two slab
+//! node accumulators (module `tled_slabs`), then a node pass gathers each node's one or two slab
 //! sums. Both run under `pulp`'s runtime dispatch.
 
 use nalgebra::{Matrix3, Vector3};
@@ -70,13 +70,13 @@ fn shape_derivatives(h: f32, p: [f32; 3]) -> [[f32; 3]; 8] {
 /// The TLED force model for a set of cells of a lattice.
 #[derive(Debug, Clone)]
 pub struct Tled {
-    params: TledParams,
+    pub(crate) params: TledParams,
     lambda: f32,
     mu: f32,
     /// Node indices of each simulated cell.
-    cell_nodes: Vec<[u32; 8]>,
+    pub(crate) cell_nodes: Vec<[u32; 8]>,
     /// Material volume of each cell, m³.
-    volume: Vec<f32>,
+    pub(crate) volume: Vec<f32>,
     /// ∂N/∂X at the centre, shared by every cell.
     dndx: [[f32; 3]; 8],
     /// ∂N/∂X at the 8 Gauss points, shared.
@@ -99,7 +99,7 @@ pub struct Tled {
     arch: pulp::Arch,
     /// Cells regularized in the last force evaluation.
     inverted: usize,
-    node_count: usize,
+    pub(crate) node_count: usize,
 }
 
 impl Tled {
@@ -255,7 +255,7 @@ impl Tled {
         inverted
     }
 
-    fn one_point_constants(&self) -> OnePointConstants {
+    pub(crate) fn one_point_constants(&self) -> OnePointConstants {
         OnePointConstants {
             inv4h: self.dndx[7][0],
             lambda: self.lambda,

@@ -5,6 +5,7 @@ pub mod bench_hull;
 pub mod bench_pipeline;
 pub mod bench_pose;
 pub mod calibrate;
+pub mod gpu_info;
 pub mod reconstruct;
 pub mod rig;
 pub mod run;
