@@ -275,15 +275,7 @@ mod tests {
             })
             .collect();
         let lattice = Lattice::from_fractions(Point3::origin(), 0.01, dims, &fractions, 0.0);
-        let u = lattice
-            .rest
-            .iter()
-            .enumerate()
-            .map(|(n, p)| {
-                let noise = ((n * 7919) % 17) as f64 / 17.0 - 0.5;
-                Vector3::new(0.2 * p.y + 1e-3 * noise, 0.1 * p.z * p.x * 10.0, -0.15 * p.x - 5e-4 * noise).cast::<f32>()
-            })
-            .collect();
+        let u = crate::tled::test_deformation(&lattice);
         (lattice, u)
     }
 

@@ -391,6 +391,21 @@ impl pulp::WithSimd for SlabPass<'_> {
     }
 }
 
+/// A large smooth deformation of `lattice` plus node-wise noise (which the hourglass terms see),
+/// for tests that compare force kernels.
+#[cfg(test)]
+pub(crate) fn test_deformation(lattice: &Lattice) -> Vec<Vector3<f32>> {
+    lattice
+        .rest
+        .iter()
+        .enumerate()
+        .map(|(n, p)| {
+            let noise = ((n * 7919) % 17) as f64 / 17.0 - 0.5;
+            Vector3::new(0.2 * p.y + 1e-3 * noise, 0.1 * p.z * p.x * 10.0, -0.15 * p.x - 5e-4 * noise).cast::<f32>()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -414,16 +429,7 @@ mod tests {
         let lattice = Lattice::from_fractions(Point3::origin(), 0.01, dims, &fractions, 0.0);
         let material = Material::default();
         let mut tled = Tled::new(&lattice, None, &material, TledParams::default()).expect("tled");
-        // A smooth large deformation plus node-wise noise (hourglass content).
-        let u: Vec<Vector3<f32>> = lattice
-            .rest
-            .iter()
-            .enumerate()
-            .map(|(n, p)| {
-                let noise = ((n * 7919) % 17) as f64 / 17.0 - 0.5;
-                Vector3::new(0.2 * p.y + 1e-3 * noise, 0.1 * p.z * p.x * 10.0, -0.15 * p.x - 5e-4 * noise).cast::<f32>()
-            })
-            .collect();
+        let u = test_deformation(&lattice);
         let mut gathered = vec![Vector3::zeros(); lattice.node_count()];
         tled.internal_forces(&u, &mut gathered);
         let mut expected = vec![Vector3::zeros(); lattice.node_count()];
