@@ -172,6 +172,44 @@ fn sim_single_hexahedron_report_matches_closed_form() {
     assert!(std::fs::metadata(&rrd).expect("rrd").len() > 1000);
 }
 
+/// Runs `hullcut` with the GPU backend: `None` (the test skips, saying so) when this machine has
+/// no adapter and `CI` is not set; CI has lavapipe, so there a missing adapter fails the test.
+fn hullcut_on_gpu(args: &[&str]) -> Option<Output> {
+    let o = hullcut(args);
+    if !o.status.success() && stderr(&o).contains("no GPU adapter") && std::env::var_os("CI").is_none() {
+        eprintln!("skipping a GPU test: {}", stderr(&o));
+        return None;
+    }
+    Some(o)
+}
+
+#[test]
+fn sim_on_the_gpu_backend_matches_the_closed_form_and_reports_its_batches() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let report = dir.path().join("sim.json");
+    let report_arg = report.to_str().expect("utf-8");
+    let hex = scenario("hex-stretch.toml");
+    let Some(o) = hullcut_on_gpu(&["sim", "--scenario", &hex, "--backend", "gpu", "--report", report_arg]) else {
+        return;
+    };
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    assert_eq!(json["backend"], "gpu");
+    assert_eq!(json["stable"], true);
+    let expected = 1.3 * (20_000.0 * (1.0 - 1.0 / 1.69) + 20_000.0 * 1.3 * 0.3 / 1.69) * 0.01;
+    let rx = json["reactions"][0]["force_n"][0].as_f64().expect("reaction");
+    assert!((rx - expected).abs() < 1e-3 * expected, "{rx} vs {expected}");
+    let gpu = &json["gpu"];
+    assert!(gpu["adapter"].as_str().is_some_and(|a| !a.is_empty()), "{gpu}");
+    assert_eq!(gpu["steps"].as_u64(), json["steps"].as_u64(), "every step ran on the GPU: {gpu}");
+    assert_eq!(gpu["cpu_batches"], 0, "{gpu}");
+    // The hybrid model is not on the GPU yet: a clear error naming the keys, not a silent CPU run.
+    let o = hullcut(&["sim", "--scenario", &scenario("liver-press.toml"), "--backend", "gpu"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("hybrid.ratio") && stderr(&o).contains("--backend cpu"), "{}", stderr(&o));
+}
+
 #[test]
 fn sim_bad_scenarios_name_the_key() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -223,6 +261,16 @@ fn bench_sim_quick_writes_tables_and_charts() {
             assert!(row[5].parse::<f64>().expect("rate") > 0.0, "{row:?}");
         }
     }
+    // CPU against GPU: both lines where there is an adapter (always in CI: lavapipe).
+    let backends = std::fs::read_to_string(dir.path().join("backends.csv")).expect("backends.csv");
+    let rows: Vec<Vec<&str>> = backends.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let on = |b: &str| rows.iter().filter(|r| r[0] == b).count();
+    assert_eq!(on("cpu"), 2, "{backends}");
+    if std::env::var_os("CI").is_some() || on("gpu") > 0 {
+        assert_eq!(on("gpu"), 2, "{backends}");
+    }
+    assert!(rows.iter().all(|r| r[6].parse::<f64>().expect("rate") > 0.0), "{backends}");
+    assert!(std::fs::read(dir.path().join("backends.png")).expect("png").starts_with(b"\x89PNG"));
 }
 
 #[test]

@@ -269,6 +269,29 @@ impl Gpu {
         })
     }
 
+    /// A bind group for group 0 of `pipeline` with each buffer at its own binding number (for
+    /// shaders whose bindings are not numbered from 0 without gaps: a binding the entry point
+    /// does not use is left out of its derived layout).
+    pub fn bind_numbered(&self, pipeline: &wgpu::ComputePipeline, buffers: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    }
+
+    /// Waits at most [`POLL_TIMEOUT`] for the work submitted so far to finish.
+    pub fn wait(&self, what: &str) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::Wait { submission_index: None, timeout: Some(POLL_TIMEOUT) })
+            .map(|_| ())
+            .map_err(|e| GpuError::Wait { what: what.to_owned(), message: e.to_string() })
+    }
+
     /// Copies the first `len` values of `buffer` back to the CPU, waiting at most
     /// [`POLL_TIMEOUT`] for the device.
     pub fn read<T: Pod>(&self, what: &str, buffer: &wgpu::Buffer, len: usize) -> Result<Vec<T>, GpuError> {

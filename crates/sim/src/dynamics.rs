@@ -152,25 +152,12 @@ impl Integrator {
         let max_speed2 = if finite { max_speed2 } else { f32::NAN };
         // Prescribed components, and the reactions they exert: r = m (ü + α u̇) + f_int − f_ext.
         let t_next = (self.step + 1) as f32 * dt;
-        for r in &mut self.reactions {
-            *r = Vector3::zeros();
-        }
         for p in &self.prescribed {
-            let (n, k) = (p.node as usize, p.axis as usize);
-            let value = p.target * ramp(t_next, p.ramp);
-            self.next[n][k] = value;
-            if p.groups != 0 {
-                let m = self.mass[n];
-                let acc = (value - 2.0 * self.u[n][k] + self.u_prev[n][k]) / dt2;
-                let vel = (value - self.u_prev[n][k]) / (2.0 * dt);
-                let r = m * (acc + self.damping * vel) + f_int(n)[k] - f_ext[n][k] + self.implicit_stiffness[n] * value;
-                for (g, reaction) in self.reactions.iter_mut().enumerate().take(32) {
-                    if p.groups & (1 << g) != 0 {
-                        reaction[k] += f64::from(r);
-                    }
-                }
-            }
+            self.next[p.node as usize][usize::from(p.axis)] = p.target * ramp(t_next, p.ramp);
         }
+        let mut reactions = std::mem::take(&mut self.reactions);
+        self.reactions_into(&f_int, f_ext, [&self.u_prev[..], &self.u[..], &self.next[..]], &mut reactions);
+        self.reactions = reactions;
         if !max_speed2.is_finite() || max_speed2.sqrt() > self.speed_limit {
             let fastest = fastest_node(&self.next, &self.u, dt);
             return Err(Divergence {
@@ -192,6 +179,36 @@ impl Integrator {
         std::mem::swap(&mut self.u, &mut self.next);
         self.step += 1;
         Ok(())
+    }
+
+    /// The reactions of the prescribed components in the step from `u` to `next`
+    /// (`[u_prev, u, next]`), with `f_int` the internal forces at `u`:
+    /// `r = m (ü + α u̇) + f_int − f_ext + k u_next` per component, summed into each of its
+    /// groups in `out`.
+    pub fn reactions_into<F>(
+        &self,
+        f_int: F,
+        f_ext: &[Vector3<f32>],
+        [u_prev, u, next]: [&[Vector3<f32>]; 3],
+        out: &mut [Vector3<f64>],
+    ) where
+        F: Fn(usize) -> Vector3<f32>,
+    {
+        let dt = self.dt;
+        out.fill(Vector3::zeros());
+        for p in self.prescribed.iter().filter(|p| p.groups != 0) {
+            let (n, k) = (p.node as usize, usize::from(p.axis));
+            let value = next[n][k];
+            let acc = (value - 2.0 * u[n][k] + u_prev[n][k]) / (dt * dt);
+            let vel = (value - u_prev[n][k]) / (2.0 * dt);
+            let r = self.mass[n] * (acc + self.damping * vel) + f_int(n)[k] - f_ext[n][k]
+                + self.implicit_stiffness[n] * value;
+            for (g, reaction) in out.iter_mut().enumerate().take(32) {
+                if p.groups & (1 << g) != 0 {
+                    reaction[k] += f64::from(r);
+                }
+            }
+        }
     }
 
     /// Kinetic energy from the last step's central velocity estimate, joules.

@@ -12,7 +12,8 @@
 //! an operational region that follows the tool ([`operational`]). The scenario-driven
 //! [`Simulation`] (hybrid TLED/FLSM with a fixed operational region) does not cut.
 //!
-//! No feature flags yet (the `gpu` feature comes with the wgpu backend).
+//! Feature `gpu`: TLED on wgpu ([`gpu`]: internal forces and whole steps) and
+//! `Simulation::use_gpu`, which steps an all-TLED scenario there.
 #![warn(missing_docs)]
 
 pub mod body;
@@ -51,6 +52,8 @@ pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
 pub use operational::{HybridParams, HybridSteps, match_flsm};
 pub use scenario::Scenario;
+#[cfg(feature = "gpu")]
+pub use simulation::GpuStats;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};

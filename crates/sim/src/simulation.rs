@@ -13,6 +13,11 @@ use crate::stability::{self, StabilityLimit};
 use crate::tled::{Integration, Tled, TledParams};
 use crate::{Lattice, Material, SimError};
 
+#[cfg(feature = "gpu")]
+mod on_gpu;
+#[cfg(feature = "gpu")]
+pub use on_gpu::GpuStats;
+
 /// What simulates a node (the seed paper's Fig. 1 colours: TLED green, FLSM yellow, interface white).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum NodeRole {
@@ -71,6 +76,9 @@ pub struct Simulation {
     embedding: Embedding,
     surface_now: Vec<Point3<f32>>,
     inverted_max: usize,
+    /// The GPU backend, once [`Simulation::use_gpu`] chose it.
+    #[cfg(feature = "gpu")]
+    gpu: Option<on_gpu::GpuPart>,
 }
 
 /// A material point located in the lattice: its cell and trilinear weights.
@@ -502,6 +510,8 @@ impl Simulation {
             embedding,
             surface_now: Vec::new(),
             inverted_max: 0,
+            #[cfg(feature = "gpu")]
+            gpu: None,
             lattice,
         })
     }
@@ -538,6 +548,28 @@ impl Simulation {
 
     /// Advances by one step (TLED only) or one FLSM step of `substeps` TLED sub-steps (hybrid).
     pub fn advance(&mut self) -> Result<(), Divergence> {
+        self.advance_by(1)
+    }
+
+    /// Advances by `n` calls' worth of [`Simulation::advance`]; on the GPU (see `use_gpu`, with
+    /// the `gpu` feature) as one batch, the state read back only at its end.
+    pub fn advance_by(&mut self, n: u64) -> Result<(), Divergence> {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            return self.gpu_steps(n);
+        }
+        self.cpu_steps(n)
+    }
+
+    /// `n` calls' worth of [`Simulation::advance`] on the CPU.
+    fn cpu_steps(&mut self, n: u64) -> Result<(), Divergence> {
+        for _ in 0..n {
+            self.advance_cpu()?;
+        }
+        Ok(())
+    }
+
+    fn advance_cpu(&mut self) -> Result<(), Divergence> {
         let Some(part) = self.flsm.as_mut() else {
             return self.tled_step(false);
         };

@@ -54,6 +54,10 @@ use crate::progress::bar;
 ///   collision.csv     per 60 Hz frame of a blade stroke through the paper-size organ: the
 ///                     spatial hash of the lattice's cells, and the lattice edges the swept
 ///                     blade surface crosses (time, triangles, candidate pairs, edges, cells).
+///   backends.csv/png  TLED whole steps (forces, update, constraints) in element-steps/s against
+///                     lattice size, on the CPU (rayon) and on the GPU (wgpu, batches of 100 steps
+///                     with the state read back after each, as `hullcut sim --backend gpu` runs);
+///                     the GPU line is left out, with a warning, when there is no adapter.
 /// Timings are wall clock on this machine: run on an idle machine, and compare ratios within one run.
 /// HULLCUT_BENCH_QUICK=1 (or --quick) shrinks every size so CI can smoke-run it.
 ///
@@ -95,7 +99,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             scaling(&args.out, quick)?;
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
-            collision(&args.out)
+            collision(&args.out)?;
+            backends(&args.out, quick)
         })?,
         Target::Hull => super::bench_hull::run(&args.out, quick)?,
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
@@ -239,6 +244,67 @@ fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
         &series,
     )?;
     println!("wrote {}", out.join("scaling.png").display());
+    Ok(())
+}
+
+/// TLED whole steps per second on the CPU and on the GPU against lattice size.
+fn backends(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let sizes: &[usize] = if quick { &[4, 8] } else { &[8, 16, 24, 32, 40] };
+    let gpu = match hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()) {
+        Ok(g) => Some(std::sync::Arc::new(g)),
+        Err(e) => {
+            tracing::warn!("backends.csv without the GPU line: {e}");
+            None
+        }
+    };
+    let cpu_label = format!("CPU (rayon, {} threads)", rayon::current_num_threads());
+    let mut lines = vec![Series { label: cpu_label.clone(), points: Vec::new() }];
+    if let Some(g) = &gpu {
+        lines.push(Series { label: format!("GPU ({})", g.summary.info.name), points: Vec::new() });
+    }
+    let mut csv = String::from("backend,device,nodes,cells,steps,wall_s,element_steps_per_s,realtime_factor\n");
+    let pb = bar((sizes.len() * lines.len()) as u64, "backends");
+    let (batch, min_wall) = if quick { (10, 0.02) } else { (100, 1.0) };
+    for &n in sizes {
+        for (li, line) in lines.iter_mut().enumerate() {
+            let mut sim = Simulation::from_scenario(&block(n, 1.0)?)?;
+            let device = match (li, &gpu) {
+                (1, Some(g)) => {
+                    sim.use_gpu(g.clone())?;
+                    g.summary.info.name.clone()
+                }
+                _ => cpu_label.clone(),
+            };
+            let unstable =
+                |d: hullcut_sim::dynamics::Divergence| anyhow::anyhow!("unstable at step {}: {}", d.step, d.reason);
+            sim.advance_by(batch).map_err(unstable)?;
+            let (t0, s0) = (Instant::now(), sim.integrator.step);
+            while t0.elapsed().as_secs_f64() < min_wall {
+                sim.advance_by(batch).map_err(unstable)?;
+            }
+            let wall = t0.elapsed().as_secs_f64();
+            let steps = sim.integrator.step - s0;
+            let cells = sim.tled_cells();
+            let rate = (cells as u64 * steps) as f64 / wall;
+            let realtime = steps as f64 * sim.dt() / wall;
+            let backend = if li == 0 { "cpu" } else { "gpu" };
+            let nodes = sim.lattice.node_count();
+            let _ = writeln!(csv, "{backend},{device},{nodes},{cells},{steps},{wall:.4},{rate:.4e},{realtime:.4}");
+            line.points.push((cells as f64, rate));
+            pb.inc(1);
+        }
+    }
+    pb.finish_and_clear();
+    write(&out.join("backends.csv"), &csv)?;
+    line_chart(
+        &out.join("backends.png"),
+        "TLED whole steps: CPU against GPU (liver material, 5 mm cells, clamped block under gravity)",
+        "TLED cells",
+        "element-steps per second",
+        (Scale::Log, Scale::Log),
+        &lines,
+    )?;
+    println!("wrote {}", out.join("backends.png").display());
     Ok(())
 }
 

@@ -1,11 +1,18 @@
-//! TLED internal forces on the GPU (wgpu, WGSL): the same one-point hexahedra with
-//! Flanagan–Belytschko hourglass control as [`crate::Tled`], in two passes without atomics: an
-//! element pass (one invocation per cell, writing its eight nodal forces) and a node pass (one
-//! invocation per node, gathering through the node → (cell, corner) list).
+//! TLED on the GPU (wgpu, WGSL): the same one-point hexahedra with Flanagan–Belytschko hourglass
+//! control as [`crate::Tled`], in passes without float atomics: an element pass (one invocation
+//! per cell, writing its eight nodal forces) and a node pass (one invocation per node, gathering
+//! through the node → (cell, corner) list).
 //!
-//! A cell whose det F falls below [`crate::tled::INVERSION_J`] is flagged and counted; unlike the
-//! CPU kernel the GPU pass does not regularize it (its force is the neo-Hookean force of the
-//! unregularized F), so callers treat a nonzero count as a reason to fall back to the CPU.
+//! - [`GpuTled`]: internal forces alone, for parity tests against the CPU kernel;
+//! - [`GpuStepper`]: whole central-difference steps (forces, update, prescribed components,
+//!   divergence flag), many per submission, the CPU reading back only the state at the end.
+//!
+//! A cell whose det F falls below [`crate::tled::INVERSION_J`] is counted; unlike the CPU kernel
+//! the GPU does not regularize it (its force is the neo-Hookean force of the unregularized F), so
+//! callers treat a nonzero count as a reason to redo the work on the CPU
+//! ([`crate::Simulation::use_gpu`] does, and counts it).
+
+mod step;
 
 use bytemuck::{Pod, Zeroable};
 use hullcut_gpu::Gpu;
@@ -14,10 +21,26 @@ use nalgebra::Vector3;
 use crate::SimError;
 use crate::tled::{INVERSION_J, Integration, Tled};
 
-/// Invocations per workgroup of both passes.
+pub use step::{GpuStepper, StepBatch};
+
+/// Invocations per workgroup of the element and node passes.
 const WORKGROUP: u32 = 64;
 
-/// The kernels' shared constants (a uniform buffer; 32 bytes).
+/// Entries of the status buffer the kernels share (atomic `u32`s).
+mod status {
+    /// Steps completed (the integrator's step count).
+    pub const STEP: usize = 0;
+    /// Nonzero once a node moved faster than the limit or became non-finite.
+    pub const DIVERGED: usize = 1;
+    /// The lowest-numbered node that did (`u32::MAX`: none).
+    pub const NODE: usize = 2;
+    /// Cells found inverted, summed over the steps run.
+    pub const INVERTED: usize = 3;
+    /// Length of the buffer.
+    pub const LEN: usize = 4;
+}
+
+/// The kernels' shared constants (a uniform buffer; 48 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct Params {
@@ -28,7 +51,16 @@ struct Params {
     mu: f32,
     kappa_per_volume: f32,
     inversion_j: f32,
-    pad: u32,
+    /// Time step, s.
+    dt: f32,
+    /// 1 / (1 + α dt / 2).
+    a: f32,
+    /// 1 − α dt / 2.
+    b: f32,
+    /// dt².
+    dt2: f32,
+    /// Largest squared speed before the run counts as divergent, m²/s².
+    speed_limit2: f32,
 }
 
 const PARAMS_WGSL: &str = "
@@ -40,18 +72,23 @@ struct Params {
     mu: f32,
     kappa_per_volume: f32,
     inversion_j: f32,
-    pad: u32,
+    dt: f32,
+    a: f32,
+    b: f32,
+    dt2: f32,
+    speed_limit2: f32,
 }
 @group(0) @binding(0) var<uniform> p: Params;
+@group(0) @binding(1) var<storage, read_write> status: array<atomic<u32>>;
 ";
 
-/// Element pass: cell `c`'s eight nodal forces to `cell_forces[24 c + 3 a ..]`.
+/// Element pass: cell `c`'s eight nodal forces to `cell_forces[24 c + 3 a ..]`; inverted cells
+/// counted in `status[3]`. Does nothing once the run has diverged.
 const ELEMENT_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> cell_nodes: array<u32>;
-@group(0) @binding(2) var<storage, read> volume: array<f32>;
-@group(0) @binding(3) var<storage, read> u: array<f32>;
-@group(0) @binding(4) var<storage, read_write> cell_forces: array<f32>;
-@group(0) @binding(5) var<storage, read_write> inverted: array<u32>;
+@group(0) @binding(2) var<storage, read> cell_nodes: array<u32>;
+@group(0) @binding(3) var<storage, read> volume: array<f32>;
+@group(0) @binding(4) var<storage, read> u: array<f32>;
+@group(0) @binding(5) var<storage, read_write> cell_forces: array<f32>;
 
 fn sign(a: u32, bit: u32) -> f32 {
     return select(-1.0, 1.0, (a & bit) != 0u);
@@ -60,7 +97,7 @@ fn sign(a: u32, bit: u32) -> f32 {
 @compute @workgroup_size(64)
 fn element(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = gid.x;
-    if (c >= p.cells) {
+    if (c >= p.cells || atomicLoad(&status[1]) != 0u) {
         return;
     }
     // Column sums d_k = sum_a u_a s_ak and hourglass sums q_m = sum_a h_am u_a.
@@ -92,7 +129,9 @@ fn element(@builtin(global_invocation_id) gid: vec3<u32>) {
         vec3<f32>(0.0, 0.0, 1.0) + d2 * p.inv4h,
     );
     let j = determinant(f);
-    inverted[c] = select(0u, 1u, j < p.inversion_j || j != j);
+    if (j < p.inversion_j || j != j) {
+        atomicAdd(&status[3], 1u);
+    }
     // C = F^T F; C^-1 = adj(C) / J^2.
     let cm = transpose(f) * f;
     let c00 = cm[0][0];
@@ -132,11 +171,24 @@ fn element(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 ";
 
-/// Node pass: node `n`'s force, the sum of its cells' corner forces.
-const GATHER_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> offsets: array<u32>;
-@group(0) @binding(2) var<storage, read> entries: array<u32>;
+/// A node's internal force: the sum of its cells' corner forces, through `gather_list` (the
+/// first `nodes + 1` entries are offsets into the same array, then `cell * 8 + corner` entries).
+const GATHER_FN_WGSL: &str = "
+@group(0) @binding(2) var<storage, read> gather_list: array<u32>;
 @group(0) @binding(3) var<storage, read> cell_forces: array<f32>;
+
+fn gathered(n: u32) -> vec3<f32> {
+    var f = vec3<f32>(0.0);
+    for (var e = gather_list[n]; e < gather_list[n + 1u]; e++) {
+        let o = 3u * gather_list[e];
+        f += vec3<f32>(cell_forces[o], cell_forces[o + 1u], cell_forces[o + 2u]);
+    }
+    return f;
+}
+";
+
+/// Node pass of [`GpuTled`]: writes each node's force.
+const FORCES_WGSL: &str = "
 @group(0) @binding(4) var<storage, read_write> forces: array<f32>;
 
 @compute @workgroup_size(64)
@@ -145,27 +197,120 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (n >= p.nodes) {
         return;
     }
-    var f = vec3<f32>(0.0);
-    for (var e = offsets[n]; e < offsets[n + 1u]; e++) {
-        let o = 3u * entries[e];
-        f += vec3<f32>(cell_forces[o], cell_forces[o + 1u], cell_forces[o + 2u]);
-    }
+    let f = gathered(n);
     forces[3u * n] = f.x;
     forces[3u * n + 1u] = f.y;
     forces[3u * n + 2u] = f.z;
 }
 ";
 
+/// The GPU side of a [`Tled`]: constants, cells, the gather list, the corner forces and the
+/// status buffer, with the element pass's pipeline.
+#[derive(Debug)]
+struct CellBuffers {
+    params: Params,
+    uniform: wgpu::Buffer,
+    status: wgpu::Buffer,
+    cell_nodes: wgpu::Buffer,
+    volume: wgpu::Buffer,
+    gather_list: wgpu::Buffer,
+    cell_forces: wgpu::Buffer,
+    element: wgpu::ComputePipeline,
+}
+
+fn gpu_err(e: hullcut_gpu::GpuError) -> SimError {
+    SimError::Gpu(e.to_string())
+}
+
+impl CellBuffers {
+    /// Uploads `tled`'s cells; `params` carries the stepping constants (zero for forces alone).
+    fn new(gpu: &Gpu, tled: &Tled, mut params: Params) -> Result<Self, SimError> {
+        if tled.params.integration != Integration::OnePoint {
+            return Err(SimError::Gpu("only one-point integration runs on the GPU (tled.integration)".into()));
+        }
+        let (cells, nodes) = (tled.cell_nodes.len(), tled.node_count);
+        let k = tled.one_point_constants();
+        params.cells = u32::try_from(cells).map_err(|_| SimError::Gpu(format!("{cells} cells: too many")))?;
+        params.nodes = u32::try_from(nodes).map_err(|_| SimError::Gpu(format!("{nodes} nodes: too many")))?;
+        params.inv4h = k.inv4h;
+        params.lambda = k.lambda;
+        params.mu = k.mu;
+        params.kappa_per_volume = k.kappa_per_volume;
+        params.inversion_j = INVERSION_J;
+        let uniform = gpu.uniform("tled params", &params);
+        let status = gpu.storage("status", &status_init(0)).map_err(gpu_err)?;
+        let cell_nodes = gpu.storage("cell nodes", tled.cell_nodes.as_flattened()).map_err(gpu_err)?;
+        let volume = gpu.storage("cell volumes", &tled.volume).map_err(gpu_err)?;
+        let gather_list = gpu.storage("gather list", &gather_list(&tled.cell_nodes, nodes)).map_err(gpu_err)?;
+        let cell_forces = gpu.storage("cell forces", &vec![0.0f32; 24 * cells]).map_err(gpu_err)?;
+        let element = gpu.pipeline("tled element pass", &format!("{PARAMS_WGSL}{ELEMENT_WGSL}"), "element");
+        Ok(Self { params, uniform, status, cell_nodes, volume, gather_list, cell_forces, element })
+    }
+
+    /// The element pass's bind group with displacements `u`.
+    fn element_bind(&self, gpu: &Gpu, u: &wgpu::Buffer) -> wgpu::BindGroup {
+        gpu.bind(&self.element, &[&self.uniform, &self.status, &self.cell_nodes, &self.volume, u, &self.cell_forces])
+    }
+
+    /// Reads the status buffer.
+    fn read_status(&self, gpu: &Gpu) -> Result<[u32; status::LEN], SimError> {
+        let v: Vec<u32> = gpu.read("status", &self.status, status::LEN).map_err(gpu_err)?;
+        let mut out = [0; status::LEN];
+        out.copy_from_slice(&v);
+        Ok(out)
+    }
+}
+
+/// The status buffer at the start of a run from step `step`.
+fn status_init(step: u32) -> [u32; status::LEN] {
+    let mut s = [0; status::LEN];
+    s[status::STEP] = step;
+    s[status::NODE] = u32::MAX;
+    s
+}
+
+/// The node → (cell, corner) list: `nodes + 1` offsets (into this same array), then the entries
+/// `cell * 8 + corner` of each node in turn.
+fn gather_list(cell_nodes: &[[u32; 8]], nodes: usize) -> Vec<u32> {
+    let mut counts = vec![0u32; nodes + 1];
+    for c in cell_nodes {
+        for &n in c {
+            counts[n as usize + 1] += 1;
+        }
+    }
+    let mut list = vec![0u32; nodes + 1 + 8 * cell_nodes.len()];
+    list[0] = (nodes + 1) as u32;
+    for i in 1..=nodes {
+        list[i] = list[i - 1] + counts[i];
+    }
+    let mut fill: Vec<u32> = list[..nodes].to_vec();
+    for (c, corners) in cell_nodes.iter().enumerate() {
+        for (a, &n) in corners.iter().enumerate() {
+            list[fill[n as usize] as usize] = (8 * c + a) as u32;
+            fill[n as usize] += 1;
+        }
+    }
+    list
+}
+
+/// Flattens vectors for upload.
+fn flatten(v: &[Vector3<f32>]) -> Vec<f32> {
+    v.iter().flat_map(|x| [x.x, x.y, x.z]).collect()
+}
+
+/// Vectors from a read-back.
+fn unflatten(v: &[f32]) -> Vec<Vector3<f32>> {
+    v.chunks_exact(3).map(|c| Vector3::new(c[0], c[1], c[2])).collect()
+}
+
 /// TLED's internal forces on a GPU, for the cells of a CPU [`Tled`].
 #[derive(Debug)]
 pub struct GpuTled<'g> {
     gpu: &'g Gpu,
-    cells: u32,
-    nodes: u32,
+    cells: CellBuffers,
     u: wgpu::Buffer,
     forces: wgpu::Buffer,
-    inverted: wgpu::Buffer,
-    element: (wgpu::ComputePipeline, wgpu::BindGroup),
+    element_bind: wgpu::BindGroup,
     gather: (wgpu::ComputePipeline, wgpu::BindGroup),
 }
 
@@ -173,83 +318,34 @@ impl<'g> GpuTled<'g> {
     /// Uploads `tled`'s cells (node lists, volumes, constants) and its gather list to `gpu`.
     /// Only one-point integration runs on the GPU.
     pub fn new(gpu: &'g Gpu, tled: &Tled) -> Result<Self, SimError> {
-        if tled.params.integration != Integration::OnePoint {
-            return Err(SimError::Gpu("only one-point integration runs on the GPU (tled.integration)".into()));
-        }
-        let gpu_err = |e: hullcut_gpu::GpuError| SimError::Gpu(e.to_string());
-        let (cells, nodes) = (tled.cell_nodes.len(), tled.node_count);
-        let k = tled.one_point_constants();
-        let params = Params {
-            cells: cells as u32,
-            nodes: nodes as u32,
-            inv4h: k.inv4h,
-            lambda: k.lambda,
-            mu: k.mu,
-            kappa_per_volume: k.kappa_per_volume,
-            inversion_j: INVERSION_J,
-            pad: 0,
-        };
-        // The node → (cell, corner) list, as cell * 8 + corner.
-        let mut offsets = vec![0u32; nodes + 1];
-        for c in &tled.cell_nodes {
-            for &n in c {
-                offsets[n as usize + 1] += 1;
-            }
-        }
-        for i in 1..=nodes {
-            offsets[i] += offsets[i - 1];
-        }
-        let mut fill = offsets.clone();
-        let mut entries = vec![0u32; offsets[nodes] as usize];
-        for (c, corners) in tled.cell_nodes.iter().enumerate() {
-            for (a, &n) in corners.iter().enumerate() {
-                entries[fill[n as usize] as usize] = (8 * c + a) as u32;
-                fill[n as usize] += 1;
-            }
-        }
-        let uniform = gpu.uniform("tled params", &params);
-        let cell_nodes = gpu.storage("cell nodes", tled.cell_nodes.as_flattened()).map_err(gpu_err)?;
-        let volume = gpu.storage("cell volumes", &tled.volume).map_err(gpu_err)?;
+        let cells = CellBuffers::new(gpu, tled, Params::zeroed())?;
+        let nodes = tled.node_count;
         let u = gpu.storage("displacements", &vec![0.0f32; 3 * nodes]).map_err(gpu_err)?;
-        let cell_forces = gpu.storage("cell forces", &vec![0.0f32; 24 * cells]).map_err(gpu_err)?;
-        let inverted = gpu.storage("inverted cells", &vec![0u32; cells]).map_err(gpu_err)?;
-        let offsets = gpu.storage("gather offsets", &offsets).map_err(gpu_err)?;
-        let entries = gpu.storage("gather entries", &entries).map_err(gpu_err)?;
         let forces = gpu.storage("nodal forces", &vec![0.0f32; 3 * nodes]).map_err(gpu_err)?;
-        let element_pipeline = gpu.pipeline("tled element pass", &format!("{PARAMS_WGSL}{ELEMENT_WGSL}"), "element");
-        let element_bind = gpu.bind(&element_pipeline, &[&uniform, &cell_nodes, &volume, &u, &cell_forces, &inverted]);
-        let gather_pipeline = gpu.pipeline("tled node pass", &format!("{PARAMS_WGSL}{GATHER_WGSL}"), "gather");
-        let gather_bind = gpu.bind(&gather_pipeline, &[&uniform, &offsets, &entries, &cell_forces, &forces]);
-        Ok(Self {
-            gpu,
-            cells: cells as u32,
-            nodes: nodes as u32,
-            u,
-            forces,
-            inverted,
-            element: (element_pipeline, element_bind),
-            gather: (gather_pipeline, gather_bind),
-        })
+        let element_bind = cells.element_bind(gpu, &u);
+        let pipeline = gpu.pipeline("tled node pass", &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{FORCES_WGSL}"), "gather");
+        let bind = gpu.bind_numbered(
+            &pipeline,
+            &[(0, &cells.uniform), (2, &cells.gather_list), (3, &cells.cell_forces), (4, &forces)],
+        );
+        Ok(Self { gpu, cells, u, forces, element_bind, gather: (pipeline, bind) })
     }
 
     /// Internal nodal forces for displacements `u` into `out` (one per node); returns the number
     /// of cells flagged as inverted (det F below [`INVERSION_J`]).
     pub fn internal_forces(&mut self, u: &[Vector3<f32>], out: &mut [Vector3<f32>]) -> Result<usize, SimError> {
-        let n = self.nodes as usize;
+        let n = self.cells.params.nodes as usize;
         if u.len() != n || out.len() != n {
             return Err(SimError::Gpu(format!("{} displacements and {} forces for {n} nodes", u.len(), out.len())));
         }
-        let flat: Vec<f32> = u.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
-        self.gpu.queue.write_buffer(&self.u, 0, bytemuck::cast_slice(&flat));
-        self.gpu.dispatch(&self.element.0, &self.element.1, self.cells, WORKGROUP);
-        self.gpu.dispatch(&self.gather.0, &self.gather.1, self.nodes, WORKGROUP);
-        let gpu_err = |e: hullcut_gpu::GpuError| SimError::Gpu(e.to_string());
+        let queue = &self.gpu.queue;
+        queue.write_buffer(&self.cells.status, 0, bytemuck::cast_slice(&status_init(0)));
+        queue.write_buffer(&self.u, 0, bytemuck::cast_slice(&flatten(u)));
+        self.gpu.dispatch(&self.cells.element, &self.element_bind, self.cells.params.cells, WORKGROUP);
+        self.gpu.dispatch(&self.gather.0, &self.gather.1, self.cells.params.nodes, WORKGROUP);
         let forces: Vec<f32> = self.gpu.read("nodal forces", &self.forces, 3 * n).map_err(gpu_err)?;
-        for (o, f) in out.iter_mut().zip(forces.chunks_exact(3)) {
-            *o = Vector3::new(f[0], f[1], f[2]);
-        }
-        let flags: Vec<u32> = self.gpu.read("inverted cells", &self.inverted, self.cells as usize).map_err(gpu_err)?;
-        Ok(flags.iter().filter(|&&f| f != 0).count())
+        out.copy_from_slice(&unflatten(&forces));
+        Ok(self.cells.read_status(self.gpu)?[status::INVERTED] as usize)
     }
 }
 

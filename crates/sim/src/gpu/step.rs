@@ -1,0 +1,291 @@
+//! Whole TLED steps on the GPU: per step an element pass, a node pass (gather, central-difference
+//! update, prescribed components, divergence flag) and a one-invocation tick that counts the
+//! step, all recorded into one compute pass per submission. The displacements live in three
+//! buffers whose roles (previous, current, next) rotate each step, so nothing is copied; the CPU
+//! reads back the state only at the end of a batch.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+use hullcut_gpu::Gpu;
+use nalgebra::Vector3;
+
+use super::{
+    CellBuffers, GATHER_FN_WGSL, PARAMS_WGSL, Params, WORKGROUP, flatten, gpu_err, status, status_init, unflatten,
+};
+use crate::SimError;
+use crate::dynamics::Integrator;
+use crate::tled::Tled;
+
+/// Steps recorded into one submission; the CPU waits (bounded) between submissions, so a slow
+/// device never holds one wait for long.
+const STEPS_PER_SUBMIT: u32 = 256;
+
+/// Per-node constants of the update (48 bytes, WGSL's layout of the struct below).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct NodeData {
+    f_ext: [f32; 3],
+    mass: f32,
+    /// Prescribed displacement at the end of the ramp, per component.
+    target: [f32; 3],
+    /// Bit k set: component k is prescribed.
+    fixed: u32,
+    /// Ramp duration per component, s.
+    ramp: [f32; 3],
+    pad: f32,
+}
+
+/// Node pass of a step: gather, update, prescribed components, divergence flag.
+const NODE_WGSL: &str = "
+struct NodeData {
+    f_ext: vec3<f32>,
+    mass: f32,
+    goal: vec3<f32>,
+    fixed: u32,
+    ramp: vec3<f32>,
+    pad: f32,
+}
+@group(0) @binding(4) var<storage, read> node_data: array<NodeData>;
+@group(0) @binding(5) var<storage, read> u_prev: array<f32>;
+@group(0) @binding(6) var<storage, read> u_now: array<f32>;
+@group(0) @binding(7) var<storage, read_write> u_next: array<f32>;
+
+// The smooth ramp s^3 (10 - 15 s + 6 s^2), as crate::dynamics::ramp.
+fn ramp(t: f32, duration: f32) -> f32 {
+    if (duration <= 0.0) {
+        return 1.0;
+    }
+    let s = clamp(t / duration, 0.0, 1.0);
+    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
+}
+
+@compute @workgroup_size(64)
+fn node(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = gid.x;
+    if (n >= p.nodes || atomicLoad(&status[1]) != 0u) {
+        return;
+    }
+    let d = node_data[n];
+    let u = vec3<f32>(u_now[3u * n], u_now[3u * n + 1u], u_now[3u * n + 2u]);
+    var x = u;
+    if (d.mass > 0.0) {
+        let up = vec3<f32>(u_prev[3u * n], u_prev[3u * n + 1u], u_prev[3u * n + 2u]);
+        x = ((d.f_ext - gathered(n)) * (p.dt2 / d.mass) + u * 2.0 - up * p.b) * p.a;
+    }
+    let step = x - u;
+    let v2 = dot(step, step) / p.dt2;
+    let t = f32(atomicLoad(&status[0]) + 1u) * p.dt;
+    for (var k = 0u; k < 3u; k++) {
+        if ((d.fixed & (1u << k)) != 0u) {
+            x[k] = d.goal[k] * ramp(t, d.ramp[k]);
+        }
+    }
+    u_next[3u * n] = x.x;
+    u_next[3u * n + 1u] = x.y;
+    u_next[3u * n + 2u] = x.z;
+    // Also true for NaN: the comparison fails.
+    if (!(v2 <= p.speed_limit2)) {
+        atomicMax(&status[1], 1u);
+        atomicMin(&status[2], n);
+    }
+}
+";
+
+/// Counts a completed step (unless the run diverged in it).
+const TICK_WGSL: &str = "
+@group(0) @binding(0) var<storage, read_write> status: array<atomic<u32>>;
+
+@compute @workgroup_size(1)
+fn tick() {
+    if (atomicLoad(&status[1]) == 0u) {
+        atomicAdd(&status[0], 1u);
+    }
+}
+";
+
+/// What a batch of steps on the GPU ended with.
+#[derive(Debug, Clone)]
+pub struct StepBatch {
+    /// Steps completed (all asked for, unless the run diverged).
+    pub completed: u32,
+    /// The lowest-numbered node that moved faster than the limit or became non-finite in the
+    /// step after the completed ones.
+    pub diverged_node: Option<u32>,
+    /// Cells found inverted, summed over the steps run (the GPU does not regularize them).
+    pub inverted_cell_steps: u32,
+    /// Displacements after the completed steps.
+    pub u: Vec<Vector3<f32>>,
+    /// Displacements one step before.
+    pub u_prev: Vec<Vector3<f32>>,
+    /// Displacements two steps before (after a divergence: the failed step's displacements,
+    /// where the node pass wrote them).
+    pub u_older: Vec<Vector3<f32>>,
+}
+
+/// TLED steps on the GPU for an all-TLED body: the cells of a [`Tled`], the masses, external
+/// forces and prescribed components of an [`Integrator`].
+#[derive(Debug)]
+pub struct GpuStepper {
+    gpu: Arc<Gpu>,
+    cells: CellBuffers,
+    /// The three displacement buffers; step `i` of a batch reads `u[(r + i) % 3]` (previous) and
+    /// `u[(r + i + 1) % 3]` (current) and writes `u[(r + i + 2) % 3]`, with `r` = `rotation`.
+    u: [wgpu::Buffer; 3],
+    /// Element pass reading `u[i]`.
+    element_binds: [wgpu::BindGroup; 3],
+    node: wgpu::ComputePipeline,
+    /// Node pass of rotation `r`.
+    node_binds: [wgpu::BindGroup; 3],
+    tick: (wgpu::ComputePipeline, wgpu::BindGroup),
+    rotation: usize,
+}
+
+impl GpuStepper {
+    /// Uploads the cells of `tled` and the masses, the prescribed components and the constant
+    /// external forces `f_ext` of `integrator` (whose state [`GpuStepper::upload`] sends).
+    ///
+    /// Refuses what the GPU path does not model: Gauss quadrature, nodes frozen or pulled by
+    /// another model (the hybrid), and devices with too few storage bindings.
+    pub fn new(gpu: Arc<Gpu>, tled: &Tled, integrator: &Integrator, f_ext: &[Vector3<f32>]) -> Result<Self, SimError> {
+        let nodes = integrator.u.len();
+        if tled.node_count != nodes || f_ext.len() != nodes {
+            return Err(SimError::Gpu(format!(
+                "{} lattice nodes, {nodes} integrator nodes and {} external forces",
+                tled.node_count,
+                f_ext.len()
+            )));
+        }
+        if integrator.frozen.iter().any(|&f| f) || integrator.implicit_stiffness.iter().any(|&k| k != 0.0) {
+            return Err(SimError::Gpu(
+                "the GPU backend steps all-TLED bodies; this one has FLSM or interface nodes (hybrid.ratio < 1)".into(),
+            ));
+        }
+        // The node pass binds six storage buffers (status, gather list, corner forces, node data
+        // and two displacement buffers read, one written: seven in all).
+        let have = gpu.summary.limits.max_storage_buffers_per_shader_stage;
+        if have < 7 {
+            return Err(SimError::Gpu(format!(
+                "{} allows {have} storage buffers per shader stage; the TLED step needs 7",
+                gpu.summary.info.name
+            )));
+        }
+        let dt = integrator.dt;
+        let params = Params {
+            dt,
+            a: 1.0 / (1.0 + 0.5 * integrator.damping * dt),
+            b: 1.0 - 0.5 * integrator.damping * dt,
+            dt2: dt * dt,
+            speed_limit2: integrator.speed_limit * integrator.speed_limit,
+            ..Params::zeroed()
+        };
+        let cells = CellBuffers::new(&gpu, tled, params)?;
+        let mut data: Vec<NodeData> = integrator
+            .mass
+            .iter()
+            .zip(f_ext)
+            .map(|(&mass, f)| NodeData { f_ext: [f.x, f.y, f.z], mass, ..NodeData::zeroed() })
+            .collect();
+        for p in &integrator.prescribed {
+            let (d, k) = (&mut data[p.node as usize], usize::from(p.axis));
+            d.fixed |= 1 << k;
+            d.target[k] = p.target;
+            d.ramp[k] = p.ramp;
+        }
+        let node_data = gpu.storage("node data", &data).map_err(gpu_err)?;
+        let zeros = vec![0.0f32; 3 * nodes];
+        let u = [
+            gpu.storage("displacements 0", &zeros).map_err(gpu_err)?,
+            gpu.storage("displacements 1", &zeros).map_err(gpu_err)?,
+            gpu.storage("displacements 2", &zeros).map_err(gpu_err)?,
+        ];
+        let element_binds = [0, 1, 2].map(|i| cells.element_bind(&gpu, &u[i]));
+        let node = gpu.pipeline("tled step node pass", &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_WGSL}"), "node");
+        let node_binds = [0, 1, 2].map(|r| {
+            gpu.bind_numbered(
+                &node,
+                &[
+                    (0, &cells.uniform),
+                    (1, &cells.status),
+                    (2, &cells.gather_list),
+                    (3, &cells.cell_forces),
+                    (4, &node_data),
+                    (5, &u[r]),
+                    (6, &u[(r + 1) % 3]),
+                    (7, &u[(r + 2) % 3]),
+                ],
+            )
+        });
+        let tick = gpu.pipeline("tled step tick", TICK_WGSL, "tick");
+        let tick_bind = gpu.bind(&tick, &[&cells.status]);
+        Ok(Self { gpu, cells, u, element_binds, node, node_binds, tick: (tick, tick_bind), rotation: 0 })
+    }
+
+    /// The device in use.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// Sends the integrator's state (current and previous displacements).
+    pub fn upload(&mut self, integrator: &Integrator) {
+        let r = self.rotation;
+        let queue = &self.gpu.queue;
+        queue.write_buffer(&self.u[r], 0, bytemuck::cast_slice(&flatten(&integrator.u_prev)));
+        queue.write_buffer(&self.u[(r + 1) % 3], 0, bytemuck::cast_slice(&flatten(&integrator.u)));
+    }
+
+    /// Runs `steps` steps from the uploaded state, the first of them step `start + 1` (its time
+    /// sets the prescribed ramps), and reads back the state they end in.
+    pub fn run(&mut self, start: u64, steps: u32) -> Result<StepBatch, SimError> {
+        let start32 = u32::try_from(start + u64::from(steps))
+            .map_err(|_| SimError::Gpu(format!("step {start}: beyond the GPU's 32-bit step counter")))?
+            - steps;
+        let gpu = &*self.gpu;
+        gpu.queue.write_buffer(&self.cells.status, 0, bytemuck::cast_slice(&status_init(start32)));
+        let (cells, nodes) = (self.cells.params.cells, self.cells.params.nodes);
+        let mut done = 0;
+        while done < steps {
+            let batch = (steps - done).min(STEPS_PER_SUBMIT);
+            let mut encoder =
+                gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("tled steps") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("tled steps"),
+                    timestamp_writes: None,
+                });
+                for i in done..done + batch {
+                    let r = (self.rotation + i as usize) % 3;
+                    pass.set_pipeline(&self.cells.element);
+                    pass.set_bind_group(0, &self.element_binds[(r + 1) % 3], &[]);
+                    pass.dispatch_workgroups(cells.div_ceil(WORKGROUP), 1, 1);
+                    pass.set_pipeline(&self.node);
+                    pass.set_bind_group(0, &self.node_binds[r], &[]);
+                    pass.dispatch_workgroups(nodes.div_ceil(WORKGROUP), 1, 1);
+                    pass.set_pipeline(&self.tick.0);
+                    pass.set_bind_group(0, &self.tick.1, &[]);
+                    pass.dispatch_workgroups(1, 1, 1);
+                }
+            }
+            gpu.queue.submit([encoder.finish()]);
+            gpu.wait("TLED steps").map_err(gpu_err)?;
+            done += batch;
+        }
+        let s = self.cells.read_status(gpu)?;
+        let completed = s[status::STEP] - start32;
+        let r = (self.rotation + completed as usize) % 3;
+        let n = 3 * nodes as usize;
+        let read = |i: usize| -> Result<Vec<Vector3<f32>>, SimError> {
+            Ok(unflatten(&gpu.read::<f32>("displacements", &self.u[i], n).map_err(gpu_err)?))
+        };
+        let batch = StepBatch {
+            completed,
+            diverged_node: (s[status::DIVERGED] != 0).then_some(s[status::NODE]),
+            inverted_cell_steps: s[status::INVERTED],
+            u: read((r + 1) % 3)?,
+            u_prev: read(r)?,
+            u_older: read((r + 2) % 3)?,
+        };
+        self.rotation = r;
+        Ok(batch)
+    }
+}

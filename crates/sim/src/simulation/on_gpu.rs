@@ -1,0 +1,306 @@
+//! A [`Simulation`] stepped on the GPU ([`GpuStepper`]), with counted falls back to the CPU.
+
+use std::sync::Arc;
+
+use hullcut_gpu::Gpu;
+
+use super::Simulation;
+use crate::SimError;
+use crate::dynamics::Divergence;
+use crate::gpu::GpuStepper;
+
+/// How the GPU backend has done so far (in the report of `hullcut sim --backend gpu`).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct GpuStats {
+    /// The adapter's name.
+    pub adapter: String,
+    /// Batches of steps run on the GPU and kept.
+    pub batches: u64,
+    /// Steps they held.
+    pub steps: u64,
+    /// Batches redone on the CPU (a cell inverted: the GPU does not regularize it).
+    pub cpu_batches: u64,
+    /// Steps the CPU ran in their place.
+    pub cpu_steps: u64,
+    /// Why the GPU was given up for the rest of the run (a device error), if it was.
+    pub abandoned: Option<String>,
+}
+
+/// The GPU side of a simulation.
+#[derive(Debug)]
+pub(super) struct GpuPart {
+    stepper: GpuStepper,
+    /// Whether the GPU holds the integrator's state (false after the CPU stepped).
+    in_sync: bool,
+    stats: GpuStats,
+}
+
+impl Simulation {
+    /// Steps this simulation on `gpu` from now on. Refused (with the reason) for what the GPU path
+    /// does not model: the hybrid model's FLSM part and Gauss quadrature.
+    pub fn use_gpu(&mut self, gpu: Arc<Gpu>) -> Result<(), SimError> {
+        if let Some(part) = &self.flsm {
+            return Err(SimError::Gpu(format!(
+                "the GPU backend runs all-TLED scenarios so far; this one simulates {} of {} nodes with FLSM \
+                 (hybrid.ratio or hybrid.operational)",
+                part.active.iter().filter(|&&a| a).count(),
+                self.rest.len()
+            )));
+        }
+        let adapter = gpu.summary.info.name.clone();
+        let stepper = GpuStepper::new(gpu, &self.tled, &self.integrator, &self.f_applied)?;
+        self.gpu = Some(GpuPart { stepper, in_sync: false, stats: GpuStats { adapter, ..GpuStats::default() } });
+        Ok(())
+    }
+
+    /// The GPU backend's counts, when it is in use.
+    pub fn gpu_stats(&self) -> Option<&GpuStats> {
+        self.gpu.as_ref().map(|g| &g.stats)
+    }
+
+    /// `steps` TLED steps on the GPU. A batch in which a cell inverted is redone on the CPU,
+    /// which regularizes it; a device error gives the GPU up for the rest of the run. Both are
+    /// counted in [`GpuStats`].
+    pub(super) fn gpu_steps(&mut self, steps: u64) -> Result<(), Divergence> {
+        let Some(part) = self.gpu.as_mut() else {
+            return self.cpu_steps(steps);
+        };
+        let steps32 = u32::try_from(steps).unwrap_or(u32::MAX);
+        if !part.in_sync {
+            part.stepper.upload(&self.integrator);
+            part.in_sync = true;
+        }
+        let start = self.integrator.step;
+        let batch = match part.stepper.run(start, steps32) {
+            Ok(b) => b,
+            Err(e) => {
+                tracing::warn!("GPU backend given up, the CPU goes on: {e}");
+                part.stats.abandoned = Some(e.to_string());
+                part.in_sync = false;
+                return self.cpu_steps(steps);
+            }
+        };
+        if batch.inverted_cell_steps > 0 {
+            tracing::debug!(
+                inverted = batch.inverted_cell_steps,
+                step = start,
+                "inverted cells on the GPU: the batch is redone on the CPU"
+            );
+            part.stats.cpu_batches += 1;
+            part.stats.cpu_steps += steps;
+            part.in_sync = false;
+            return self.cpu_steps(steps);
+        }
+        part.stats.batches += 1;
+        part.stats.steps += u64::from(batch.completed);
+        let it = &mut self.integrator;
+        it.step = start + u64::from(batch.completed);
+        if let Some(node) = batch.diverged_node {
+            // The state stays at the last completed step; the failed step's values are in u_older.
+            it.u = batch.u;
+            it.u_prev = batch.u_prev;
+            let node = node as usize;
+            let speed = (batch.u_older[node] - it.u[node]).norm() / it.dt;
+            return Err(Divergence {
+                step: it.step + 1,
+                time: (it.step + 1) as f64 * f64::from(it.dt),
+                node,
+                reason: if speed.is_finite() {
+                    format!("node {node} reached {speed:.3e} m/s, above the {:.3e} m/s limit", it.speed_limit)
+                } else {
+                    format!("node {node} has a non-finite displacement")
+                },
+            });
+        }
+        // Reactions of the last step, from the internal forces at the state before it.
+        if batch.completed > 0 && self.integrator.prescribed.iter().any(|p| p.groups != 0) {
+            self.tled.element_pass(&batch.u_prev);
+            let tled = &self.tled;
+            let mut reactions = std::mem::take(&mut self.integrator.reactions);
+            self.integrator.reactions_into(
+                |i| tled.node_force(i),
+                &self.f_applied,
+                [&batch.u_older[..], &batch.u_prev[..], &batch.u[..]],
+                &mut reactions,
+            );
+            self.integrator.reactions = reactions;
+        }
+        self.integrator.u = batch.u;
+        self.integrator.u_prev = batch.u_prev;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Scenario;
+    use nalgebra::Vector3;
+
+    /// A clamped block pulled sideways at its x+ face (a ramp), under gravity and a point load:
+    /// 12 x 8 x 6 cells of 5 mm.
+    const BLOCK: &str = r#"
+        [body]
+        shape = "box"
+        size = [0.06, 0.04, 0.03]
+        cell = 0.005
+        [[boundary]]
+        faces = ["z-"]
+        fix = ["x", "y", "z"]
+        [[boundary]]
+        box = { min = [0.06, 0.0, 0.005], max = [0.06, 0.04, 0.03] }
+        displace = [0.004, 0.0, 0.002]
+        ramp = 0.02
+        [run]
+        damping = 30.0
+        gravity = [0.0, 0.0, -9.81]
+        [[load]]
+        box = { min = [0.0, 0.0, 0.03], max = [0.01, 0.04, 0.03] }
+        force = [0.0, 0.3, -0.5]
+        [report]
+        reaction = ["z-", "x+"]
+    "#;
+
+    fn sim(text: &str) -> Simulation {
+        Simulation::from_scenario(&Scenario::parse(text, "test.toml").expect("scenario")).expect("simulation")
+    }
+
+    fn largest(v: &[Vector3<f32>]) -> f32 {
+        v.iter().map(|x| x.norm()).fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn gpu_steps_match_the_cpu_within_f32_rounding() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        let gpu = Arc::new(gpu);
+        let mut cpu = sim(BLOCK);
+        let mut on_gpu = sim(BLOCK);
+        on_gpu.use_gpu(gpu.clone()).expect("use_gpu");
+        // Batches of 1, 300 (two submissions) and 99 steps: the buffers' rotation carries over.
+        let steps = 400;
+        cpu.advance_by(steps).expect("cpu");
+        for n in [1, 300, 99] {
+            on_gpu.advance_by(n).expect("gpu");
+        }
+        assert_eq!(on_gpu.integrator.step, steps);
+        let stats = on_gpu.gpu_stats().expect("stats");
+        assert_eq!((stats.batches, stats.steps, stats.cpu_batches), (3, steps, 0), "{stats:?}");
+        let (a, b) = (&cpu.integrator.u, &on_gpu.integrator.u);
+        let scale = largest(a);
+        let worst = a.iter().zip(b).map(|(x, y)| (x - y).norm()).fold(0.0f32, f32::max);
+        // Each step rounds a node's new displacement (about four operations) and its force (about
+        // 150 dependent operations in each of up to 8 cells), and the force's error enters
+        // through dt²/m: at the auto step (ω dt ≤ 1.6) a force error of ε|f| moves a node by at
+        // most ε (ω dt)² ≈ 2.6 ε of its displacement, and a stable, damped central-difference step
+        // does not amplify it. Worst case, every rounding adds up: N (4 + 2.6 · 1200) · 2⁻²⁴ ≈ 0.07
+        // of the largest displacement for N = 400. Roundings are independent, so sums of them grow
+        // as square roots: √N (2 + 2.6 √1200) · 6e-8 ≈ 1.1e-4; the bound is ten times that. A wrong
+        // index, sign or ramp gives differences of order 1.
+        let per_step = (2.0 + 2.6 * 1200f32.sqrt()) * f32::EPSILON / 2.0;
+        let bound = 10.0 * (steps as f32).sqrt() * per_step;
+        eprintln!(
+            "GPU ({}) against CPU after {steps} steps: largest difference {:.2e} of {scale:.3e} m (bound {bound:.1e})",
+            gpu.summary.info.name,
+            worst / scale
+        );
+        assert!(worst <= bound * scale, "difference {worst} m against displacements up to {scale} m");
+        for (r_cpu, r_gpu) in cpu.integrator.reactions.iter().zip(&on_gpu.integrator.reactions) {
+            assert!((r_cpu - r_gpu).norm() <= 1e-3 * r_cpu.norm().max(1e-3), "reaction {r_gpu:?} against {r_cpu:?}");
+        }
+        assert!(cpu.integrator.reactions[1].x > 0.0, "the pulled face's reaction must be reported");
+    }
+
+    #[test]
+    fn the_single_hexahedron_reaction_matches_the_closed_form_on_the_gpu() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        let text =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/scenarios/hex-stretch.toml"))
+                .expect("hex-stretch.toml");
+        let mut s = sim(&text);
+        s.use_gpu(Arc::new(gpu)).expect("use_gpu");
+        let steps = (0.3 / s.dt()).ceil() as u64;
+        s.advance_by(steps).expect("stable");
+        // P_xx = 1.3 (μ (1 − 1/1.69) + λ 1.3 · 0.3 / 1.69) on 0.01 m²; the face is held at rest
+        // after the ramp, and damping has settled the body by t = 0.3 s.
+        let expected = 1.3 * (20_000.0 * (1.0 - 1.0 / 1.69) + 20_000.0 * 1.3 * 0.3 / 1.69) * 0.01;
+        let got = s.integrator.reactions[0].x;
+        assert!((got - expected).abs() < 0.01 * expected, "reaction {got} N, closed form {expected} N");
+    }
+
+    #[test]
+    fn a_step_above_the_limit_is_reported_with_its_step_not_nan() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        let mut s = sim(BLOCK);
+        let dt = 1.5 * s.stability.dt_critical;
+        let text = BLOCK.replace("damping = 30.0", &format!("damping = 30.0\ndt = {dt:e}"));
+        let mut s2 = sim(&text);
+        assert!(s2.dt_above_critical);
+        s2.use_gpu(Arc::new(gpu)).expect("use_gpu");
+        let err = s2.advance_by(5000).expect_err("unstable");
+        assert!(err.step > 1 && err.step <= 5000, "{err:?}");
+        assert_eq!(s2.integrator.step + 1, err.step);
+        assert!(
+            s2.integrator.u.iter().all(|u| u.iter().all(|x| x.is_finite())),
+            "the state before the failure is finite"
+        );
+        assert!(err.reason.contains(&format!("node {}", err.node)), "{}", err.reason);
+        // The CPU fails at the same step: the same arithmetic, up to rounding.
+        s.integrator.dt = dt as f32;
+        let cpu = s.advance_by(5000).expect_err("unstable on the cpu");
+        assert!(cpu.step.abs_diff(err.step) <= 2, "cpu {} gpu {}", cpu.step, err.step);
+    }
+
+    #[test]
+    fn a_batch_with_an_inverted_cell_is_redone_on_the_cpu_and_counted() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        // A 3 cm cube at rest, one interior node pushed through its neighbours to start with:
+        // the cells around it are inverted, which the GPU counts and the CPU regularizes.
+        let text = r#"
+            [body]
+            shape = "box"
+            size = [0.03, 0.03, 0.03]
+            cell = 0.01
+            [[boundary]]
+            faces = ["z-"]
+            fix = ["x", "y", "z"]
+            [run]
+            damping = 200.0
+        "#;
+        let mut cpu = sim(text);
+        let centre = cpu.lattice.node_at([1, 1, 1]).expect("node") as usize;
+        cpu.integrator.u[centre] = Vector3::new(0.015, 0.015, 0.015);
+        cpu.integrator.u_prev[centre] = cpu.integrator.u[centre];
+        let mut s = sim(text);
+        s.integrator.u.clone_from(&cpu.integrator.u);
+        s.integrator.u_prev.clone_from(&cpu.integrator.u_prev);
+        s.use_gpu(Arc::new(gpu)).expect("use_gpu");
+        // The first batch inverts and is redone on the CPU, from the same state as the CPU run:
+        // the same arithmetic, so the same numbers.
+        cpu.advance_by(20).expect("stable on the cpu");
+        s.advance_by(20).expect("stable");
+        let stats = s.gpu_stats().expect("stats").clone();
+        assert_eq!((stats.batches, stats.cpu_batches, stats.cpu_steps), (0, 1, 20), "{stats:?}");
+        assert!(cpu.inverted_cells_max() > 0 && s.inverted_cells_max() > 0);
+        assert_eq!(s.integrator.u, cpu.integrator.u);
+        // Once the cells have recovered, batches run on the GPU again.
+        for _ in 0..20 {
+            s.advance_by(100).expect("stable");
+        }
+        let stats = s.gpu_stats().expect("stats");
+        assert!(stats.batches >= 1, "{stats:?}");
+        assert!(s.integrator.u.iter().all(|u| u.iter().all(|x| x.is_finite())));
+        eprintln!("{stats:?}");
+    }
+
+    #[test]
+    fn the_hybrid_and_gauss_quadrature_are_refused_with_their_keys() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        let gpu = Arc::new(gpu);
+        let mut hybrid = sim(&format!("{BLOCK}\n[hybrid]\nratio = 0.5\n"));
+        let err = hybrid.use_gpu(gpu.clone()).expect_err("hybrid");
+        assert!(err.to_string().contains("hybrid.ratio"), "{err}");
+        let mut gauss = sim(&format!("{BLOCK}\n[tled]\nintegration = \"gauss8\"\n"));
+        let err = gauss.use_gpu(gpu).expect_err("gauss8");
+        assert!(err.to_string().contains("tled.integration"), "{err}");
+    }
+}
