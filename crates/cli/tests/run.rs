@@ -205,6 +205,35 @@ fn the_built_in_scene_cuts_the_organ_in_two() {
 }
 
 #[test]
+fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let report = dir.path().join("run.json");
+    let report_arg = report.to_str().expect("utf-8");
+    let o = hullcut(&["run", "--scene-frames", "135", "--backend", "gpu", "--report", report_arg]);
+    if !o.status.success() && text(&o).contains("no GPU adapter") && std::env::var_os("CI").is_none() {
+        eprintln!("skipping a GPU test: {}", text(&o));
+        return;
+    }
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["backend"].as_str(), Some("gpu"));
+    let t = &r["tissue"];
+    assert_eq!(t["pieces"].as_u64(), Some(2), "{t}");
+    assert!(t["failure"].is_null(), "{t}");
+    // The steps ran on the GPU, a stepper per cut lattice; a batch with an inverted cell would
+    // have gone to the CPU, counted.
+    let g = &t["gpu"];
+    let (batches, cpu) = (g["batches"].as_u64().expect("batches"), g["cpu_batches"].as_u64().expect("cpu"));
+    assert!(batches > 100 && cpu < batches / 10, "{g}");
+    assert!(g["uploads"].as_u64().expect("uploads") >= 2, "rebuilt after cuts: {g}");
+    assert!(g["abandoned"].is_null(), "{g}");
+    // The hybrid model stays on the CPU: a clear error, not a silent CPU run.
+    let o = hullcut(&["run", "--scene-frames", "2", "--backend", "gpu", "--operational-radius", "0.02"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--operational-radius"), "{}", text(&o));
+}
+
+#[test]
 fn the_recording_holds_every_entity_of_the_design_tree() {
     let dir = tempfile::tempdir().expect("tempdir");
     let rrd = dir.path().join("run.rrd");

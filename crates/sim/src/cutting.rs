@@ -37,6 +37,9 @@ use crate::tled::{Tled, TledParams};
 use crate::vna::CutTopology;
 use crate::{Material, SimError};
 
+#[cfg(feature = "gpu")]
+mod on_gpu;
+
 /// Settings of a [`CutSim`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct CutSimParams {
@@ -134,6 +137,9 @@ pub struct CutSim {
     steps: Option<HybridSteps>,
     /// Interface anchors of the current FLSM step: node, goal − rest, β × velocity.
     anchors: Vec<(usize, Vector3<f32>, Vector3<f32>)>,
+    /// The GPU backend, once [`CutSim::use_gpu`] chose it.
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::gpu::GpuRun>,
 }
 
 impl CutSim {
@@ -201,6 +207,8 @@ impl CutSim {
             region_changes: 0,
             steps,
             anchors: Vec::new(),
+            #[cfg(feature = "gpu")]
+            gpu: None,
         };
         sim.install(
             cut,
@@ -251,6 +259,11 @@ impl CutSim {
         integrator.u_prev = u_prev;
         self.integrator = integrator;
         self.cut_lattice = cut;
+        #[cfg(feature = "gpu")]
+        if let Some(run) = &mut self.gpu {
+            // Built anew for the cut lattice at the next advance.
+            run.stepper = None;
+        }
         // Whatever FLSM moved is in u and u_prev now (see `flush_flsm`); the region is rebuilt.
         self.flsm = None;
         let width = self.params.hybrid.map_or(0, |h| h.flsm.w);
@@ -493,6 +506,10 @@ impl CutSim {
         }
         let outer = (seconds / (f64::from(self.integrator.dt) * substeps as f64)).ceil().max(1.0) as usize;
         self.contacts = 0;
+        #[cfg(feature = "gpu")]
+        if self.gpu_steps(outer)? {
+            return Ok(outer);
+        }
         for _ in 0..outer {
             if let (Some(part), Some(steps)) = (&mut self.flsm, self.steps) {
                 let dt = self.integrator.dt;
@@ -697,7 +714,7 @@ mod tests {
     use crate::body::box_sdf;
 
     /// The surface a blade edge along y sweeps going down through x = `x` from z0 to z1.
-    fn vertical_stroke(x: f64, z0: f64, z1: f64) -> SweptSurface {
+    pub(super) fn vertical_stroke(x: f64, z0: f64, z1: f64) -> SweptSurface {
         let edge: Vec<Point3<f64>> = (0..7).map(|k| Point3::new(0.0, -0.01 + 0.01 * k as f64, 0.0)).collect();
         SweptSurface::between(
             &edge,

@@ -46,14 +46,14 @@ pub use cutting::{CutOutcome, CutSim, CutSimParams};
 pub use embed::{EmbedError, Embedding};
 pub use error::SimError;
 pub use flsm::{Flsm, FlsmParams};
+#[cfg(feature = "gpu")]
+pub use gpu::GpuStats;
 pub use lattice::{CORNERS, Cell, Lattice};
 pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
 pub use operational::{HybridParams, HybridSteps, match_flsm};
 pub use scenario::Scenario;
-#[cfg(feature = "gpu")]
-pub use simulation::GpuStats;
 pub use simulation::{NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};

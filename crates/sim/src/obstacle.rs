@@ -102,6 +102,19 @@ impl Obstacle {
         Some(Obstacle { origin, h, dims, push, occupied: occupied.to_vec() })
     }
 
+    /// The voxel grid: origin (centre of voxel 0), spacing and dimensions (for the GPU's contact
+    /// pass).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn frame(&self) -> (Point3<f64>, f64, [usize; 3]) {
+        (self.origin, self.h, self.dims)
+    }
+
+    /// Per voxel, x fastest: the push out of it and 1 where it is occupied (0 elsewhere).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn voxels(&self) -> Vec<[f32; 4]> {
+        self.push.iter().zip(&self.occupied).map(|(v, &o)| [v.x, v.y, v.z, if o { 1.0 } else { 0.0 }]).collect()
+    }
+
     /// The offset that takes `p` out of the obstacle, or `None` when `p` is outside.
     pub fn push_at(&self, p: &Point3<f32>) -> Option<Vector3<f32>> {
         let q = (p.cast::<f64>() - self.origin) / self.h;

@@ -15,8 +15,6 @@ use crate::{Lattice, Material, SimError};
 
 #[cfg(feature = "gpu")]
 mod on_gpu;
-#[cfg(feature = "gpu")]
-pub use on_gpu::GpuStats;
 
 /// What simulates a node (the seed paper's Fig. 1 colours: TLED green, FLSM yellow, interface white).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]

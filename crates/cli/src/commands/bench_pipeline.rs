@@ -99,7 +99,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     for config in &configs {
         let hull = HullParams { leaf_size: config.voxel, ..HullParams::default() };
         let hybrid = config.hybrid.map(|radius| HybridParams { radius, ..HybridParams::default() });
-        let mut sim = tissue::build("organ", config.cell, hybrid)?;
+        let mut sim = tissue::build("organ", config.cell, hybrid, None)?;
         let mut tled_cells = Vec::new();
         let nodes = sim.sim.lattice().node_count();
         let mut tracker = Tracker::new(template.clone(), TrackerParams::default());

@@ -18,6 +18,7 @@ use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use serde::Serialize;
 
 use self::stages::{Policy, StageTimes, Work};
+use super::sim::Backend;
 use crate::commands::reconstruct::checks;
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
@@ -78,9 +79,11 @@ pub struct Args {
     /// Pace the replay to the capture timestamps (a stage that falls behind drops frame sets).
     #[arg(long)]
     realtime: bool,
-    /// Compute backend. Only `cpu` exists so far (the wgpu backend is a later issue).
-    #[arg(long, value_name = "cpu|gpu", default_value = "cpu")]
-    backend: String,
+    /// Compute backend of the tissue: `cpu` (rayon) or `gpu` (wgpu: TLED steps, contacts; the hull
+    /// and the hybrid model stay on the CPU). A batch in which a cell inverts is redone on the CPU,
+    /// counted in the report's tissue.gpu.
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
     /// The tissue: `organ` or a PLY/OBJ mesh in world metres.
     #[arg(long, value_name = "NAME|MESH", default_value = "organ")]
     tissue: String,
@@ -211,10 +214,12 @@ struct TissueReport {
     tled_cells_max: usize,
     /// Times the operational region changed.
     region_changes: usize,
+    /// The GPU backend's adapter and counts (null on the CPU).
+    gpu: Option<hullcut_sim::GpuStats>,
 }
 
 #[derive(Debug, Serialize)]
-struct Report<'a> {
+struct Report {
     schema_version: u32,
     kind: &'static str,
     provenance: Provenance,
@@ -223,7 +228,7 @@ struct Report<'a> {
     frames: [u64; 2],
     /// Times the frames were replayed (`--repeat`).
     repeat: u64,
-    backend: &'a str,
+    backend: Backend,
     masks: &'static str,
     voxel_m: f64,
     realtime: bool,
@@ -313,9 +318,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         })
         .context("installing the Ctrl-C handler")?;
     }
-    if args.backend != "cpu" {
-        bail!("--backend {}: only the cpu backend exists so far", args.backend);
-    }
     if args.queue == 0 || args.rrd_every == 0 || args.snapshot_every == 0 {
         bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
     }
@@ -391,7 +393,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
     let clock = Instant::now();
     let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });
-    let tissue = tissue::build(&args.tissue, args.cell, hybrid)?;
+    let gpu = match args.backend {
+        Backend::Gpu => {
+            let gpu = hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()).context("--backend gpu")?;
+            println!("GPU backend: {}", gpu.summary.info.name);
+            Some(std::sync::Arc::new(gpu))
+        }
+        Backend::Cpu => None,
+    };
+    let tissue = tissue::build(&args.tissue, args.cell, hybrid, gpu)?;
     let setup_s = clock.elapsed().as_secs_f64();
     for warning in &tissue.warnings {
         eprintln!("warning: {warning}");
@@ -598,7 +608,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             seed,
             frames: [range.start, range.end],
             repeat: args.repeat,
-            backend: &args.backend,
+            backend: args.backend,
             masks: if use_files { "files" } else { "segment" },
             voxel_m: args.voxel,
             realtime: args.realtime,
@@ -630,6 +640,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 tled_cells_mean: tled_cells.iter().sum::<usize>() as f64 / tled_cells.len().max(1) as f64,
                 tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),
                 region_changes: sim.region_changes(),
+                gpu: sim.gpu_stats().cloned(),
             },
             pose: pose_report,
             timings: Timings {

@@ -12,6 +12,7 @@
 //! callers treat a nonzero count as a reason to redo the work on the CPU
 //! ([`crate::Simulation::use_gpu`] does, and counts it).
 
+mod run;
 mod step;
 
 use bytemuck::{Pod, Zeroable};
@@ -21,6 +22,8 @@ use nalgebra::Vector3;
 use crate::SimError;
 use crate::tled::{INVERSION_J, Integration, Tled};
 
+pub use run::GpuStats;
+pub(crate) use run::{GpuRun, Ran};
 pub use step::{GpuStepper, StepBatch};
 
 /// Invocations per workgroup of the element and node passes.
@@ -36,8 +39,11 @@ mod status {
     pub const NODE: usize = 2;
     /// Cells found inverted, summed over the steps run.
     pub const INVERTED: usize = 3;
-    /// Length of the buffer.
-    pub const LEN: usize = 4;
+    /// Nodes pushed out of the obstacle in the last completed step.
+    pub const CONTACTS: usize = 4;
+    /// Length of the buffer; entry 5 counts the contacts of the step under way, which the tick
+    /// moves to `CONTACTS`.
+    pub const LEN: usize = 6;
 }
 
 /// The kernels' shared constants (a uniform buffer; 48 bytes).

@@ -2,7 +2,8 @@
 //! update, prescribed components, divergence flag) and a one-invocation tick that counts the
 //! step, all recorded into one compute pass per submission. The displacements live in three
 //! buffers whose roles (previous, current, next) rotate each step, so nothing is copied; the CPU
-//! reads back the state only at the end of a batch.
+//! reads back the state only at the end of a batch. With an obstacle set, a contact pass after
+//! each step pushes the free nodes inside it out, as [`crate::CutSim`] does on the CPU.
 
 use std::sync::Arc;
 
@@ -13,6 +14,7 @@ use nalgebra::Vector3;
 use super::{
     CellBuffers, GATHER_FN_WGSL, PARAMS_WGSL, Params, WORKGROUP, flatten, gpu_err, status, status_init, unflatten,
 };
+use crate::Obstacle;
 use crate::SimError;
 use crate::dynamics::Integrator;
 use crate::tled::Tled;
@@ -36,8 +38,8 @@ struct NodeData {
     pad: f32,
 }
 
-/// Node pass of a step: gather, update, prescribed components, divergence flag.
-const NODE_WGSL: &str = "
+/// The per-node constants, as [`NodeData`].
+const NODE_DATA_WGSL: &str = "
 struct NodeData {
     f_ext: vec3<f32>,
     mass: f32,
@@ -46,6 +48,63 @@ struct NodeData {
     ramp: vec3<f32>,
     pad: f32,
 }
+";
+
+/// The obstacle's grid (a uniform; 32 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct ContactParams {
+    origin: [f32; 3],
+    h: f32,
+    dims: [u32; 3],
+    /// Longest push per step, m.
+    max_push: f32,
+}
+
+/// Contact pass: a free node inside the obstacle moves toward its outside by at most
+/// `max_push` and stops (its previous displacement set to the new one).
+const CONTACT_WGSL: &str = "
+struct Contact {
+    origin: vec3<f32>,
+    h: f32,
+    dims: vec3<u32>,
+    max_push: f32,
+}
+@group(0) @binding(2) var<uniform> obstacle: Contact;
+@group(0) @binding(3) var<storage, read> push: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> rest: array<f32>;
+@group(0) @binding(5) var<storage, read> node_data: array<NodeData>;
+@group(0) @binding(6) var<storage, read_write> u_new: array<f32>;
+@group(0) @binding(7) var<storage, read_write> u_old: array<f32>;
+
+@compute @workgroup_size(64)
+fn contact(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = gid.x;
+    if (n >= p.nodes || atomicLoad(&status[1]) != 0u || node_data[n].fixed == 7u) {
+        return;
+    }
+    let u = vec3<f32>(u_new[3u * n], u_new[3u * n + 1u], u_new[3u * n + 2u]);
+    let x = vec3<f32>(rest[3u * n], rest[3u * n + 1u], rest[3u * n + 2u]) + u;
+    let q = round((x - obstacle.origin) / obstacle.h);
+    if (!(all(q >= vec3<f32>(0.0)) && all(q < vec3<f32>(obstacle.dims)))) {
+        return;
+    }
+    let g = u32(q.x) + obstacle.dims.x * (u32(q.y) + obstacle.dims.y * u32(q.z));
+    let v = push[g];
+    if (v.w == 0.0) {
+        return;
+    }
+    let moved = u + v.xyz * (obstacle.max_push / max(length(v.xyz), obstacle.max_push));
+    for (var k = 0u; k < 3u; k++) {
+        u_new[3u * n + k] = moved[k];
+        u_old[3u * n + k] = moved[k];
+    }
+    atomicAdd(&status[5], 1u);
+}
+";
+
+/// Node pass of a step: gather, update, prescribed components, divergence flag.
+const NODE_WGSL: &str = "
 @group(0) @binding(4) var<storage, read> node_data: array<NodeData>;
 @group(0) @binding(5) var<storage, read> u_prev: array<f32>;
 @group(0) @binding(6) var<storage, read> u_now: array<f32>;
@@ -92,7 +151,7 @@ fn node(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 ";
 
-/// Counts a completed step (unless the run diverged in it).
+/// Counts a completed step (unless the run diverged in it) and its contacts.
 const TICK_WGSL: &str = "
 @group(0) @binding(0) var<storage, read_write> status: array<atomic<u32>>;
 
@@ -100,6 +159,8 @@ const TICK_WGSL: &str = "
 fn tick() {
     if (atomicLoad(&status[1]) == 0u) {
         atomicAdd(&status[0], 1u);
+        atomicStore(&status[4], atomicLoad(&status[5]));
+        atomicStore(&status[5], 0u);
     }
 }
 ";
@@ -114,6 +175,8 @@ pub struct StepBatch {
     pub diverged_node: Option<u32>,
     /// Cells found inverted, summed over the steps run (the GPU does not regularize them).
     pub inverted_cell_steps: u32,
+    /// Nodes the contact pass pushed out of the obstacle in the last completed step.
+    pub contacts: u32,
     /// Displacements after the completed steps.
     pub u: Vec<Vector3<f32>>,
     /// Displacements one step before.
@@ -139,21 +202,34 @@ pub struct GpuStepper {
     node_binds: [wgpu::BindGroup; 3],
     tick: (wgpu::ComputePipeline, wgpu::BindGroup),
     rotation: usize,
+    rest: wgpu::Buffer,
+    node_data: wgpu::Buffer,
+    contact: wgpu::ComputePipeline,
+    /// Contact pass of rotation `r`, while an obstacle is set.
+    contact_binds: Option<[wgpu::BindGroup; 3]>,
 }
 
 impl GpuStepper {
-    /// Uploads the cells of `tled` and the masses, the prescribed components and the constant
-    /// external forces `f_ext` of `integrator` (whose state [`GpuStepper::upload`] sends).
+    /// Uploads the cells of `tled`, the masses and the prescribed components of `integrator` (whose
+    /// state [`GpuStepper::upload`] sends), the constant external forces `f_ext` and the nodes'
+    /// rest positions `rest` (for contacts).
     ///
     /// Refuses what the GPU path does not model: Gauss quadrature, nodes frozen or pulled by
     /// another model (the hybrid), and devices with too few storage bindings.
-    pub fn new(gpu: Arc<Gpu>, tled: &Tled, integrator: &Integrator, f_ext: &[Vector3<f32>]) -> Result<Self, SimError> {
+    pub fn new(
+        gpu: Arc<Gpu>,
+        tled: &Tled,
+        integrator: &Integrator,
+        f_ext: &[Vector3<f32>],
+        rest: &[Vector3<f32>],
+    ) -> Result<Self, SimError> {
         let nodes = integrator.u.len();
-        if tled.node_count != nodes || f_ext.len() != nodes {
+        if tled.node_count != nodes || f_ext.len() != nodes || rest.len() != nodes {
             return Err(SimError::Gpu(format!(
-                "{} lattice nodes, {nodes} integrator nodes and {} external forces",
+                "{} lattice nodes, {nodes} integrator nodes, {} external forces and {} rest positions",
                 tled.node_count,
-                f_ext.len()
+                f_ext.len(),
+                rest.len()
             )));
         }
         if integrator.frozen.iter().any(|&f| f) || integrator.implicit_stiffness.iter().any(|&k| k != 0.0) {
@@ -200,7 +276,11 @@ impl GpuStepper {
             gpu.storage("displacements 2", &zeros).map_err(gpu_err)?,
         ];
         let element_binds = [0, 1, 2].map(|i| cells.element_bind(&gpu, &u[i]));
-        let node = gpu.pipeline("tled step node pass", &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_WGSL}"), "node");
+        let node = gpu.pipeline(
+            "tled step node pass",
+            &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_DATA_WGSL}{NODE_WGSL}"),
+            "node",
+        );
         let node_binds = [0, 1, 2].map(|r| {
             gpu.bind_numbered(
                 &node,
@@ -218,7 +298,60 @@ impl GpuStepper {
         });
         let tick = gpu.pipeline("tled step tick", TICK_WGSL, "tick");
         let tick_bind = gpu.bind(&tick, &[&cells.status]);
-        Ok(Self { gpu, cells, u, element_binds, node, node_binds, tick: (tick, tick_bind), rotation: 0 })
+        let rest = gpu.storage("rest positions", &flatten(rest)).map_err(gpu_err)?;
+        let contact =
+            gpu.pipeline("tled contact pass", &format!("{PARAMS_WGSL}{NODE_DATA_WGSL}{CONTACT_WGSL}"), "contact");
+        Ok(Self {
+            gpu,
+            cells,
+            u,
+            element_binds,
+            node,
+            node_binds,
+            tick: (tick, tick_bind),
+            rotation: 0,
+            rest,
+            node_data,
+            contact,
+            contact_binds: None,
+        })
+    }
+
+    /// The obstacle free nodes cannot enter from the next step on (`None`: none), each moving
+    /// out by at most `max_push` metres per step; as [`crate::CutSim::set_obstacles`], up to the
+    /// rounding of positions to the obstacle's voxels in f32 instead of f64.
+    pub fn set_obstacle(&mut self, obstacle: Option<&Obstacle>, max_push: f32) -> Result<(), SimError> {
+        let Some(o) = obstacle else {
+            self.contact_binds = None;
+            return Ok(());
+        };
+        let (origin, h, dims) = o.frame();
+        let params = ContactParams {
+            origin: origin.coords.cast::<f32>().into(),
+            h: h as f32,
+            dims: dims.map(|d| d as u32),
+            max_push,
+        };
+        let grid = o.voxels();
+        let gpu = &*self.gpu;
+        let uniform = gpu.uniform("obstacle", &params);
+        let grid = gpu.storage("obstacle grid", &grid).map_err(gpu_err)?;
+        self.contact_binds = Some([0, 1, 2].map(|r| {
+            gpu.bind_numbered(
+                &self.contact,
+                &[
+                    (0, &self.cells.uniform),
+                    (1, &self.cells.status),
+                    (2, &uniform),
+                    (3, &grid),
+                    (4, &self.rest),
+                    (5, &self.node_data),
+                    (6, &self.u[(r + 2) % 3]),
+                    (7, &self.u[(r + 1) % 3]),
+                ],
+            )
+        }));
+        Ok(())
     }
 
     /// The device in use.
@@ -261,6 +394,11 @@ impl GpuStepper {
                     pass.set_pipeline(&self.node);
                     pass.set_bind_group(0, &self.node_binds[r], &[]);
                     pass.dispatch_workgroups(nodes.div_ceil(WORKGROUP), 1, 1);
+                    if let Some(binds) = &self.contact_binds {
+                        pass.set_pipeline(&self.contact);
+                        pass.set_bind_group(0, &binds[r], &[]);
+                        pass.dispatch_workgroups(nodes.div_ceil(WORKGROUP), 1, 1);
+                    }
                     pass.set_pipeline(&self.tick.0);
                     pass.set_bind_group(0, &self.tick.1, &[]);
                     pass.dispatch_workgroups(1, 1, 1);
@@ -281,6 +419,7 @@ impl GpuStepper {
             completed,
             diverged_node: (s[status::DIVERGED] != 0).then_some(s[status::NODE]),
             inverted_cell_steps: s[status::INVERTED],
+            contacts: s[status::CONTACTS],
             u: read((r + 1) % 3)?,
             u_prev: read(r)?,
             u_older: read((r + 2) % 3)?,

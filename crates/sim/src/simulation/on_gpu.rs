@@ -4,36 +4,15 @@ use std::sync::Arc;
 
 use hullcut_gpu::Gpu;
 
+use nalgebra::Vector3;
+
 use super::Simulation;
 use crate::SimError;
 use crate::dynamics::Divergence;
-use crate::gpu::GpuStepper;
-
-/// How the GPU backend has done so far (in the report of `hullcut sim --backend gpu`).
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
-pub struct GpuStats {
-    /// The adapter's name.
-    pub adapter: String,
-    /// Batches of steps run on the GPU and kept.
-    pub batches: u64,
-    /// Steps they held.
-    pub steps: u64,
-    /// Batches redone on the CPU (a cell inverted: the GPU does not regularize it).
-    pub cpu_batches: u64,
-    /// Steps the CPU ran in their place.
-    pub cpu_steps: u64,
-    /// Why the GPU was given up for the rest of the run (a device error), if it was.
-    pub abandoned: Option<String>,
-}
+use crate::gpu::{GpuRun, GpuStats, GpuStepper, Ran};
 
 /// The GPU side of a simulation.
-#[derive(Debug)]
-pub(super) struct GpuPart {
-    stepper: GpuStepper,
-    /// Whether the GPU holds the integrator's state (false after the CPU stepped).
-    in_sync: bool,
-    stats: GpuStats,
-}
+pub(super) type GpuPart = GpuRun;
 
 impl Simulation {
     /// Steps this simulation on `gpu` from now on. Refused (with the reason) for what the GPU path
@@ -47,9 +26,10 @@ impl Simulation {
                 self.rest.len()
             )));
         }
-        let adapter = gpu.summary.info.name.clone();
-        let stepper = GpuStepper::new(gpu, &self.tled, &self.integrator, &self.f_applied)?;
-        self.gpu = Some(GpuPart { stepper, in_sync: false, stats: GpuStats { adapter, ..GpuStats::default() } });
+        let stepper = GpuStepper::new(gpu.clone(), &self.tled, &self.integrator, &self.f_applied, &self.rest)?;
+        let mut run = GpuRun::new(gpu);
+        run.install(stepper);
+        self.gpu = Some(run);
         Ok(())
     }
 
@@ -58,75 +38,28 @@ impl Simulation {
         self.gpu.as_ref().map(|g| &g.stats)
     }
 
-    /// `steps` TLED steps on the GPU. A batch in which a cell inverted is redone on the CPU,
-    /// which regularizes it; a device error gives the GPU up for the rest of the run. Both are
-    /// counted in [`GpuStats`].
+    /// `steps` TLED steps on the GPU, or on the CPU where [`GpuRun`] says so (counted).
     pub(super) fn gpu_steps(&mut self, steps: u64) -> Result<(), Divergence> {
-        let Some(part) = self.gpu.as_mut() else {
+        let Some(run) = self.gpu.as_mut() else {
             return self.cpu_steps(steps);
         };
-        let steps32 = u32::try_from(steps).unwrap_or(u32::MAX);
-        if !part.in_sync {
-            part.stepper.upload(&self.integrator);
-            part.in_sync = true;
-        }
-        let start = self.integrator.step;
-        let batch = match part.stepper.run(start, steps32) {
-            Ok(b) => b,
-            Err(e) => {
-                tracing::warn!("GPU backend given up, the CPU goes on: {e}");
-                part.stats.abandoned = Some(e.to_string());
-                part.in_sync = false;
-                return self.cpu_steps(steps);
-            }
-        };
-        if batch.inverted_cell_steps > 0 {
-            tracing::debug!(
-                inverted = batch.inverted_cell_steps,
-                step = start,
-                "inverted cells on the GPU: the batch is redone on the CPU"
-            );
-            part.stats.cpu_batches += 1;
-            part.stats.cpu_steps += steps;
-            part.in_sync = false;
+        let Ran::Gpu { u_older, .. } = run.advance(&mut self.integrator, steps)? else {
             return self.cpu_steps(steps);
-        }
-        part.stats.batches += 1;
-        part.stats.steps += u64::from(batch.completed);
-        let it = &mut self.integrator;
-        it.step = start + u64::from(batch.completed);
-        if let Some(node) = batch.diverged_node {
-            // The state stays at the last completed step; the failed step's values are in u_older.
-            it.u = batch.u;
-            it.u_prev = batch.u_prev;
-            let node = node as usize;
-            let speed = (batch.u_older[node] - it.u[node]).norm() / it.dt;
-            return Err(Divergence {
-                step: it.step + 1,
-                time: (it.step + 1) as f64 * f64::from(it.dt),
-                node,
-                reason: if speed.is_finite() {
-                    format!("node {node} reached {speed:.3e} m/s, above the {:.3e} m/s limit", it.speed_limit)
-                } else {
-                    format!("node {node} has a non-finite displacement")
-                },
-            });
-        }
+        };
         // Reactions of the last step, from the internal forces at the state before it.
-        if batch.completed > 0 && self.integrator.prescribed.iter().any(|p| p.groups != 0) {
-            self.tled.element_pass(&batch.u_prev);
+        if self.integrator.prescribed.iter().any(|p| p.groups != 0) {
+            let it = &self.integrator;
+            self.tled.element_pass(&it.u_prev);
             let tled = &self.tled;
-            let mut reactions = std::mem::take(&mut self.integrator.reactions);
-            self.integrator.reactions_into(
+            let mut reactions = vec![Vector3::zeros(); it.reactions.len()];
+            it.reactions_into(
                 |i| tled.node_force(i),
                 &self.f_applied,
-                [&batch.u_older[..], &batch.u_prev[..], &batch.u[..]],
+                [&u_older[..], &it.u_prev[..], &it.u[..]],
                 &mut reactions,
             );
             self.integrator.reactions = reactions;
         }
-        self.integrator.u = batch.u;
-        self.integrator.u_prev = batch.u_prev;
         Ok(())
     }
 }

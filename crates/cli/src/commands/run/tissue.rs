@@ -99,8 +99,14 @@ impl Sweeper {
 
 /// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
 /// at lattice spacing `cell`, its lowest layer of nodes held (it rests on the table), settled
-/// under gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere.
-pub fn build(name: &str, cell: f64, hybrid: Option<HybridParams>) -> anyhow::Result<Tissue> {
+/// under gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere; with `gpu`, the
+/// TLED steps run there.
+pub fn build(
+    name: &str,
+    cell: f64,
+    hybrid: Option<HybridParams>,
+    gpu: Option<std::sync::Arc<hullcut_gpu::Gpu>>,
+) -> anyhow::Result<Tissue> {
     let material = Material::from_young_poisson(YOUNG_PA, POISSON, DENSITY);
     let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
         (Body::Organ, Box::new(organ_sdf))
@@ -119,6 +125,9 @@ pub fn build(name: &str, cell: f64, hybrid: Option<HybridParams>) -> anyhow::Res
     let params = CutSimParams { hybrid, ..CutSimParams::default() };
     let mut sim = CutSim::new(lattice, &*signed, material, fixed, params)
         .with_context(|| format!("setting up the tissue ({name})"))?;
+    if let Some(gpu) = gpu {
+        sim.use_gpu(gpu).context("--backend gpu")?;
+    }
     sim.advance(SETTLE_S).map_err(|d| anyhow::anyhow!("the tissue diverged while settling: {}", d.reason))?;
     Ok(Tissue { sim, cell, warnings: voxelized.warnings })
 }
