@@ -3,6 +3,7 @@
 //!
 //! Exit codes: 0 success, 1 failure (the error is printed), 2 bad usage.
 
+mod backend;
 mod chart;
 mod commands;
 mod frames;

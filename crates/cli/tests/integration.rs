@@ -288,6 +288,16 @@ fn bench_hull_quick_compares_octree_and_dense_grid() {
         let tests = |r: &Vec<&str>| r[4].parse::<u64>().expect("tests");
         assert!(tests(octree) < tests(dense), "{octree:?} vs {dense:?}");
     }
+    // The GPU's octree (where there is an adapter; always in CI) keeps the same cells, hence the
+    // same IoU, at the quick sizes.
+    let gpu_rows: Vec<_> = rows.iter().filter(|r| r[0] == "gpu").collect();
+    if std::env::var_os("CI").is_some() || !gpu_rows.is_empty() {
+        assert_eq!(gpu_rows.len(), 3, "{csv}");
+    }
+    for gpu in gpu_rows {
+        let octree = rows.iter().find(|r| r[0] == "octree" && r[1] == gpu[1]).expect("octree row");
+        assert_eq!((octree[5], &octree[6..]), (gpu[5], &gpu[6..]), "resolution {}", gpu[1]);
+    }
     for name in ["hull_speed.png", "hull_accuracy.png", "hull_robustness_noise.png", "hull_robustness_cameras.png"] {
         assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
     }
@@ -460,6 +470,33 @@ fn pose_lines(out: &Path) -> Vec<serde_json::Value> {
         .lines()
         .map(|l| serde_json::from_str(l).expect("a JSON line"))
         .collect()
+}
+
+#[test]
+fn reconstruct_on_the_gpu_backend_scores_as_the_cpu_does() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dataset = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let mut reports = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let (out, report) = (dir.path().join(backend), dir.path().join(format!("{backend}.json")));
+        let args = ["reconstruct", "--dataset", dataset, "--out", &path(&out), "--frames", "3:6", "--backend", backend];
+        let Some(o) = hullcut_on_gpu(&[&args[..], &["--report", &path(&report)]].concat()) else { return };
+        assert!(o.status.success(), "{}", stderr(&o));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+        assert_eq!(r["backend"], backend);
+        reports.push(r);
+    }
+    // The same cells up to f32 rounding at pixel edges (none differ on these frames in practice):
+    // the scores agree to a hundredth, and the view that disagreed most is the same.
+    for (a, b) in
+        reports[0]["accuracy"].as_array().expect("cpu").iter().zip(reports[1]["accuracy"].as_array().expect("gpu"))
+    {
+        let (x, y) = (a["iou_mean"].as_f64().expect("iou"), b["iou_mean"].as_f64().expect("iou"));
+        assert!((x - y).abs() < 0.01 * x.max(0.01), "{a} against {b}");
+    }
+    assert_eq!(reports[0]["view_disagreement"]["disagreed_most"], reports[1]["view_disagreement"]["disagreed_most"]);
 }
 
 #[test]

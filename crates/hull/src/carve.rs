@@ -420,23 +420,29 @@ impl Carver<'_> {
     }
 }
 
-/// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
-pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
+/// Checks the parameters against the views; the leaf level and the carved cube's side.
+pub(crate) fn check(views: &[Option<Silhouette>], params: &HullParams) -> Result<(u32, f64), HullError> {
     if params.leaf_size.is_nan() || params.leaf_size <= 0.0 || params.carve_votes == 0 {
         return Err(HullError::Params(format!(
             "leaf_size must be positive and carve_votes at least 1 (got {} m, {})",
             params.leaf_size, params.carve_votes
         )));
     }
-    let present: Vec<&Silhouette> = views.iter().flatten().collect();
-    if present.len() < params.carve_votes {
-        return Err(HullError::TooFewViews { present: present.len(), needed: params.carve_votes });
+    let present = views.iter().flatten().count();
+    if present < params.carve_votes {
+        return Err(HullError::TooFewViews { present, needed: params.carve_votes });
     }
     let extent = params.workspace.extent();
     if extent.is_nan() || extent <= 0.0 {
         return Err(HullError::Params("the workspace is empty".into()));
     }
-    let leaf_level = (extent / params.leaf_size).log2().ceil().max(0.0) as u32;
+    Ok(((extent / params.leaf_size).log2().ceil().max(0.0) as u32, extent))
+}
+
+/// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
+pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
+    let (leaf_level, extent) = check(views, params)?;
+    let present: Vec<&Silhouette> = views.iter().flatten().collect();
     let start = params.start_level.min(leaf_level);
     let carver = Carver { views: present, params, leaf_level };
     let n = 1usize << start;

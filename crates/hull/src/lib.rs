@@ -10,11 +10,14 @@
 //! - [`DenseGrid`]: one label's occupancy on the leaf grid and its closed surface
 //!   ([`DenseGrid::surface`], surface nets).
 //!
-//! CPU only so far (rayon across the top-level cells). No feature flags.
+//! On the CPU, rayon runs across the top-level cells. Feature `gpu`: [`gpu::GpuCarver`], the same
+//! carving on wgpu, one dispatch per octree level.
 #![warn(missing_docs)]
 
 pub mod accuracy;
 mod carve;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 mod silhouette;
 mod surface;
 
@@ -53,6 +56,9 @@ pub enum HullError {
         /// Mask height.
         found_h: u32,
     },
+    /// The GPU carver failed (limits, a lost device).
+    #[error("visual hull on the GPU: {0}")]
+    Gpu(String),
 }
 
 /// Summed-area tables for each camera's mask (`None` for a missing view).

@@ -78,6 +78,13 @@ impl Silhouette {
         self.monotonic_radius
     }
 
+    /// The summed-area table (`(w + 1) × (h + 1)` entries of hand, scalpel, unknown counts, row
+    /// by row) and its row stride.
+    #[cfg(feature = "gpu")]
+    pub(crate) fn table(&self) -> (&[[u32; 3]], usize) {
+        (&self.table, self.stride)
+    }
+
     /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).
     pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
         let s = self.stride;

@@ -30,7 +30,9 @@ use crate::progress::bar;
 /// `hull` measures
 ///   hull.csv, hull_speed.png, hull_accuracy.png
 ///                     carving time of one rendered cut-scene frame (6 x 640x480 truth masks)
-///                     against resolution, octree against a dense grid (every leaf tested), and
+///                     against resolution, octree against a dense grid (every leaf tested) and
+///                     against the octree on the GPU (rows `gpu`, when there is an adapter; the
+///                     time includes uploading the six tables and reading the cells back), and
 ///                     IoU with the exact visual hull (512³) against time;
 ///   hull_robustness.csv, hull_robustness_noise.png, hull_robustness_cameras.png
 ///                     where carving breaks (128³): IoU with the clean six-view hull against

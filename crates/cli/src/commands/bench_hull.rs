@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::Context as _;
 use hullcut_dataset::label;
 use hullcut_hull::accuracy::{grid_iou, occupancy_iou};
+use hullcut_hull::gpu::GpuCarver;
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
 use hullcut_synth::texture::mix64;
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
@@ -21,12 +22,17 @@ fn timed_carve(
     views: &[Option<hullcut_hull::Silhouette>],
     params: &HullParams,
     repeats: usize,
+    gpu: Option<&mut GpuCarver>,
 ) -> anyhow::Result<(Occupancy, f64)> {
     let mut best = f64::INFINITY;
     let mut occ = None;
+    let mut gpu = gpu;
     for _ in 0..repeats.max(1) {
         let t = Instant::now();
-        let o = carve(views, params)?;
+        let o = match gpu.as_deref_mut() {
+            Some(g) => g.carve(views, params)?,
+            None => carve(views, params)?,
+        };
         best = best.min(t.elapsed().as_secs_f64() * 1e3);
         occ = Some(o);
     }
@@ -57,17 +63,28 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         Series { label: "octree".into(), points: Vec::new() },
         Series { label: "dense grid (every leaf tested)".into(), points: Vec::new() },
     ];
+    let mut gpu = match hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()) {
+        Ok(g) => {
+            speed.push(Series { label: format!("octree on the GPU ({})", g.summary.info.name), points: Vec::new() });
+            Some(GpuCarver::new(std::sync::Arc::new(g))?)
+        }
+        Err(e) => {
+            tracing::warn!("hull.csv without the GPU rows: {e}");
+            None
+        }
+    };
     let mut accuracy: Vec<Series> =
         label::NAMED.iter().map(|&(_, n)| Series { label: format!("{n} (octree)"), points: Vec::new() }).collect();
     for &n in resolutions {
         let leaf = extent / n as f64;
         let depth = n.trailing_zeros();
-        for (method, start_level) in [("octree", 3), ("dense", depth)] {
-            if method == "dense" && n > dense_limit {
+        for (method, start_level) in [("octree", 3), ("dense", depth), ("gpu", 3)] {
+            if method == "dense" && n > dense_limit || method == "gpu" && gpu.is_none() {
                 continue;
             }
             let params = HullParams { leaf_size: leaf, start_level, ..HullParams::default() };
-            let (occ, ms) = timed_carve(&views, &params, repeats)?;
+            let on_gpu = if method == "gpu" { gpu.as_mut() } else { None };
+            let (occ, ms) = timed_carve(&views, &params, repeats, on_gpu)?;
             let ious: Vec<Option<f64>> = label::NAMED
                 .iter()
                 .zip(&exact_grids)
@@ -88,7 +105,11 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 fmt(ious[0]),
                 fmt(ious[1])
             ));
-            let k = usize::from(method == "dense");
+            let k = match method {
+                "octree" => 0,
+                "dense" => 1,
+                _ => 2,
+            };
             speed[k].points.push((n as f64, ms));
             if method == "octree" {
                 for (s, iou) in accuracy.iter_mut().zip(&ious) {

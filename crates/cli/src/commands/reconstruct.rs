@@ -16,6 +16,7 @@ use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_ma
 use serde::Serialize;
 
 use self::checks::ViewDisagreement;
+use crate::backend::{Backend, Carver};
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, PoseWriter, log_blade, no_tool_estimate};
@@ -66,9 +67,10 @@ pub struct Args {
     /// Frames: A:B (half-open) or N (the first N).
     #[arg(long, value_name = "A:B|N")]
     frames: Option<String>,
-    /// Compute backend. Only `cpu` exists so far (the wgpu backend is a later issue).
-    #[arg(long, value_name = "cpu|gpu", default_value = "cpu")]
-    backend: String,
+    /// Compute backend of carving: `cpu` (rayon) or `gpu` (wgpu; the same rules, corners projected
+    /// in f32).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    backend: Backend,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
     masks: String,
@@ -157,7 +159,7 @@ struct Report<'a> {
     dataset: String,
     out: String,
     frames: [u64; 2],
-    backend: &'a str,
+    backend: Backend,
     masks: &'a str,
     voxel_m: f64,
     resolution: usize,
@@ -174,9 +176,7 @@ struct Report<'a> {
 /// Runs the command.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let t_start = Instant::now();
-    if args.backend != "cpu" {
-        bail!("--backend {}: only the cpu backend exists so far", args.backend);
-    }
+    let mut carver = Carver::new(args.backend.open()?.as_ref())?;
     if args.accuracy_every == 0 || args.rrd_every == 0 {
         bail!("--accuracy-every and --rrd-every must be at least 1");
     }
@@ -238,7 +238,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let masks: Vec<Option<&image::GrayImage>> =
             set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
         let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-        let occ = carve(&views, &params).with_context(|| format!("frame {frame}"))?;
+        let occ = carver.carve(&views, &params).with_context(|| format!("frame {frame}"))?;
         t.carve.push(clock.elapsed());
         resolution = occ.resolution;
         counters.frame_sets += 1;
@@ -410,7 +410,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             dataset: args.dataset.display().to_string(),
             out: args.out.display().to_string(),
             frames: [range.start, range.end],
-            backend: &args.backend,
+            backend: args.backend,
             masks: if use_files { "files" } else { "segment" },
             voxel_m: params.workspace.extent() / resolution.max(1) as f64,
             resolution,

@@ -18,7 +18,7 @@ use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use serde::Serialize;
 
 use self::stages::{Policy, StageTimes, Work};
-use super::sim::Backend;
+use crate::backend::{Backend, Carver};
 use crate::commands::reconstruct::checks;
 use crate::frames::parse_frames;
 use crate::logging::{CameraLogger, log_tool};
@@ -79,9 +79,9 @@ pub struct Args {
     /// Pace the replay to the capture timestamps (a stage that falls behind drops frame sets).
     #[arg(long)]
     realtime: bool,
-    /// Compute backend of the tissue: `cpu` (rayon) or `gpu` (wgpu: TLED steps, contacts; the hull
-    /// and the hybrid model stay on the CPU). A batch in which a cell inverts is redone on the CPU,
-    /// counted in the report's tissue.gpu.
+    /// Compute backend: `cpu` (rayon) or `gpu` (wgpu: hull carving, and the tissue's TLED steps
+    /// with contacts; segmentation, pose and the hybrid model stay on the CPU). A batch in which a
+    /// cell inverts is redone on the CPU, counted in the report's tissue.gpu.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
     /// The tissue: `organ` or a PLY/OBJ mesh in world metres.
@@ -393,14 +393,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
     let clock = Instant::now();
     let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });
-    let gpu = match args.backend {
-        Backend::Gpu => {
-            let gpu = hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()).context("--backend gpu")?;
-            println!("GPU backend: {}", gpu.summary.info.name);
-            Some(std::sync::Arc::new(gpu))
-        }
-        Backend::Cpu => None,
-    };
+    let gpu = args.backend.open()?;
+    if let Some(g) = &gpu {
+        println!("GPU backend: {}", g.summary.info.name);
+    }
+    let carver = Carver::new(gpu.as_ref())?;
     let tissue = tissue::build(&args.tissue, args.cell, hybrid, gpu)?;
     let setup_s = clock.elapsed().as_secs_f64();
     for warning in &tissue.warnings {
@@ -445,6 +442,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         pass_span_ns,
         use_files,
         hull,
+        carver,
         template: template.clone(),
         tissue,
         queue: args.queue,

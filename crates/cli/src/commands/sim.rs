@@ -8,6 +8,7 @@ use hullcut_sim::dynamics::Divergence;
 use hullcut_sim::{NodeRole, Scenario, Simulation};
 use serde::Serialize;
 
+use crate::backend::Backend;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 
@@ -42,16 +43,6 @@ pub struct Args {
     /// Log the simulation to this rerun recording (.rrd).
     #[arg(long, value_name = "FILE")]
     rrd: Option<PathBuf>,
-}
-
-/// Where the simulation steps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Backend {
-    /// The CPU, on rayon's threads.
-    Cpu,
-    /// A GPU through wgpu.
-    Gpu,
 }
 
 #[derive(Debug, Serialize)]
@@ -137,10 +128,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let scenario = Scenario::load(&args.scenario)?;
     let mut sim =
         Simulation::from_scenario(&scenario).with_context(|| format!("setting up {}", args.scenario.display()))?;
-    if args.backend == Backend::Gpu {
-        let gpu = hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()).context("--backend gpu")?;
-        tracing::info!(adapter = %gpu.summary.info.name, "GPU backend");
-        sim.use_gpu(std::sync::Arc::new(gpu))
+    if let Some(gpu) = args.backend.open()? {
+        sim.use_gpu(gpu)
             .with_context(|| format!("--backend gpu on {} (--backend cpu runs it)", args.scenario.display()))?;
     }
     let setup = t0.elapsed();

@@ -1,6 +1,8 @@
 //! Carving checked on rendered silhouettes of shapes with known geometry (the default rig, exact
 //! masks from the synthetic renderer).
 
+#[cfg(feature = "gpu")]
+mod gpu;
 mod robustness;
 
 use hullcut_dataset::{Mesh, label};

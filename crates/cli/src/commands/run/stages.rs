@@ -14,11 +14,12 @@ use anyhow::{Context as _, anyhow};
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
 use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
-use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
+use hullcut_hull::{DenseGrid, HullParams, Occupancy, silhouettes};
 use hullcut_pose::{PoseEstimate, Template, Tracker, TrackerParams, ViewInput};
 use hullcut_sim::CutSim;
 
 use super::tissue::{Sweeper, Tissue, TissueStep};
+use crate::backend::Carver;
 use crate::commands::reconstruct::checks;
 use crate::pose_out::no_tool_estimate;
 
@@ -46,6 +47,8 @@ pub struct Setup {
     pub use_files: bool,
     /// Carving.
     pub hull: HullParams,
+    /// Where carving runs.
+    pub carver: Carver,
     /// The blade's template, when the dataset has a tool.json.
     pub template: Option<Template>,
     /// The organ.
@@ -192,6 +195,7 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         pass_span_ns,
         use_files,
         hull,
+        carver,
         template,
         tissue,
         queue,
@@ -223,7 +227,7 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         let ds = Arc::clone(&ds);
         std::thread::Builder::new()
             .name("hull".into())
-            .spawn(move || hull_stage(&ds, use_files, segmenter, &hull, &read_rx, &hull_tx))?
+            .spawn(move || hull_stage(&ds, use_files, segmenter, (carver, &hull), &read_rx, &hull_tx))?
     };
     let pose = {
         let ds = Arc::clone(&ds);
@@ -312,7 +316,7 @@ fn hull_stage(
     ds: &Dataset,
     use_files: bool,
     mut segmenter: Option<Segmenter>,
-    params: &HullParams,
+    (mut carver, params): (Carver, &HullParams),
     rx: &Receiver<Work>,
     tx: &Sender<Work>,
 ) -> anyhow::Result<()> {
@@ -335,7 +339,7 @@ fn hull_stage(
         let masks: Vec<Option<&image::GrayImage>> =
             work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
         let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-        let occ = carve(&views, params).with_context(|| format!("frame {frame}"))?;
+        let occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
         work.times.carve.push(clock.elapsed());
         let clock = Instant::now();
         work.grids = label::NAMED
