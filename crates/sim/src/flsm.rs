@@ -340,6 +340,55 @@ impl Flsm {
         });
     }
 
+    /// What the GPU's FLSM passes need ([`crate::gpu`]), in f32: positions relative to the rest
+    /// centroid (the sums are then small numbers, as on the CPU).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn gpu_layout(&self) -> FlsmLayout {
+        let mut node_grid = vec![0u32; self.node_count()];
+        for (g, &n) in self.grid_node.iter().enumerate() {
+            if n != NONE {
+                node_grid[n as usize] = g as u32;
+            }
+        }
+        FlsmLayout {
+            grid: self.grid.map(|g| g as u32),
+            w: self.params.w as u32,
+            alpha: self.params.alpha,
+            region_damping: self.params.region_damping,
+            grid_node: self.grid_node.clone(),
+            nodes: (0..self.node_count())
+                .map(|n| {
+                    let x0 = self.x0[n];
+                    [
+                        x0.x as f32,
+                        x0.y as f32,
+                        x0.z as f32,
+                        self.weight[n] as f32,
+                        f32::from_bits(node_grid[n]),
+                        self.inv_count[n] as f32,
+                        self.inv_mass[n],
+                        0.0,
+                    ]
+                })
+                .collect(),
+            regions: (0..self.node_count())
+                .map(|n| {
+                    let c0 = self.region_c0[n];
+                    [
+                        c0.x as f32,
+                        c0.y as f32,
+                        c0.z as f32,
+                        self.region_mass[n] as f32,
+                        self.region_floor[n] as f32,
+                        0.0,
+                        0.0,
+                        0.0,
+                    ]
+                })
+                .collect(),
+        }
+    }
+
     /// Region frames for positions `x`: afterwards `buf_b` holds, at each node's box-sum index,
     /// `Σ_r R_r` (9, column-major) and `Σ_r (c_r − R_r c0_r)` (3) over the regions containing it.
     fn region_frames(&mut self, x: &[Vector3<f32>]) {
@@ -448,6 +497,28 @@ impl Flsm {
             }
         });
     }
+}
+
+/// FLSM's constants laid out for the GPU ([`Flsm::gpu_layout`]).
+#[cfg(feature = "gpu")]
+#[derive(Debug, Clone)]
+pub(crate) struct FlsmLayout {
+    /// Grid points per axis.
+    pub grid: [u32; 3],
+    /// Region half-width.
+    pub w: u32,
+    /// Goal stiffness.
+    pub alpha: f32,
+    /// Region damping.
+    pub region_damping: f32,
+    /// Node at each grid point (x fastest), `u32::MAX` for none.
+    pub grid_node: Vec<u32>,
+    /// Per node: rest position relative to the rest centroid (3), weight `m / N`, grid point (bits of a
+    /// u32), `1 / N`, `1 / m`, and a slot for the active flag.
+    pub nodes: Vec<[f32; 8]>,
+    /// Per region (node): rest centroid relative to the body's (3), mass, the floor below which its
+    /// moment counts as vanished, padding.
+    pub regions: Vec<[f32; 8]>,
 }
 
 /// Box sum of half-width `w` (clipped at the grid's edges) of `C` channels per grid point.

@@ -13,7 +13,8 @@
 //! [`Simulation`] (hybrid TLED/FLSM with a fixed operational region) does not cut.
 //!
 //! Feature `gpu`: TLED on wgpu ([`gpu`]: internal forces and whole steps) and
-//! `Simulation::use_gpu`, which steps an all-TLED scenario there.
+//! `Simulation::use_gpu` (TLED, and the hybrid's FLSM step and interface pull) and
+//! `CutSim::use_gpu` (all-TLED, with contacts).
 #![warn(missing_docs)]
 
 pub mod body;

@@ -24,17 +24,18 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// role under world/tissue/nodes, the embedded surface under world/tissue/surface, kinetic energy
 /// and step time as scalars, at about 60 Hz of simulated time) with --rrd.
 ///
-/// --backend gpu steps all-TLED scenarios (hybrid.ratio = 1, one-point integration) on wgpu: the
-/// adapter is chosen as `hullcut gpu-info` shows (HULLCUT_GPU_ADAPTER=software forces Mesa's
-/// lavapipe), the state is read back every report interval, and a batch in which a cell inverted
-/// is redone on the CPU (counted in the report's `gpu` object).
+/// --backend gpu steps the scenario on wgpu (TLED with one-point integration, and the hybrid's
+/// FLSM part and interface pull): the adapter is chosen as `hullcut gpu-info` shows
+/// (HULLCUT_GPU_ADAPTER=software forces Mesa's lavapipe), the state is read back every report
+/// interval, and a batch in which a cell inverted is redone on the CPU (counted in the report's
+/// `gpu` object).
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
     /// The scenario file (TOML).
     #[arg(long, value_name = "FILE.toml")]
     scenario: PathBuf,
-    /// Compute backend: `cpu` (rayon) or `gpu` (wgpu; all-TLED scenarios).
+    /// Compute backend: `cpu` (rayon) or `gpu` (wgpu).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
     /// Write a JSON report.

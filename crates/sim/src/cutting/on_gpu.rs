@@ -55,7 +55,7 @@ impl CutSim {
             run.give_up(e.to_string());
             return Ok(false);
         }
-        match run.advance(&mut self.integrator, steps as u64)? {
+        match run.advance(&mut self.integrator, None, steps as u64)? {
             Ran::Gpu { contacts, .. } => {
                 self.contacts = contacts as usize;
                 Ok(true)

@@ -5,13 +5,17 @@
 //!
 //! - [`GpuTled`]: internal forces alone, for parity tests against the CPU kernel;
 //! - [`GpuStepper`]: whole central-difference steps (forces, update, prescribed components,
-//!   divergence flag), many per submission, the CPU reading back only the state at the end.
+//!   divergence flag, contacts with an obstacle), many per submission, the CPU reading back only
+//!   the state at the end; with the hybrid model, the FLSM step (region fits, polar
+//!   decompositions, goals, goal pull, region damping) and the interface pull before every
+//!   `substeps` TLED steps (`flsm` module).
 //!
 //! A cell whose det F falls below [`crate::tled::INVERSION_J`] is counted; unlike the CPU kernel
 //! the GPU does not regularize it (its force is the neo-Hookean force of the unregularized F), so
 //! callers treat a nonzero count as a reason to redo the work on the CPU
 //! ([`crate::Simulation::use_gpu`] does, and counts it).
 
+mod flsm;
 mod run;
 mod step;
 
@@ -22,6 +26,7 @@ use nalgebra::Vector3;
 use crate::SimError;
 use crate::tled::{INVERSION_J, Integration, Tled};
 
+pub(crate) use flsm::FlsmSetup;
 pub use run::GpuStats;
 pub(crate) use run::{GpuRun, Ran};
 pub use step::{GpuStepper, StepBatch};

@@ -9,6 +9,7 @@ use hullcut_gpu::Gpu;
 use nalgebra::Vector3;
 
 use super::GpuStepper;
+use super::step::FlsmState;
 use crate::dynamics::{Divergence, Integrator};
 
 /// How the GPU backend has done so far (in the reports of `hullcut sim` and `hullcut run` with
@@ -40,6 +41,8 @@ pub(crate) enum Ran {
         u_older: Vec<Vector3<f32>>,
         /// Nodes pushed out of the obstacle in the last step.
         contacts: u32,
+        /// The hybrid's FLSM velocities and goal displacements after the batch.
+        flsm: Option<FlsmState>,
     },
     /// The CPU must run these steps (counted in the stats).
     Cpu,
@@ -79,14 +82,23 @@ impl GpuRun {
         self.stepper = None;
     }
 
-    /// `steps` steps of `integrator` on the GPU (its stepper must be installed). On success the
+    /// `steps` steps of `integrator` on the GPU (its stepper must be installed), with the hybrid's
+    /// FLSM velocities `flsm_v` sent along when the GPU's state is stale. On success the
     /// integrator holds the new state; a divergence leaves it at the last completed step.
-    pub(crate) fn advance(&mut self, integrator: &mut Integrator, steps: u64) -> Result<Ran, Divergence> {
+    pub(crate) fn advance(
+        &mut self,
+        integrator: &mut Integrator,
+        flsm_v: Option<&[Vector3<f32>]>,
+        steps: u64,
+    ) -> Result<Ran, Divergence> {
         let Some(stepper) = self.stepper.as_mut().filter(|_| !self.given_up) else {
             return Ok(Ran::Cpu);
         };
         if !self.in_sync {
             stepper.upload(integrator);
+            if let Some(v) = flsm_v {
+                stepper.upload_flsm_velocities(v);
+            }
             self.in_sync = true;
         }
         let start = integrator.step;
@@ -128,6 +140,14 @@ impl GpuRun {
                 },
             });
         }
-        Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts })
+        let flsm = match stepper.read_flsm() {
+            Ok(f) => f,
+            Err(e) => {
+                // The displacements are in; the FLSM velocities are not: the CPU goes on from here.
+                self.give_up(e.to_string());
+                return Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts, flsm: None });
+            }
+        };
+        Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts, flsm })
     }
 }

@@ -11,6 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use hullcut_gpu::Gpu;
 use nalgebra::Vector3;
 
+use super::flsm::{FlsmPasses, FlsmSetup};
 use super::{
     CellBuffers, GATHER_FN_WGSL, PARAMS_WGSL, Params, WORKGROUP, flatten, gpu_err, status, status_init, unflatten,
 };
@@ -35,18 +36,20 @@ struct NodeData {
     fixed: u32,
     /// Ramp duration per component, s.
     ramp: [f32; 3],
-    pad: f32,
+    /// Spring stiffness integrated implicitly (the hybrid's interface pull), N/m.
+    k: f32,
 }
 
-/// The per-node constants, as [`NodeData`].
-const NODE_DATA_WGSL: &str = "
+/// The per-node constants, as [`NodeData`]: `fixed` bits 0–2 prescribed components, bit 3 a
+/// node frozen during TLED steps (moved by FLSM).
+pub(super) const NODE_DATA_WGSL: &str = "
 struct NodeData {
     f_ext: vec3<f32>,
     mass: f32,
     goal: vec3<f32>,
     fixed: u32,
     ramp: vec3<f32>,
-    pad: f32,
+    k: f32,
 }
 ";
 
@@ -80,7 +83,7 @@ struct Contact {
 @compute @workgroup_size(64)
 fn contact(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = gid.x;
-    if (n >= p.nodes || atomicLoad(&status[1]) != 0u || node_data[n].fixed == 7u) {
+    if (n >= p.nodes || atomicLoad(&status[1]) != 0u || (node_data[n].fixed & 7u) == 7u) {
         return;
     }
     let u = vec3<f32>(u_new[3u * n], u_new[3u * n + 1u], u_new[3u * n + 2u]);
@@ -128,9 +131,10 @@ fn node(@builtin(global_invocation_id) gid: vec3<u32>) {
     let d = node_data[n];
     let u = vec3<f32>(u_now[3u * n], u_now[3u * n + 1u], u_now[3u * n + 2u]);
     var x = u;
-    if (d.mass > 0.0) {
+    if (d.mass > 0.0 && (d.fixed & 8u) == 0u) {
         let up = vec3<f32>(u_prev[3u * n], u_prev[3u * n + 1u], u_prev[3u * n + 2u]);
-        x = ((d.f_ext - gathered(n)) * (p.dt2 / d.mass) + u * 2.0 - up * p.b) * p.a;
+        let denom = select(p.a, 1.0 / (1.0 / p.a + d.k * p.dt2 / d.mass), d.k > 0.0);
+        x = ((d.f_ext - gathered(n)) * (p.dt2 / d.mass) + u * 2.0 - up * p.b) * denom;
     }
     let step = x - u;
     let v2 = dot(step, step) / p.dt2;
@@ -165,6 +169,15 @@ fn tick() {
 }
 ";
 
+/// The hybrid's FLSM state read back after a batch.
+#[derive(Debug, Clone)]
+pub(crate) struct FlsmState {
+    /// Velocities of the FLSM nodes (zero elsewhere).
+    pub v: Vec<Vector3<f32>>,
+    /// Every node's goal displacement (goal − rest) of the last FLSM step.
+    pub goals: Vec<Vector3<f32>>,
+}
+
 /// What a batch of steps on the GPU ended with.
 #[derive(Debug, Clone)]
 pub struct StepBatch {
@@ -186,7 +199,7 @@ pub struct StepBatch {
     pub u_older: Vec<Vector3<f32>>,
 }
 
-/// TLED steps on the GPU for an all-TLED body: the cells of a [`Tled`], the masses, external
+/// TLED steps on the GPU (with the hybrid's FLSM step where it has one): the cells of a [`Tled`], the masses, external
 /// forces and prescribed components of an [`Integrator`].
 #[derive(Debug)]
 pub struct GpuStepper {
@@ -207,6 +220,8 @@ pub struct GpuStepper {
     contact: wgpu::ComputePipeline,
     /// Contact pass of rotation `r`, while an obstacle is set.
     contact_binds: Option<[wgpu::BindGroup; 3]>,
+    /// The hybrid's FLSM step, run before every `substeps` TLED steps.
+    flsm: Option<FlsmPasses>,
 }
 
 impl GpuStepper {
@@ -215,13 +230,27 @@ impl GpuStepper {
     /// rest positions `rest` (for contacts).
     ///
     /// Refuses what the GPU path does not model: Gauss quadrature, nodes frozen or pulled by
-    /// another model (the hybrid), and devices with too few storage bindings.
+    /// another model without that model's FLSM part (the hybrid), and devices with too few
+    /// storage bindings.
     pub fn new(
         gpu: Arc<Gpu>,
         tled: &Tled,
         integrator: &Integrator,
         f_ext: &[Vector3<f32>],
         rest: &[Vector3<f32>],
+    ) -> Result<Self, SimError> {
+        Self::with_flsm(gpu, tled, integrator, f_ext, rest, None)
+    }
+
+    /// As [`GpuStepper::new`], with the hybrid's FLSM part: `f_ext` are then the applied forces
+    /// (the interface pull is added on the GPU), and a batch runs whole FLSM steps.
+    pub(crate) fn with_flsm(
+        gpu: Arc<Gpu>,
+        tled: &Tled,
+        integrator: &Integrator,
+        f_ext: &[Vector3<f32>],
+        rest: &[Vector3<f32>],
+        flsm: Option<FlsmSetup>,
     ) -> Result<Self, SimError> {
         let nodes = integrator.u.len();
         if tled.node_count != nodes || f_ext.len() != nodes || rest.len() != nodes {
@@ -232,9 +261,11 @@ impl GpuStepper {
                 rest.len()
             )));
         }
-        if integrator.frozen.iter().any(|&f| f) || integrator.implicit_stiffness.iter().any(|&k| k != 0.0) {
+        if flsm.is_none()
+            && (integrator.frozen.iter().any(|&f| f) || integrator.implicit_stiffness.iter().any(|&k| k != 0.0))
+        {
             return Err(SimError::Gpu(
-                "the GPU backend steps all-TLED bodies; this one has FLSM or interface nodes (hybrid.ratio < 1)".into(),
+                "frozen or pulled nodes without the FLSM part that moves them (GpuStepper::with_flsm)".into(),
             ));
         }
         // The node pass binds six storage buffers (status, gather list, corner forces, node data
@@ -260,7 +291,14 @@ impl GpuStepper {
             .mass
             .iter()
             .zip(f_ext)
-            .map(|(&mass, f)| NodeData { f_ext: [f.x, f.y, f.z], mass, ..NodeData::zeroed() })
+            .zip(integrator.frozen.iter().zip(&integrator.implicit_stiffness))
+            .map(|((&mass, f), (&frozen, &k))| NodeData {
+                f_ext: [f.x, f.y, f.z],
+                mass,
+                fixed: if frozen { 8 } else { 0 },
+                k,
+                ..NodeData::zeroed()
+            })
             .collect();
         for p in &integrator.prescribed {
             let (d, k) = (&mut data[p.node as usize], usize::from(p.axis));
@@ -301,6 +339,7 @@ impl GpuStepper {
         let rest = gpu.storage("rest positions", &flatten(rest)).map_err(gpu_err)?;
         let contact =
             gpu.pipeline("tled contact pass", &format!("{PARAMS_WGSL}{NODE_DATA_WGSL}{CONTACT_WGSL}"), "contact");
+        let flsm = flsm.map(|setup| FlsmPasses::new(&gpu, setup, &cells.status, &node_data, &u)).transpose()?;
         Ok(Self {
             gpu,
             cells,
@@ -314,6 +353,7 @@ impl GpuStepper {
             node_data,
             contact,
             contact_binds: None,
+            flsm,
         })
     }
 
@@ -359,6 +399,26 @@ impl GpuStepper {
         &self.gpu
     }
 
+    /// Sends the FLSM nodes' velocities (the hybrid only).
+    pub(crate) fn upload_flsm_velocities(&self, v: &[Vector3<f32>]) {
+        if let Some(f) = &self.flsm {
+            let v: Vec<[f32; 4]> = v.iter().map(|v| [v.x, v.y, v.z, 0.0]).collect();
+            self.gpu.queue.write_buffer(&f.buffers.vel, 0, bytemuck::cast_slice(&v));
+        }
+    }
+
+    /// The FLSM nodes' velocities and every node's goal displacement (goal − rest) of the last
+    /// FLSM step (the hybrid only).
+    pub(crate) fn read_flsm(&self) -> Result<Option<FlsmState>, SimError> {
+        let Some(f) = &self.flsm else { return Ok(None) };
+        let n = self.cells.params.nodes as usize;
+        let read = |b: &wgpu::Buffer, what: &str| -> Result<Vec<Vector3<f32>>, SimError> {
+            let raw: Vec<[f32; 4]> = self.gpu.read(what, b, n).map_err(gpu_err)?;
+            Ok(raw.iter().map(|v| Vector3::new(v[0], v[1], v[2])).collect())
+        };
+        Ok(Some(FlsmState { v: read(&f.buffers.vel, "flsm velocities")?, goals: read(&f.buffers.goal, "flsm goals")? }))
+    }
+
     /// Sends the integrator's state (current and previous displacements).
     pub fn upload(&mut self, integrator: &Integrator) {
         let r = self.rotation;
@@ -370,6 +430,10 @@ impl GpuStepper {
     /// Runs `steps` steps from the uploaded state, the first of them step `start + 1` (its time
     /// sets the prescribed ramps), and reads back the state they end in.
     pub fn run(&mut self, start: u64, steps: u32) -> Result<StepBatch, SimError> {
+        let substeps = self.flsm.as_ref().map_or(1, |f| f.buffers.substeps);
+        if !steps.is_multiple_of(substeps) {
+            return Err(SimError::Gpu(format!("{steps} steps: not whole FLSM steps of {substeps}")));
+        }
         let start32 = u32::try_from(start + u64::from(steps))
             .map_err(|_| SimError::Gpu(format!("step {start}: beyond the GPU's 32-bit step counter")))?
             - steps;
@@ -378,7 +442,7 @@ impl GpuStepper {
         let (cells, nodes) = (self.cells.params.cells, self.cells.params.nodes);
         let mut done = 0;
         while done < steps {
-            let batch = (steps - done).min(STEPS_PER_SUBMIT);
+            let batch = (steps - done).min(STEPS_PER_SUBMIT.next_multiple_of(substeps));
             let mut encoder =
                 gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("tled steps") });
             {
@@ -388,6 +452,11 @@ impl GpuStepper {
                 });
                 for i in done..done + batch {
                     let r = (self.rotation + i as usize) % 3;
+                    if let Some(flsm) = &self.flsm
+                        && i % substeps == 0
+                    {
+                        flsm.record(&mut pass, r);
+                    }
                     pass.set_pipeline(&self.cells.element);
                     pass.set_bind_group(0, &self.element_binds[(r + 1) % 3], &[]);
                     pass.dispatch_workgroups(cells.div_ceil(WORKGROUP), 1, 1);

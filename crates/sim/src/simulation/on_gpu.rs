@@ -9,24 +9,24 @@ use nalgebra::Vector3;
 use super::Simulation;
 use crate::SimError;
 use crate::dynamics::Divergence;
-use crate::gpu::{GpuRun, GpuStats, GpuStepper, Ran};
+use crate::gpu::{FlsmSetup, GpuRun, GpuStats, GpuStepper, Ran};
 
 /// The GPU side of a simulation.
 pub(super) type GpuPart = GpuRun;
 
 impl Simulation {
-    /// Steps this simulation on `gpu` from now on. Refused (with the reason) for what the GPU path
-    /// does not model: the hybrid model's FLSM part and Gauss quadrature.
+    /// Steps this simulation on `gpu` from now on: TLED, and with the hybrid model its FLSM part
+    /// and the interface pull. Refused (with the reason) for Gauss quadrature.
     pub fn use_gpu(&mut self, gpu: Arc<Gpu>) -> Result<(), SimError> {
-        if let Some(part) = &self.flsm {
-            return Err(SimError::Gpu(format!(
-                "the GPU backend runs all-TLED scenarios so far; this one simulates {} of {} nodes with FLSM \
-                 (hybrid.ratio or hybrid.operational)",
-                part.active.iter().filter(|&&a| a).count(),
-                self.rest.len()
-            )));
-        }
-        let stepper = GpuStepper::new(gpu.clone(), &self.tled, &self.integrator, &self.f_applied, &self.rest)?;
+        let flsm = self.flsm.as_ref().map(|part| FlsmSetup {
+            layout: part.flsm.gpu_layout(),
+            active: &part.active,
+            substeps: part.steps.substeps as u32,
+            dt: self.integrator.dt,
+            applied: &self.f_applied,
+        });
+        let stepper =
+            GpuStepper::with_flsm(gpu.clone(), &self.tled, &self.integrator, &self.f_applied, &self.rest, flsm)?;
         let mut run = GpuRun::new(gpu);
         run.install(stepper);
         self.gpu = Some(run);
@@ -38,14 +38,26 @@ impl Simulation {
         self.gpu.as_ref().map(|g| &g.stats)
     }
 
-    /// `steps` TLED steps on the GPU, or on the CPU where [`GpuRun`] says so (counted).
-    pub(super) fn gpu_steps(&mut self, steps: u64) -> Result<(), Divergence> {
+    /// `advances` calls' worth of [`Simulation::advance`] on the GPU, or on the CPU where
+    /// [`GpuRun`] says so (counted).
+    pub(super) fn gpu_steps(&mut self, advances: u64) -> Result<(), Divergence> {
         let Some(run) = self.gpu.as_mut() else {
-            return self.cpu_steps(steps);
+            return self.cpu_steps(advances);
         };
-        let Ran::Gpu { u_older, .. } = run.advance(&mut self.integrator, steps)? else {
-            return self.cpu_steps(steps);
+        let steps = advances * self.flsm.as_ref().map_or(1, |p| p.steps.substeps as u64);
+        let flsm_v = self.flsm.as_ref().map(|p| &p.v[..]);
+        let Ran::Gpu { u_older, flsm, .. } = run.advance(&mut self.integrator, flsm_v, steps)? else {
+            return self.cpu_steps(advances);
         };
+        // The external forces of the last step: the applied ones, and the interface pull toward
+        // the goals of the last FLSM step.
+        let mut f_ext = self.f_applied.clone();
+        if let (Some(part), Some(state)) = (self.flsm.as_mut(), flsm) {
+            for &i in &part.interface {
+                f_ext[i as usize] += state.goals[i as usize] * part.steps.beta;
+            }
+            part.v = state.v;
+        }
         // Reactions of the last step, from the internal forces at the state before it.
         if self.integrator.prescribed.iter().any(|p| p.groups != 0) {
             let it = &self.integrator;
@@ -54,7 +66,7 @@ impl Simulation {
             let mut reactions = vec![Vector3::zeros(); it.reactions.len()];
             it.reactions_into(
                 |i| tled.node_force(i),
-                &self.f_applied,
+                &f_ext,
                 [&u_older[..], &it.u_prev[..], &it.u[..]],
                 &mut reactions,
             );
@@ -67,7 +79,7 @@ impl Simulation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Scenario;
+    use crate::{NodeRole, Scenario};
     use nalgebra::Vector3;
 
     /// A clamped block pulled sideways at its x+ face (a ramp), under gravity and a point load:
@@ -226,14 +238,61 @@ mod tests {
     }
 
     #[test]
-    fn the_hybrid_and_gauss_quadrature_are_refused_with_their_keys() {
+    fn the_hybrid_on_the_gpu_moves_as_on_the_cpu() {
         let Some(gpu) = hullcut_gpu::for_tests() else { return };
         let gpu = Arc::new(gpu);
-        let mut hybrid = sim(&format!("{BLOCK}\n[hybrid]\nratio = 0.5\n"));
-        let err = hybrid.use_gpu(gpu.clone()).expect_err("hybrid");
-        assert!(err.to_string().contains("hybrid.ratio"), "{err}");
+        // FLSM matched to the material (a step per TLED step), and the seed's settings (an FLSM
+        // step every 4 TLED steps, a weak interface pull: FLSM lags and swings).
+        for hybrid in ["ratio = 0.5", "ratio = 0.4\nsubsteps = 4\nbeta = 200.0"] {
+            let text = format!("{BLOCK}\n[hybrid]\n{hybrid}\n");
+            let (mut cpu, mut on_gpu) = (sim(&text), sim(&text));
+            assert!(cpu.hybrid_steps().is_some(), "a hybrid");
+            on_gpu.use_gpu(gpu.clone()).expect("use_gpu");
+            cpu.advance_by(200).expect("cpu");
+            for n in [1, 120, 79] {
+                on_gpu.advance_by(n).expect("gpu");
+            }
+            assert_eq!(on_gpu.integrator.step, cpu.integrator.step);
+            let stats = on_gpu.gpu_stats().expect("stats");
+            assert_eq!((stats.batches, stats.cpu_batches), (3, 0), "{stats:?}");
+            let (a, b) = (&cpu.integrator.u, &on_gpu.integrator.u);
+            let scale = largest(a);
+            let worst = a.iter().zip(b).map(|(x, y)| (x - y).norm()).fold(0.0f32, f32::max);
+            // The TLED part's rounding (see the all-TLED parity test) plus FLSM's: sums in f32
+            // instead of f64, and rotations that stop within 1e-3 rad Newton steps on both
+            // sides (leaving about 1e-6 rad), each FLSM step pulling nodes to goals that differ by
+            // that much of a region's size.
+            eprintln!(
+                "hybrid ({hybrid:?}) after {} steps: GPU against CPU {:.2e} of {scale:.3e} m",
+                cpu.integrator.step,
+                worst / scale
+            );
+            assert!(worst <= 1e-3 * scale, "difference {worst} m against displacements up to {scale} m");
+            for (r_cpu, r_gpu) in cpu.integrator.reactions.iter().zip(&on_gpu.integrator.reactions) {
+                assert!(
+                    (r_cpu - r_gpu).norm() <= 1e-2 * r_cpu.norm().max(1e-3),
+                    "reaction {r_gpu:?} against {r_cpu:?}"
+                );
+            }
+            // FLSM moved its nodes: they sag under gravity on both sides alike.
+            let flsm_sag = |s: &Simulation| {
+                s.roles
+                    .iter()
+                    .zip(&s.integrator.u)
+                    .filter(|(r, _)| **r == NodeRole::Flsm)
+                    .map(|(_, u)| u.z)
+                    .fold(0.0f32, f32::min)
+            };
+            assert!(flsm_sag(&cpu) < -1e-5, "FLSM nodes sag: {}", flsm_sag(&cpu));
+            assert!((flsm_sag(&cpu) - flsm_sag(&on_gpu)).abs() <= 1e-3 * scale);
+        }
+    }
+
+    #[test]
+    fn gauss_quadrature_is_refused_with_its_key() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
         let mut gauss = sim(&format!("{BLOCK}\n[tled]\nintegration = \"gauss8\"\n"));
-        let err = gauss.use_gpu(gpu).expect_err("gauss8");
+        let err = gauss.use_gpu(Arc::new(gpu)).expect_err("gauss8");
         assert!(err.to_string().contains("tled.integration"), "{err}");
     }
 }
