@@ -204,6 +204,7 @@ fn sim_on_the_gpu_backend_matches_the_closed_form_and_reports_its_batches() {
     assert!(gpu["adapter"].as_str().is_some_and(|a| !a.is_empty()), "{gpu}");
     assert_eq!(gpu["steps"].as_u64(), json["steps"].as_u64(), "every step ran on the GPU: {gpu}");
     assert_eq!(gpu["cpu_batches"], 0, "{gpu}");
+    assert!(gpu["device_ms"].is_null() || gpu["device_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{gpu}");
     // The hybrid (the seed's liver press, TLED ratio 0.4) on both backends: the probe agrees to
     // a thousandth of its displacement.
     let mut probes = Vec::new();

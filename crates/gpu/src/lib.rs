@@ -184,6 +184,11 @@ impl Gpu {
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("hullcut"),
             required_limits: summary.limits.clone(),
+            required_features: if summary.timestamps {
+                wgpu::Features::TIMESTAMP_QUERY
+            } else {
+                wgpu::Features::empty()
+            },
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device { adapter: summary.info.name.clone(), message: e.to_string() })?;
@@ -329,6 +334,25 @@ impl Gpu {
         Ok(out)
     }
 
+    /// A timer of compute passes on the device, or `None` where the adapter cannot time them.
+    pub fn pass_timer(&self) -> Option<PassTimer> {
+        if !self.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let set = self.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pass timer"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let resolve = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pass timer"),
+            size: 16,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        Some(PassTimer { set, resolve, period_ns: f64::from(self.queue.get_timestamp_period()) })
+    }
+
     /// Runs one compute pass of `pipeline` over `invocations` (workgroups of `workgroup`).
     pub fn dispatch(&self, pipeline: &wgpu::ComputePipeline, bind: &wgpu::BindGroup, invocations: u32, workgroup: u32) {
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
@@ -340,6 +364,38 @@ impl Gpu {
             pass.dispatch_workgroups(invocations.div_ceil(workgroup), 1, 1);
         }
         self.queue.submit([encoder.finish()]);
+    }
+}
+
+/// Device time of a compute pass from timestamp queries ([`Gpu::pass_timer`]): the pass writes
+/// a timestamp at its start and end ([`PassTimer::writes`]), the encoder resolves them
+/// ([`PassTimer::resolve`]) and, once the work is done, [`PassTimer::elapsed_ns`] reads them.
+#[derive(Debug)]
+pub struct PassTimer {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    period_ns: f64,
+}
+
+impl PassTimer {
+    /// The timestamp writes of the pass to time.
+    pub fn writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
+    /// Resolves the timestamps (after the pass, in the same encoder).
+    pub fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.set, 0..2, &self.resolve, 0);
+    }
+
+    /// Nanoseconds between the pass's start and end, once its submission is done.
+    pub fn elapsed_ns(&self, gpu: &Gpu) -> Result<f64, GpuError> {
+        let t: Vec<u64> = gpu.read("pass timestamps", &self.resolve, 2)?;
+        Ok(t[1].saturating_sub(t[0]) as f64 * self.period_ns)
     }
 }
 
@@ -382,6 +438,39 @@ mod tests {
         let too_big = gpu.summary.limits.max_buffer_size.max(gpu.summary.limits.max_storage_buffer_binding_size) + 1;
         let err = gpu.check_storage("a huge lattice", too_big).expect_err("over the limit");
         assert!(err.to_string().contains("a huge lattice"), "{err}");
+    }
+
+    #[test]
+    fn a_timed_pass_takes_time_where_the_adapter_has_timestamps() {
+        let Some(gpu) = for_tests() else { return };
+        let Some(timer) = gpu.pass_timer() else {
+            assert!(!gpu.summary.timestamps, "the adapter has timestamps but no timer was made");
+            return;
+        };
+        // A loop long enough to take measurable time.
+        let wgsl = "@group(0) @binding(0) var<storage, read_write> v: array<f32>;\n\
+                    @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) g: vec3<u32>) {\n\
+                        var x = v[g.x];\n\
+                        for (var i = 0u; i < 2000u; i++) { x = x * 0.999 + 1.0; }\n\
+                        v[g.x] = x;\n\
+                    }\n";
+        let pipeline = gpu.pipeline("spin", wgsl, "main");
+        let buffer = gpu.storage("values", &vec![0.0f32; 64 * 256]).expect("buffer");
+        let bind = gpu.bind(&pipeline, &[&buffer]);
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: Some(timer.writes()),
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(256, 1, 1);
+        }
+        timer.resolve(&mut encoder);
+        gpu.queue.submit([encoder.finish()]);
+        let ns = timer.elapsed_ns(&gpu).expect("timestamps");
+        assert!(ns > 0.0 && ns < 60e9, "{ns} ns");
     }
 
     #[test]

@@ -305,10 +305,11 @@ fn print_summary(r: &Report) {
     );
     if let Some(g) = r.gpu {
         println!(
-            "GPU {}: {} batches ({} steps) on the GPU, {} batches ({} steps) redone on the CPU{}",
+            "GPU {}: {} batches ({} steps) on the GPU{}, {} batches ({} steps) redone on the CPU{}",
             g.adapter,
             g.batches,
             g.steps,
+            g.device_ms.map(|ms| format!(" ({ms:.1} ms of device time)")).unwrap_or_default(),
             g.cpu_batches,
             g.cpu_steps,
             g.abandoned.as_ref().map(|e| format!("; given up: {e}")).unwrap_or_default()

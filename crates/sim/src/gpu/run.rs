@@ -28,6 +28,10 @@ pub struct GpuStats {
     pub cpu_steps: u64,
     /// Times the GPU's buffers were built anew (after cuts: the cut lattice changed).
     pub uploads: u64,
+    /// Device time of the step passes kept, milliseconds, from timestamp queries (`None` where the
+    /// adapter has none): against the wall time it tells the device's work from the transfers,
+    /// waits and submissions around it.
+    pub device_ms: Option<f64>,
     /// Why the GPU was given up for the rest of the run (a device error), if it was.
     pub abandoned: Option<String>,
 }
@@ -122,6 +126,9 @@ impl GpuRun {
         }
         self.stats.batches += 1;
         self.stats.steps += u64::from(batch.completed);
+        if let Some(ns) = batch.device_ns {
+            *self.stats.device_ms.get_or_insert(0.0) += ns * 1e-6;
+        }
         integrator.step = start + u64::from(batch.completed);
         integrator.u = batch.u;
         integrator.u_prev = batch.u_prev;

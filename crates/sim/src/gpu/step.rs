@@ -190,6 +190,8 @@ pub struct StepBatch {
     pub inverted_cell_steps: u32,
     /// Nodes the contact pass pushed out of the obstacle in the last completed step.
     pub contacts: u32,
+    /// Device time of the batch's passes (timestamp queries; `None` where the adapter has none).
+    pub device_ns: Option<f64>,
     /// Displacements after the completed steps.
     pub u: Vec<Vector3<f32>>,
     /// Displacements one step before.
@@ -222,6 +224,8 @@ pub struct GpuStepper {
     contact_binds: Option<[wgpu::BindGroup; 3]>,
     /// The hybrid's FLSM step, run before every `substeps` TLED steps.
     flsm: Option<FlsmPasses>,
+    /// Times the passes on the device, where the adapter can.
+    timer: Option<hullcut_gpu::PassTimer>,
 }
 
 impl GpuStepper {
@@ -340,6 +344,7 @@ impl GpuStepper {
         let contact =
             gpu.pipeline("tled contact pass", &format!("{PARAMS_WGSL}{NODE_DATA_WGSL}{CONTACT_WGSL}"), "contact");
         let flsm = flsm.map(|setup| FlsmPasses::new(&gpu, setup, &cells.status, &node_data, &u)).transpose()?;
+        let timer = gpu.pass_timer();
         Ok(Self {
             gpu,
             cells,
@@ -354,6 +359,7 @@ impl GpuStepper {
             contact,
             contact_binds: None,
             flsm,
+            timer,
         })
     }
 
@@ -441,6 +447,7 @@ impl GpuStepper {
         gpu.queue.write_buffer(&self.cells.status, 0, bytemuck::cast_slice(&status_init(start32)));
         let (cells, nodes) = (self.cells.params.cells, self.cells.params.nodes);
         let mut done = 0;
+        let mut device_ns = None;
         while done < steps {
             let batch = (steps - done).min(STEPS_PER_SUBMIT.next_multiple_of(substeps));
             let mut encoder =
@@ -448,7 +455,7 @@ impl GpuStepper {
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("tled steps"),
-                    timestamp_writes: None,
+                    timestamp_writes: self.timer.as_ref().map(hullcut_gpu::PassTimer::writes),
                 });
                 for i in done..done + batch {
                     let r = (self.rotation + i as usize) % 3;
@@ -473,8 +480,14 @@ impl GpuStepper {
                     pass.dispatch_workgroups(1, 1, 1);
                 }
             }
+            if let Some(t) = &self.timer {
+                t.resolve(&mut encoder);
+            }
             gpu.queue.submit([encoder.finish()]);
             gpu.wait("TLED steps").map_err(gpu_err)?;
+            if let Some(t) = &self.timer {
+                *device_ns.get_or_insert(0.0) += t.elapsed_ns(gpu).map_err(gpu_err)?;
+            }
             done += batch;
         }
         let s = self.cells.read_status(gpu)?;
@@ -489,6 +502,7 @@ impl GpuStepper {
             diverged_node: (s[status::DIVERGED] != 0).then_some(s[status::NODE]),
             inverted_cell_steps: s[status::INVERTED],
             contacts: s[status::CONTACTS],
+            device_ns,
             u: read((r + 1) % 3)?,
             u_prev: read(r)?,
             u_older: read((r + 2) % 3)?,
