@@ -261,8 +261,8 @@ impl CutSim {
         self.cut_lattice = cut;
         #[cfg(feature = "gpu")]
         if let Some(run) = &mut self.gpu {
-            // Built anew for the cut lattice at the next advance.
-            run.stepper = None;
+            // The stepper takes the cut lattice over at the next advance.
+            run.stale = true;
         }
         // Whatever FLSM moved is in u and u_prev now (see `flush_flsm`); the region is rebuilt.
         self.flsm = None;

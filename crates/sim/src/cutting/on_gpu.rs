@@ -38,14 +38,18 @@ impl CutSim {
         let Some(run) = self.gpu.as_mut().filter(|r| !r.given_up) else {
             return Ok(false);
         };
-        if run.stepper.is_none() {
+        if run.stepper.is_none() || run.stale {
             let rest: Vec<_> = self.rest.iter().map(|p| p.coords).collect();
-            match GpuStepper::new(run.gpu.clone(), &self.tled, &self.integrator, &self.f_ext, &rest) {
-                Ok(s) => run.install(s),
-                Err(e) => {
-                    run.give_up(e.to_string());
-                    return Ok(false);
-                }
+            let done = match run.stepper.as_mut() {
+                Some(stepper) => stepper
+                    .refit(&self.tled, &self.integrator, &self.f_ext, &rest)
+                    .map(|(written, total)| run.refitted(written, total)),
+                None => GpuStepper::new(run.gpu.clone(), &self.tled, &self.integrator, &self.f_ext, &rest)
+                    .map(|s| run.install(s)),
+            };
+            if let Err(e) = done {
+                run.give_up(e.to_string());
+                return Ok(false);
             }
         }
         let max_push = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
@@ -102,7 +106,12 @@ mod tests {
             sim.advance(0.1).expect("stable after the cut");
         }
         let stats = on_gpu.gpu_stats().expect("stats").clone();
-        assert_eq!((stats.uploads, stats.cpu_batches), (2, 0), "a stepper per lattice: {stats:?}");
+        assert_eq!(
+            (stats.uploads, stats.refits, stats.cpu_batches),
+            (1, 1, 0),
+            "built once, refitted at the cut: {stats:?}"
+        );
+        assert!(stats.refit_bytes_written > 0 && stats.refit_bytes_written <= stats.refit_bytes_total, "{stats:?}");
         assert_eq!(stats.steps, on_gpu.integrator.step, "{stats:?}");
         // The cut-off end falls on both; the fields agree to f32 rounding over the steps run (the
         // derivation of the Simulation parity test: √N (2 + 2.6 √1200) 6e-8, ten times over).

@@ -26,8 +26,15 @@ pub struct GpuStats {
     pub cpu_batches: u64,
     /// Steps the CPU ran in their place.
     pub cpu_steps: u64,
-    /// Times the GPU's buffers were built anew (after cuts: the cut lattice changed).
+    /// Steppers built (pipelines compiled, every buffer created and written).
     pub uploads: u64,
+    /// Times a stepper took over a changed lattice (after a cut) by writing only what changed.
+    pub refits: u64,
+    /// Bytes those refits wrote, and the bytes of the lattices' data they kept up to date: their
+    /// ratio is what writing only the changed blocks saves.
+    pub refit_bytes_written: u64,
+    /// See `refit_bytes_written`.
+    pub refit_bytes_total: u64,
     /// Device time of the step passes kept, milliseconds, from timestamp queries (`None` where the
     /// adapter has none): against the wall time it tells the device's work from the transfers,
     /// waits and submissions around it.
@@ -56,8 +63,10 @@ pub(crate) enum Ran {
 #[derive(Debug)]
 pub(crate) struct GpuRun {
     pub(crate) gpu: Arc<Gpu>,
-    /// `None` until built, and after the lattice changed.
+    /// `None` until built.
     pub(crate) stepper: Option<GpuStepper>,
+    /// The lattice changed since the stepper took it (a cut): refit before the next batch.
+    pub(crate) stale: bool,
     /// Whether the GPU holds the integrator's state (false after the CPU stepped).
     pub(crate) in_sync: bool,
     pub(crate) stats: GpuStats,
@@ -68,14 +77,24 @@ pub(crate) struct GpuRun {
 impl GpuRun {
     pub(crate) fn new(gpu: Arc<Gpu>) -> Self {
         let stats = GpuStats { adapter: gpu.summary.info.name.clone(), ..GpuStats::default() };
-        Self { gpu, stepper: None, in_sync: false, stats, given_up: false }
+        Self { gpu, stepper: None, stale: false, in_sync: false, stats, given_up: false }
     }
 
     /// Uses `stepper` for the lattice from now on.
     pub(crate) fn install(&mut self, stepper: GpuStepper) {
         self.stepper = Some(stepper);
+        self.stale = false;
         self.in_sync = false;
         self.stats.uploads += 1;
+    }
+
+    /// Counts a refit that wrote `written` of `total` bytes; the state is sent again.
+    pub(crate) fn refitted(&mut self, written: u64, total: u64) {
+        self.stale = false;
+        self.in_sync = false;
+        self.stats.refits += 1;
+        self.stats.refit_bytes_written += written;
+        self.stats.refit_bytes_total += total;
     }
 
     /// Gives the GPU up after a device error (the CPU goes on).

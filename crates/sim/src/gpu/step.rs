@@ -226,6 +226,109 @@ pub struct GpuStepper {
     flsm: Option<FlsmPasses>,
     /// Times the passes on the device, where the adapter can.
     timer: Option<hullcut_gpu::PassTimer>,
+    /// What the lattice's buffers hold, for [`GpuStepper::refit`].
+    shadows: Shadows,
+}
+
+/// The bytes last written to the lattice's buffers.
+#[derive(Debug, Default)]
+struct Shadows {
+    cell_nodes: Vec<u8>,
+    volume: Vec<u8>,
+    gather_list: Vec<u8>,
+    node_data: Vec<u8>,
+    rest: Vec<u8>,
+}
+
+/// Bytes compared and written together by [`refill`].
+const BLOCK: usize = 4096;
+
+/// A storage buffer of at least `bytes`, rounded up to a power of two.
+fn grown_buffer(gpu: &Gpu, label: &str, bytes: u64) -> Result<wgpu::Buffer, SimError> {
+    let size = bytes.max(16).next_power_of_two();
+    gpu.check_storage(label, size).map_err(gpu_err)?;
+    Ok(gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    }))
+}
+
+/// Makes `buffer` hold `data` (whose last write is `shadow`): a grown buffer written whole, or the
+/// blocks that differ. Returns the bytes written and whether the buffer is new.
+fn refill(
+    gpu: &Gpu,
+    label: &str,
+    buffer: &mut wgpu::Buffer,
+    shadow: &mut Vec<u8>,
+    data: &[u8],
+) -> Result<(u64, bool), SimError> {
+    if (data.len() as u64) > buffer.size() {
+        *buffer = grown_buffer(gpu, label, data.len() as u64)?;
+        gpu.queue.write_buffer(buffer, 0, data);
+        *shadow = data.to_vec();
+        return Ok((data.len() as u64, true));
+    }
+    let mut written = 0;
+    for (b, block) in data.chunks(BLOCK).enumerate() {
+        let at = b * BLOCK;
+        if shadow.get(at..at + block.len()) != Some(block) {
+            gpu.queue.write_buffer(buffer, at as u64, block);
+            written += block.len() as u64;
+        }
+    }
+    shadow.clear();
+    shadow.extend_from_slice(data);
+    Ok((written, false))
+}
+
+/// The per-node constants of `integrator` with external forces `f_ext`.
+fn node_data_of(integrator: &Integrator, f_ext: &[Vector3<f32>]) -> Vec<NodeData> {
+    let mut data: Vec<NodeData> = integrator
+        .mass
+        .iter()
+        .zip(f_ext)
+        .zip(integrator.frozen.iter().zip(&integrator.implicit_stiffness))
+        .map(|((&mass, f), (&frozen, &k))| NodeData {
+            f_ext: [f.x, f.y, f.z],
+            mass,
+            fixed: if frozen { 8 } else { 0 },
+            k,
+            ..NodeData::zeroed()
+        })
+        .collect();
+    for p in &integrator.prescribed {
+        let (d, k) = (&mut data[p.node as usize], usize::from(p.axis));
+        d.fixed |= 1 << k;
+        d.target[k] = p.target;
+        d.ramp[k] = p.ramp;
+    }
+    data
+}
+
+/// The node pass's bind group for rotation `r`.
+fn node_bind(
+    gpu: &Gpu,
+    node: &wgpu::ComputePipeline,
+    cells: &CellBuffers,
+    node_data: &wgpu::Buffer,
+    u: &[wgpu::Buffer; 3],
+    r: usize,
+) -> wgpu::BindGroup {
+    gpu.bind_numbered(
+        node,
+        &[
+            (0, &cells.uniform),
+            (1, &cells.status),
+            (2, &cells.gather_list),
+            (3, &cells.cell_forces),
+            (4, node_data),
+            (5, &u[r]),
+            (6, &u[(r + 1) % 3]),
+            (7, &u[(r + 2) % 3]),
+        ],
+    )
 }
 
 impl GpuStepper {
@@ -291,26 +394,15 @@ impl GpuStepper {
             ..Params::zeroed()
         };
         let cells = CellBuffers::new(&gpu, tled, params)?;
-        let mut data: Vec<NodeData> = integrator
-            .mass
-            .iter()
-            .zip(f_ext)
-            .zip(integrator.frozen.iter().zip(&integrator.implicit_stiffness))
-            .map(|((&mass, f), (&frozen, &k))| NodeData {
-                f_ext: [f.x, f.y, f.z],
-                mass,
-                fixed: if frozen { 8 } else { 0 },
-                k,
-                ..NodeData::zeroed()
-            })
-            .collect();
-        for p in &integrator.prescribed {
-            let (d, k) = (&mut data[p.node as usize], usize::from(p.axis));
-            d.fixed |= 1 << k;
-            d.target[k] = p.target;
-            d.ramp[k] = p.ramp;
-        }
+        let data = node_data_of(integrator, f_ext);
         let node_data = gpu.storage("node data", &data).map_err(gpu_err)?;
+        let shadows = Shadows {
+            cell_nodes: bytemuck::cast_slice(tled.cell_nodes.as_flattened()).to_vec(),
+            volume: bytemuck::cast_slice(&tled.volume).to_vec(),
+            gather_list: bytemuck::cast_slice(&super::gather_list(&tled.cell_nodes, nodes)).to_vec(),
+            node_data: bytemuck::cast_slice(&data).to_vec(),
+            rest: bytemuck::cast_slice(&flatten(rest)).to_vec(),
+        };
         let zeros = vec![0.0f32; 3 * nodes];
         let u = [
             gpu.storage("displacements 0", &zeros).map_err(gpu_err)?,
@@ -323,21 +415,7 @@ impl GpuStepper {
             &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_DATA_WGSL}{NODE_WGSL}"),
             "node",
         );
-        let node_binds = [0, 1, 2].map(|r| {
-            gpu.bind_numbered(
-                &node,
-                &[
-                    (0, &cells.uniform),
-                    (1, &cells.status),
-                    (2, &cells.gather_list),
-                    (3, &cells.cell_forces),
-                    (4, &node_data),
-                    (5, &u[r]),
-                    (6, &u[(r + 1) % 3]),
-                    (7, &u[(r + 2) % 3]),
-                ],
-            )
-        });
+        let node_binds = [0, 1, 2].map(|r| node_bind(&gpu, &node, &cells, &node_data, &u, r));
         let tick = gpu.pipeline("tled step tick", TICK_WGSL, "tick");
         let tick_bind = gpu.bind(&tick, &[&cells.status]);
         let rest = gpu.storage("rest positions", &flatten(rest)).map_err(gpu_err)?;
@@ -360,7 +438,86 @@ impl GpuStepper {
             contact_binds: None,
             flsm,
             timer,
+            shadows,
         })
+    }
+
+    /// Takes over a changed lattice (a cut) without building anew: the same pipelines, buffers
+    /// grown where the new lattice needs more room (to the next power of two), and of the cells,
+    /// gather list, node data and rest positions only the 4 KiB blocks that changed are written.
+    /// Returns the bytes written and the bytes the lattice's data take. The state is sent by the
+    /// next [`GpuStepper::upload`]; steppers with an FLSM part are not refitted.
+    pub fn refit(
+        &mut self,
+        tled: &Tled,
+        integrator: &Integrator,
+        f_ext: &[Vector3<f32>],
+        rest: &[Vector3<f32>],
+    ) -> Result<(u64, u64), SimError> {
+        let nodes = integrator.u.len();
+        if self.flsm.is_some() {
+            return Err(SimError::Gpu("a stepper with an FLSM part is built anew, not refitted".into()));
+        }
+        if tled.node_count != nodes || f_ext.len() != nodes || rest.len() != nodes {
+            return Err(SimError::Gpu(format!(
+                "{} lattice nodes, {nodes} integrator nodes, {} external forces and {} rest positions",
+                tled.node_count,
+                f_ext.len(),
+                rest.len()
+            )));
+        }
+        let gpu = Arc::clone(&self.gpu);
+        let cells = tled.cell_nodes.len();
+        self.cells.params.cells =
+            u32::try_from(cells).map_err(|_| SimError::Gpu(format!("{cells} cells: too many")))?;
+        self.cells.params.nodes =
+            u32::try_from(nodes).map_err(|_| SimError::Gpu(format!("{nodes} nodes: too many")))?;
+        gpu.queue.write_buffer(&self.cells.uniform, 0, bytemuck::bytes_of(&self.cells.params));
+        let (mut written, mut total, mut grown) = (0u64, 0u64, false);
+        let mut refill = |label: &str, buffer: &mut wgpu::Buffer, shadow: &mut Vec<u8>, data: &[u8]| {
+            let (w, g) = refill(&gpu, label, buffer, shadow, data)?;
+            written += w;
+            total += data.len() as u64;
+            grown |= g;
+            Ok::<(), SimError>(())
+        };
+        let s = &mut self.shadows;
+        refill(
+            "cell nodes",
+            &mut self.cells.cell_nodes,
+            &mut s.cell_nodes,
+            bytemuck::cast_slice(tled.cell_nodes.as_flattened()),
+        )?;
+        refill("cell volumes", &mut self.cells.volume, &mut s.volume, bytemuck::cast_slice(&tled.volume))?;
+        let list = super::gather_list(&tled.cell_nodes, nodes);
+        refill("gather list", &mut self.cells.gather_list, &mut s.gather_list, bytemuck::cast_slice(&list))?;
+        let data = node_data_of(integrator, f_ext);
+        refill("node data", &mut self.node_data, &mut s.node_data, bytemuck::cast_slice(&data))?;
+        refill("rest positions", &mut self.rest, &mut s.rest, bytemuck::cast_slice(&flatten(rest)))?;
+        let mut room = |label: &str, buffer: &mut wgpu::Buffer, bytes: u64| -> Result<(), SimError> {
+            if buffer.size() < bytes {
+                *buffer = grown_buffer(&gpu, label, bytes)?;
+                grown = true;
+            }
+            Ok(())
+        };
+        room("cell forces", &mut self.cells.cell_forces, 96 * cells as u64)?;
+        for (i, u) in self.u.iter_mut().enumerate() {
+            room(["displacements 0", "displacements 1", "displacements 2"][i], u, 12 * nodes as u64)?;
+        }
+        if grown {
+            self.bind();
+        }
+        self.contact_binds = None;
+        Ok((written, total))
+    }
+
+    /// (Re)creates the bind groups of the element, node and tick passes over the current buffers.
+    fn bind(&mut self) {
+        let (gpu, cells, u) = (&*self.gpu, &self.cells, &self.u);
+        self.element_binds = [0, 1, 2].map(|i| cells.element_bind(gpu, &u[i]));
+        self.node_binds = [0, 1, 2].map(|r| node_bind(gpu, &self.node, cells, &self.node_data, u, r));
+        self.tick.1 = gpu.bind(&self.tick.0, &[&cells.status]);
     }
 
     /// The obstacle free nodes cannot enter from the next step on (`None`: none), each moving
