@@ -220,12 +220,16 @@ fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
     let t = &r["tissue"];
     assert_eq!(t["pieces"].as_u64(), Some(2), "{t}");
     assert!(t["failure"].is_null(), "{t}");
-    // The steps ran on the GPU, a stepper per cut lattice; a batch with an inverted cell would
-    // have gone to the CPU, counted.
+    // The steps ran on the GPU, one stepper refitted to each cut lattice (writing only what
+    // changed); a batch with an inverted cell would have gone to the CPU, counted.
     let g = &t["gpu"];
     let (batches, cpu) = (g["batches"].as_u64().expect("batches"), g["cpu_batches"].as_u64().expect("cpu"));
     assert!(batches > 100 && cpu < batches / 10, "{g}");
-    assert!(g["uploads"].as_u64().expect("uploads") >= 2, "rebuilt after cuts: {g}");
+    assert_eq!(g["uploads"].as_u64(), Some(1), "built once: {g}");
+    assert!(g["refits"].as_u64().expect("refits") >= 2, "refitted after cuts: {g}");
+    let (written, total) =
+        (g["refit_bytes_written"].as_u64().expect("written"), g["refit_bytes_total"].as_u64().expect("total"));
+    assert!(written > 0 && written < total, "only what changed is written: {g}");
     assert!(g["abandoned"].is_null(), "{g}");
     // The hybrid model stays on the CPU: a clear error, not a silent CPU run.
     let o = hullcut(&["run", "--scene-frames", "2", "--backend", "gpu", "--operational-radius", "0.02"]);
