@@ -726,6 +726,22 @@ mod tests {
         .expect("surface")
     }
 
+    /// A 1 x 1 cm "finger" of 2.5 mm voxels over the centre of a 4 x 4 x 3 cm block, its tip 6 mm
+    /// below the block's top; and its voxel size.
+    pub(super) fn finger() -> (Obstacle, f64) {
+        let h = 0.0025;
+        let dims = [24, 24, 24];
+        let origin = Point3::new(-0.01, -0.01, 0.0);
+        let occupied: Vec<bool> = (0..dims[0] * dims[1] * dims[2])
+            .map(|g| {
+                let (i, j, k) = (g % 24, (g / 24) % 24, g / 576);
+                let p = origin + Vector3::new(i as f64, j as f64, k as f64) * h;
+                (p.x - 0.02).abs() < 0.005 && (p.y - 0.02).abs() < 0.005 && p.z > 0.024 && k < 23
+            })
+            .collect();
+        (Obstacle::from_occupancy(origin, h, dims, &occupied).expect("finger"), h)
+    }
+
     #[test]
     fn a_finger_pressed_into_the_top_pushes_the_tissue_down_instead_of_passing_through() {
         // A 4 x 4 x 3 cm block on the table (bottom held), and a 1 x 1 cm "finger" of 2.5 mm
@@ -737,17 +753,7 @@ mod tests {
             CutSim::new(lattice, &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim");
         sim.advance(0.3).expect("stable");
         let top_before = sim.node_positions().iter().map(|p| p.z).fold(f32::MIN, f32::max);
-        let h = 0.0025;
-        let dims = [24, 24, 24];
-        let origin = Point3::new(-0.01, -0.01, 0.0);
-        let occupied: Vec<bool> = (0..dims[0] * dims[1] * dims[2])
-            .map(|g| {
-                let (i, j, k) = (g % 24, (g / 24) % 24, g / 576);
-                let p = origin + Vector3::new(i as f64, j as f64, k as f64) * h;
-                (p.x - 0.02).abs() < 0.005 && (p.y - 0.02).abs() < 0.005 && p.z > 0.024 && k < 23
-            })
-            .collect();
-        let finger = Obstacle::from_occupancy(origin, h, dims, &occupied).expect("finger");
+        let (finger, h) = finger();
         sim.set_obstacles(vec![finger.clone()]);
         sim.advance(0.3).expect("stable with contact");
         assert!(sim.contacts() > 0, "the finger touches the tissue");

@@ -75,8 +75,8 @@ mod tests {
 
     use super::*;
     use crate::body::box_sdf;
-    use crate::cutting::tests::vertical_stroke;
-    use crate::{CutSimParams, HybridParams, Lattice, Material, Obstacle};
+    use crate::cutting::tests::{finger, vertical_stroke};
+    use crate::{CutSimParams, HybridParams, Lattice, Material};
 
     /// A 6 x 3 x 3 cm bar of 1 cm cells held at x = 0, under gravity (as the CPU's cutting test).
     fn bar() -> CutSim {
@@ -135,16 +135,8 @@ mod tests {
             let size = Vector3::new(0.04, 0.04, 0.03);
             CutSim::new(lattice, &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim")
         };
-        // A 1 x 1 cm finger of 2.5 mm voxels reaching 6 mm into the block's top (the CPU test's).
-        let (h, dims, origin) = (0.0025, [24, 24, 24], Point3::new(-0.01, -0.01, 0.0));
-        let occupied: Vec<bool> = (0..dims[0] * dims[1] * dims[2])
-            .map(|g| {
-                let (i, j, k) = (g % 24, (g / 24) % 24, g / 576);
-                let p = origin + Vector3::new(i as f64, j as f64, k as f64) * h;
-                (p.x - 0.02).abs() < 0.005 && (p.y - 0.02).abs() < 0.005 && p.z > 0.024 && k < 23
-            })
-            .collect();
-        let finger = Obstacle::from_occupancy(origin, h, dims, &occupied).expect("finger");
+        // The CPU test's finger, reaching 6 mm into the block's top.
+        let (finger, h) = finger();
         let (mut cpu, mut on_gpu) = (block(), block());
         on_gpu.use_gpu(Arc::new(gpu)).expect("use_gpu");
         for sim in [&mut cpu, &mut on_gpu] {

@@ -75,9 +75,31 @@ fn index_of(p: vec3<i32>) -> u32 {
 }
 ";
 
+/// A region's grid points, for the passes that sum over them (`grid_node` at binding 1).
+const NEIGHBOURS_WGSL: &str = "
+@group(0) @binding(1) var<storage, read> grid_node: array<u32>;
+
+// Grid points in a region of half-width w: (2w + 1)^3.
+fn neighbourhood() -> u32 {
+    let side = 2u * f.w + 1u;
+    return side * side * side;
+}
+
+// The node at grid point t of the region around `at` (x fastest, then y, then z), or
+// 0xffffffff outside the grid or where there is none.
+fn neighbour(at: vec3<i32>, t: u32) -> u32 {
+    let side = 2u * f.w + 1u;
+    let d = vec3<i32>(i32(t % side), i32((t / side) % side), i32(t / (side * side))) - vec3<i32>(i32(f.w));
+    let p = at + d;
+    if (!inside(p)) {
+        return 0xffffffffu;
+    }
+    return grid_node[index_of(p)];
+}
+";
+
 /// Region fit: centroid, moment and rotation of the region centred at each node.
 const FIT_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> grid_node: array<u32>;
 @group(0) @binding(2) var<storage, read> fnodes: array<FlsmNode>;
 @group(0) @binding(3) var<storage, read> regions: array<Region>;
 @group(0) @binding(4) var<storage, read_write> u_now: array<f32>;
@@ -198,39 +220,24 @@ fn fit(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let at = grid_of(fnodes[r].grid);
-    let w = i32(f.w);
     let region = regions[r];
     var sx = vec3<f32>(0.0);
-    for (var dz = -w; dz <= w; dz++) {
-        for (var dy = -w; dy <= w; dy++) {
-            for (var dx = -w; dx <= w; dx++) {
-                let p = at + vec3<i32>(dx, dy, dz);
-                if (inside(p)) {
-                    let m = grid_node[index_of(p)];
-                    if (m != 0xffffffffu) {
-                        let node = fnodes[m];
-                        sx += (node.x0 + disp(m)) * node.weight;
-                    }
-                }
-            }
+    for (var t = 0u; t < neighbourhood(); t++) {
+        let m = neighbour(at, t);
+        if (m != 0xffffffffu) {
+            let node = fnodes[m];
+            sx += (node.x0 + disp(m)) * node.weight;
         }
     }
     let c = sx / region.mass;
     var a = mat3x3<f32>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var dz = -w; dz <= w; dz++) {
-        for (var dy = -w; dy <= w; dy++) {
-            for (var dx = -w; dx <= w; dx++) {
-                let p = at + vec3<i32>(dx, dy, dz);
-                if (inside(p)) {
-                    let m = grid_node[index_of(p)];
-                    if (m != 0xffffffffu) {
-                        let node = fnodes[m];
-                        let x = (node.x0 + disp(m) - c) * node.weight;
-                        let y = node.x0 - region.c0;
-                        a += mat3x3<f32>(x * y.x, x * y.y, x * y.z);
-                    }
-                }
-            }
+    for (var t = 0u; t < neighbourhood(); t++) {
+        let m = neighbour(at, t);
+        if (m != 0xffffffffu) {
+            let node = fnodes[m];
+            let x = (node.x0 + disp(m) - c) * node.weight;
+            let y = node.x0 - region.c0;
+            a += mat3x3<f32>(x * y.x, x * y.y, x * y.z);
         }
     }
     let q = polar(a, region.floor, quat[r]);
@@ -245,7 +252,6 @@ fn fit(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 /// Goals: each node's mean over the regions containing it, as a displacement from rest.
 const GOALS_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> grid_node: array<u32>;
 @group(0) @binding(2) var<storage, read> fnodes: array<FlsmNode>;
 @group(0) @binding(6) var<storage, read> frame: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> goal: array<vec4<f32>>;
@@ -258,22 +264,14 @@ fn goals(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let node = fnodes[n];
     let at = grid_of(node.grid);
-    let w = i32(f.w);
     var g = vec3<f32>(0.0);
-    for (var dz = -w; dz <= w; dz++) {
-        for (var dy = -w; dy <= w; dy++) {
-            for (var dx = -w; dx <= w; dx++) {
-                let p = at + vec3<i32>(dx, dy, dz);
-                if (inside(p)) {
-                    let r = grid_node[index_of(p)];
-                    if (r != 0xffffffffu) {
-                        let c0 = frame[3u * r];
-                        let c1 = frame[3u * r + 1u];
-                        let c2 = frame[3u * r + 2u];
-                        g += c0.xyz * node.x0.x + c1.xyz * node.x0.y + c2.xyz * node.x0.z + vec3<f32>(c0.w, c1.w, c2.w);
-                    }
-                }
-            }
+    for (var t = 0u; t < neighbourhood(); t++) {
+        let r = neighbour(at, t);
+        if (r != 0xffffffffu) {
+            let c0 = frame[3u * r];
+            let c1 = frame[3u * r + 1u];
+            let c2 = frame[3u * r + 2u];
+            g += c0.xyz * node.x0.x + c1.xyz * node.x0.y + c2.xyz * node.x0.z + vec3<f32>(c0.w, c1.w, c2.w);
         }
     }
     goal[n] = vec4<f32>(g * node.inv_count - node.x0, 0.0);
@@ -306,7 +304,6 @@ fn velocity(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 /// Mean velocity of each region (for region damping).
 const REGION_VELOCITY_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> grid_node: array<u32>;
 @group(0) @binding(2) var<storage, read> fnodes: array<FlsmNode>;
 @group(0) @binding(3) var<storage, read> regions: array<Region>;
 @group(0) @binding(8) var<storage, read> vel: array<vec4<f32>>;
@@ -319,19 +316,11 @@ fn region_velocity(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let at = grid_of(fnodes[r].grid);
-    let w = i32(f.w);
     var s = vec3<f32>(0.0);
-    for (var dz = -w; dz <= w; dz++) {
-        for (var dy = -w; dy <= w; dy++) {
-            for (var dx = -w; dx <= w; dx++) {
-                let p = at + vec3<i32>(dx, dy, dz);
-                if (inside(p)) {
-                    let m = grid_node[index_of(p)];
-                    if (m != 0xffffffffu) {
-                        s += vel[m].xyz * fnodes[m].weight;
-                    }
-                }
-            }
+    for (var t = 0u; t < neighbourhood(); t++) {
+        let m = neighbour(at, t);
+        if (m != 0xffffffffu) {
+            s += vel[m].xyz * fnodes[m].weight;
         }
     }
     vbar[r] = vec4<f32>(s / regions[r].mass, 0.0);
@@ -341,7 +330,6 @@ fn region_velocity(@builtin(global_invocation_id) gid: vec3<u32>) {
 /// Region damping, the move, the FLSM nodes' prescribed components, and their displacements
 /// handed to TLED's buffers (current and previous).
 const MOVE_WGSL: &str = "
-@group(0) @binding(1) var<storage, read> grid_node: array<u32>;
 @group(0) @binding(2) var<storage, read> fnodes: array<FlsmNode>;
 @group(0) @binding(4) var<storage, read_write> u_now: array<f32>;
 @group(0) @binding(8) var<storage, read_write> vel: array<vec4<f32>>;
@@ -354,14 +342,6 @@ fn disp(n: u32) -> vec3<f32> {
     return vec3<f32>(u_now[3u * n], u_now[3u * n + 1u], u_now[3u * n + 2u]);
 }
 
-fn ramp(t: f32, duration: f32) -> f32 {
-    if (duration <= 0.0) {
-        return 1.0;
-    }
-    let s = clamp(t / duration, 0.0, 1.0);
-    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
-}
-
 @compute @workgroup_size(64)
 fn move_nodes(@builtin(global_invocation_id) gid: vec3<u32>) {
     let n = gid.x;
@@ -372,19 +352,11 @@ fn move_nodes(@builtin(global_invocation_id) gid: vec3<u32>) {
     var v = vel[n].xyz;
     if (f.damping > 0.0) {
         let at = grid_of(node.grid);
-        let w = i32(f.w);
-        var s = vec3<f32>(0.0);
-        for (var dz = -w; dz <= w; dz++) {
-            for (var dy = -w; dy <= w; dy++) {
-                for (var dx = -w; dx <= w; dx++) {
-                    let p = at + vec3<i32>(dx, dy, dz);
-                    if (inside(p)) {
-                        let r = grid_node[index_of(p)];
-                        if (r != 0xffffffffu) {
-                            s += vbar[r].xyz;
-                        }
-                    }
-                }
+            var s = vec3<f32>(0.0);
+        for (var t = 0u; t < neighbourhood(); t++) {
+            let r = neighbour(at, t);
+            if (r != 0xffffffffu) {
+                s += vbar[r].xyz;
             }
         }
         v = v + (s * node.inv_count - v) * f.damping;
@@ -518,7 +490,11 @@ impl FlsmPasses {
             damping: layout.region_damping > 0.0,
         };
         let b = &buffers;
-        let module = |src: &str| format!("{FLSM_COMMON_WGSL}{}{src}", super::step::NODE_DATA_WGSL);
+        let module = |src: &str| {
+            // The passes over regions read the grid; `move_nodes` also ramps prescribed components.
+            let neighbours = if src.contains("neighbour(") { NEIGHBOURS_WGSL } else { "" };
+            format!("{FLSM_COMMON_WGSL}{neighbours}{}{}{src}", super::step::NODE_DATA_WGSL, super::step::RAMP_WGSL)
+        };
         let all: [(u32, &wgpu::Buffer); 11] = [
             (0, &b.uniform),
             (1, &b.grid_node),

@@ -106,14 +106,8 @@ fn contact(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 ";
 
-/// Node pass of a step: gather, update, prescribed components, divergence flag.
-const NODE_WGSL: &str = "
-@group(0) @binding(4) var<storage, read> node_data: array<NodeData>;
-@group(0) @binding(5) var<storage, read> u_prev: array<f32>;
-@group(0) @binding(6) var<storage, read> u_now: array<f32>;
-@group(0) @binding(7) var<storage, read_write> u_next: array<f32>;
-
-// The smooth ramp s^3 (10 - 15 s + 6 s^2), as crate::dynamics::ramp.
+/// The smooth ramp `s³ (10 − 15 s + 6 s²)`, as [`crate::dynamics::ramp`].
+pub(super) const RAMP_WGSL: &str = "
 fn ramp(t: f32, duration: f32) -> f32 {
     if (duration <= 0.0) {
         return 1.0;
@@ -121,6 +115,14 @@ fn ramp(t: f32, duration: f32) -> f32 {
     let s = clamp(t / duration, 0.0, 1.0);
     return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
 }
+";
+
+/// Node pass of a step: gather, update, prescribed components, divergence flag.
+const NODE_WGSL: &str = "
+@group(0) @binding(4) var<storage, read> node_data: array<NodeData>;
+@group(0) @binding(5) var<storage, read> u_prev: array<f32>;
+@group(0) @binding(6) var<storage, read> u_now: array<f32>;
+@group(0) @binding(7) var<storage, read_write> u_next: array<f32>;
 
 @compute @workgroup_size(64)
 fn node(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -412,7 +414,7 @@ impl GpuStepper {
         let element_binds = [0, 1, 2].map(|i| cells.element_bind(&gpu, &u[i]));
         let node = gpu.pipeline(
             "tled step node pass",
-            &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_DATA_WGSL}{NODE_WGSL}"),
+            &format!("{PARAMS_WGSL}{GATHER_FN_WGSL}{NODE_DATA_WGSL}{RAMP_WGSL}{NODE_WGSL}"),
             "node",
         );
         let node_binds = [0, 1, 2].map(|r| node_bind(&gpu, &node, &cells, &node_data, &u, r));

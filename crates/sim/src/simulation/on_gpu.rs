@@ -49,17 +49,23 @@ impl Simulation {
         let Ran::Gpu { u_older, flsm, .. } = run.advance(&mut self.integrator, flsm_v, steps)? else {
             return self.cpu_steps(advances);
         };
-        // The external forces of the last step: the applied ones, and the interface pull toward
-        // the goals of the last FLSM step.
-        let mut f_ext = self.f_applied.clone();
-        if let (Some(part), Some(state)) = (self.flsm.as_mut(), flsm) {
-            for &i in &part.interface {
-                f_ext[i as usize] += state.goals[i as usize] * part.steps.beta;
+        let goals = match (self.flsm.as_mut(), flsm) {
+            (Some(part), Some(state)) => {
+                part.v = state.v;
+                Some(state.goals)
             }
-            part.v = state.v;
-        }
+            _ => None,
+        };
         // Reactions of the last step, from the internal forces at the state before it.
         if self.integrator.prescribed.iter().any(|p| p.groups != 0) {
+            // The external forces of that step: the applied ones, and the interface pull toward
+            // the goals of the last FLSM step.
+            let mut f_ext = self.f_applied.clone();
+            if let (Some(part), Some(goals)) = (&self.flsm, &goals) {
+                for &i in &part.interface {
+                    f_ext[i as usize] += goals[i as usize] * part.steps.beta;
+                }
+            }
             let it = &self.integrator;
             self.tled.element_pass(&it.u_prev);
             let tled = &self.tled;
