@@ -4,6 +4,8 @@
 //! Entry points:
 //! - [`discover_images`]: one folder per camera; files with the same name are simultaneous views.
 //! - [`detect_all`]: chessboard corners with sub-pixel refinement, in parallel.
+//! - [`import::read_opencv_cameras`]: a calibration made by another tool, as per-camera OpenCV
+//!   FileStorage files (YAML, XML, JSON).
 //! - [`calibrate`]: intrinsics per camera (OpenCV `calibrateCamera`), extrinsics chained through a
 //!   maximum spanning tree of camera pairs weighted by shared views ([`extrinsics`]), then every
 //!   camera's intrinsics and pose and every board pose refined jointly ([`refine`]); the world frame
@@ -18,6 +20,7 @@ mod detect;
 mod discover;
 mod error;
 pub mod extrinsics;
+pub mod import;
 mod intrinsics;
 mod model;
 pub mod refine;

@@ -10,6 +10,7 @@
 //!   timestamp, with counted policies for late and missing frames ([`SyncStats`]);
 //!   [`Capture::synchronized`] wires both into an iterator of frame sets.
 //! - [`write_video`], [`export_camera_video`]: OpenCV `VideoWriter` (MJPG in `.avi`).
+//! - [`import::import_videos`]: one video per camera, paired by timestamp, into a dataset.
 //! - [`Segmenter`]: background model (or MOG2) + colour classes + morphological clean-up → label
 //!   masks; [`iou`] and [`IouAccumulator`] score them against truth.
 //!
@@ -19,6 +20,7 @@
 
 mod convert;
 mod error;
+pub mod import;
 pub mod segment;
 mod source;
 mod sync;

@@ -94,12 +94,15 @@ pub struct SourceConfig {
     pub clock: Clock,
     /// Stop after this many frames (an [`SourceEvent::Ended`] follows); `None` reads to the end.
     pub max_frames: Option<u64>,
+    /// Added to every timestamp, nanoseconds: a camera's known delay against the others (videos
+    /// started at different moments), or a recording's start time.
+    pub offset_ns: i64,
 }
 
 impl SourceConfig {
     /// A source with [`Clock::Auto`] and no frame limit.
     pub fn new(camera: usize, spec: SourceSpec) -> Self {
-        Self { camera, spec, clock: Clock::Auto, max_frames: None }
+        Self { camera, spec, clock: Clock::Auto, max_frames: None, offset_ns: 0 }
     }
 
     /// Replays with the given per-frame timestamps (nanoseconds, in stream order).
@@ -112,6 +115,20 @@ impl SourceConfig {
     pub fn with_clock(mut self, clock: Clock) -> Self {
         self.clock = clock;
         self
+    }
+
+    /// Adds `offset_ns` to every timestamp.
+    pub fn with_offset(mut self, offset_ns: i64) -> Self {
+        self.offset_ns = offset_ns;
+        self
+    }
+
+    /// The frame rate the source's container states (`CAP_PROP_FPS`), when it states a positive
+    /// one; opens and closes the source.
+    pub fn stated_fps(&self) -> Result<Option<f64>, CaptureError> {
+        let source = FrameSource::open(self.clone())?;
+        let fps = source.cap.get(videoio::CAP_PROP_FPS).unwrap_or(0.0);
+        Ok((fps.is_finite() && fps > 0.0).then_some(fps))
     }
 }
 
@@ -267,6 +284,12 @@ impl FrameSource {
                 };
                 t
             }
+        };
+        let Some(timestamp_ns) = timestamp_ns.checked_add(self.config.offset_ns) else {
+            return Err(CaptureError::Param {
+                name: "offset_ns",
+                message: format!("camera {camera}, frame {sequence}: the timestamp plus the offset overflows"),
+            });
         };
         if !self.cap.retrieve_def(&mut self.mat).context(ctx)? || self.mat.empty() {
             return match self.config.spec {

@@ -11,6 +11,7 @@ mod logging;
 mod pose_out;
 mod progress;
 mod report;
+mod volume;
 
 use std::process::ExitCode;
 
@@ -33,6 +34,8 @@ enum Command {
     Bench(commands::bench::Args),
     Calibrate(commands::calibrate::Args),
     GpuInfo(commands::gpu_info::Args),
+    ImportCalibration(commands::import::CalibrationArgs),
+    ImportVideos(commands::import::VideosArgs),
     Reconstruct(commands::reconstruct::Args),
     Rig(commands::rig::Args),
     Run(commands::run::Args),
@@ -55,6 +58,8 @@ fn main() -> ExitCode {
         Command::Bench(args) => commands::bench::run(&args),
         Command::Calibrate(args) => commands::calibrate::run(&args),
         Command::GpuInfo(args) => commands::gpu_info::run(&args),
+        Command::ImportCalibration(args) => commands::import::calibration(&args),
+        Command::ImportVideos(args) => commands::import::videos(&args),
         Command::Reconstruct(args) => commands::reconstruct::run(&args),
         Command::Rig(args) => commands::rig::run(&args),
         Command::Run(args) => commands::run::run(&args),

@@ -74,6 +74,17 @@ pub fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
     std::fs::write(path, text + "\n").with_context(|| format!("writing report {}", path.display()))
 }
 
+/// A value for a message, cut to `max` characters (with an ellipsis and the full length) so that
+/// a long bad input is not echoed whole.
+pub fn shorten(s: &str, max: usize) -> String {
+    let n = s.chars().count();
+    if n <= max {
+        return s.to_owned();
+    }
+    let head: String = s.chars().take(max).collect();
+    format!("{head}… ({n} characters)")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

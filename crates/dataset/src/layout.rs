@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{DatasetError, Result};
 use crate::types::{DatasetMeta, TruthPose};
 use crate::{FORMAT_VERSION, MAX_FRAME_COUNT};
+use hullcut_rig::MAX_CAMERAS;
 
 /// `dataset.toml`.
 pub(crate) const DATASET_TOML: &str = "dataset.toml";
@@ -80,6 +81,21 @@ pub(crate) fn validate_meta(path: &Path, meta: &DatasetMeta) -> Result<()> {
     }
     if meta.cameras.is_empty() {
         return Err(invalid("cameras", "no cameras".to_owned()));
+    }
+    if meta.cameras.len() > MAX_CAMERAS {
+        return Err(invalid(
+            "cameras",
+            format!("{} cameras, more than the {MAX_CAMERAS} a dataset may have", meta.cameras.len()),
+        ));
+    }
+    if let Some(w) = &meta.workspace {
+        let finite = w.min.iter().chain(&w.max).all(|c| c.is_finite());
+        if !finite || (0..3).any(|a| w.min[a] >= w.max[a]) {
+            return Err(invalid(
+                "workspace",
+                format!("needs finite corners with min < max on every axis, found min {:?}, max {:?}", w.min, w.max),
+            ));
+        }
     }
     for (i, name) in meta.cameras.iter().enumerate() {
         check_component(name).map_err(|m| invalid("cameras", format!("camera {i}: {m}")))?;

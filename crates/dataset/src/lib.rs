@@ -30,7 +30,7 @@ pub use layout::{frame_file_name, parse_frame_file_name};
 pub use ply::{read_ply, write_ply};
 pub use reader::{Dataset, Dropped};
 pub use tool::{read_tool, tool_mesh_path, write_tool};
-pub use types::{DatasetMeta, FrameSet, Mesh, ToolGeometry, TruthPose, View, label};
+pub use types::{DatasetMeta, FrameSet, Mesh, ToolGeometry, TruthPose, View, Workspace, label};
 pub use writer::DatasetWriter;
 
 /// The `format_version` this crate reads and writes in `dataset.toml`.

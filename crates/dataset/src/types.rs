@@ -70,6 +70,20 @@ pub struct DatasetMeta {
     pub frame_count: u64,
     /// Camera names in rig order; each has a folder of the same name.
     pub cameras: Vec<String>,
+    /// The working volume carving covers, world metres (optional; without it the volume is
+    /// derived from the rig).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub workspace: Option<Workspace>,
+}
+
+/// `workspace = { min = [x, y, z], max = [x, y, z] }` in `dataset.toml`: a box in world metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Workspace {
+    /// Lower corner.
+    pub min: [f64; 3],
+    /// Upper corner.
+    pub max: [f64; 3],
 }
 
 /// A triangle mesh in metres (PLY on disk).

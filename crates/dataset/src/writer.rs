@@ -107,6 +107,22 @@ impl DatasetWriter {
         Ok(writer)
     }
 
+    /// Sets the number of frame sets `dataset.toml` states (a recording whose length is known only at
+    /// its end); at most the number the writer was created with.
+    pub fn set_frame_count(&mut self, frame_count: u64) -> Result<()> {
+        if frame_count > self.meta.frame_count {
+            return Err(DatasetError::Inconsistent {
+                path: self.out.join(DATASET_TOML),
+                message: format!(
+                    "frame_count {frame_count} exceeds the {} the writer was created for",
+                    self.meta.frame_count
+                ),
+            });
+        }
+        self.meta.frame_count = frame_count;
+        Ok(())
+    }
+
     /// Sets the PNG compression of everything written from now on (default: fast).
     pub fn with_compression(mut self, compression: PngCompression) -> Self {
         self.compression = compression;

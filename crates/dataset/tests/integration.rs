@@ -30,6 +30,7 @@ fn meta(rig: &Rig, frame_count: u64) -> DatasetMeta {
         fps: 30.0,
         frame_count,
         cameras: rig.cameras.iter().map(|c| c.name.clone()).collect(),
+        workspace: None,
     }
 }
 

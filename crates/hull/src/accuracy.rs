@@ -25,6 +25,100 @@ pub fn winding_number(mesh: &Mesh, p: &Point3<f64>) -> f64 {
     sum / (4.0 * std::f64::consts::PI)
 }
 
+/// A closed mesh prepared for inside tests: the integer winding number of a point is the signed
+/// count of the mesh's triangles that a vertical ray from the point upward crosses (+1 where it
+/// leaves through a triangle facing up, −1 where it enters through one facing down), so that
+/// overlapping closed parts count once each. Triangles are binned on a grid over the mesh's xy
+/// extent, so a test costs the few triangles above the point's cell instead of all of them (the
+/// generalized winding number, [`winding_number`], sums over every triangle).
+#[derive(Debug)]
+pub struct Solid<'a> {
+    mesh: &'a Mesh,
+    lo: [f64; 2],
+    cell: [f64; 2],
+    dims: [usize; 2],
+    /// Triangles of bin k: `ids[start[k]..start[k + 1]]`.
+    start: Vec<u32>,
+    ids: Vec<u32>,
+}
+
+impl<'a> Solid<'a> {
+    /// Bins the mesh's triangles (about four per bin, at most 256 bins a side).
+    pub fn new(mesh: &'a Mesh) -> Self {
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for v in &mesh.vertices {
+            for a in 0..2 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        let side = ((mesh.triangles.len() as f64 / 4.0).sqrt().ceil() as usize).clamp(1, 256);
+        let dims = [side, side];
+        let cell = [0, 1].map(|a| ((hi[a] - lo[a]) / side as f64).max(1e-12));
+        let bin = |x: f64, a: usize| (((x - lo[a]) / cell[a]).floor().max(0.0) as usize).min(dims[a] - 1);
+        let mut counts = vec![0u32; dims[0] * dims[1] + 1];
+        let spans: Vec<[usize; 4]> = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+                let (x0, x1) = (a.x.min(b.x).min(c.x), a.x.max(b.x).max(c.x));
+                let (y0, y1) = (a.y.min(b.y).min(c.y), a.y.max(b.y).max(c.y));
+                [bin(x0, 0), bin(x1, 0), bin(y0, 1), bin(y1, 1)]
+            })
+            .collect();
+        for s in &spans {
+            for j in s[2]..=s[3] {
+                for i in s[0]..=s[1] {
+                    counts[j * dims[0] + i + 1] += 1;
+                }
+            }
+        }
+        for k in 1..counts.len() {
+            counts[k] += counts[k - 1];
+        }
+        let mut fill = counts.clone();
+        let mut ids = vec![0u32; counts[counts.len() - 1] as usize];
+        for (t, s) in spans.iter().enumerate() {
+            for j in s[2]..=s[3] {
+                for i in s[0]..=s[1] {
+                    let k = j * dims[0] + i;
+                    ids[fill[k] as usize] = t as u32;
+                    fill[k] += 1;
+                }
+            }
+        }
+        Solid { mesh, lo, cell, dims, start: counts, ids }
+    }
+
+    /// The integer winding number at `p`: 1 inside one part, n inside n overlapping parts, 0
+    /// outside (undefined on the surface itself).
+    pub fn winding(&self, p: &Point3<f64>) -> i32 {
+        let (fi, fj) = ((p.x - self.lo[0]) / self.cell[0], (p.y - self.lo[1]) / self.cell[1]);
+        if !(fi >= 0.0 && fj >= 0.0 && fi < self.dims[0] as f64 && fj < self.dims[1] as f64) {
+            return 0;
+        }
+        let k = fj as usize * self.dims[0] + fi as usize;
+        let mut w = 0;
+        for &t in &self.ids[self.start[k] as usize..self.start[k + 1] as usize] {
+            let [a, b, c] = self.mesh.triangles[t as usize].map(|i| self.mesh.vertices[i as usize]);
+            let edge = |u: &Point3<f64>, v: &Point3<f64>| (v.x - u.x) * (p.y - u.y) - (v.y - u.y) * (p.x - u.x);
+            let (e0, e1, e2) = (edge(&a, &b), edge(&b, &c), edge(&c, &a));
+            let area = e0 + e1 + e2;
+            if area == 0.0 || !(e0 * area > 0.0 && e1 * area > 0.0 && e2 * area > 0.0) {
+                continue;
+            }
+            // Height of the triangle's plane above (x, y), from the barycentric weights.
+            let z = (e1 * a.z + e2 * b.z + e0 * c.z) / area;
+            if z > p.z {
+                // area > 0: counter-clockwise seen from above, so the triangle faces up.
+                w += if area > 0.0 { 1 } else { -1 };
+            }
+        }
+        w
+    }
+}
+
 fn bounds(points: impl Iterator<Item = Point3<f64>>) -> Option<(Point3<f64>, Point3<f64>)> {
     points.fold(None, |acc, p| match acc {
         None => Some((p, p)),
@@ -51,6 +145,7 @@ pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) ->
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => return None,
     };
+    let solid = Solid::new(truth);
     let (both, either) = (0..samples as u64)
         .into_par_iter()
         .map(|k| {
@@ -60,7 +155,7 @@ pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) ->
                 lo.z + (hi.z - lo.z) * unit(3 * k + 2),
             );
             let in_hull = hull.is_some_and(|g| g.contains(&p));
-            let in_truth = winding_number(truth, &p) >= 0.5;
+            let in_truth = solid.winding(&p) >= 1;
             (u64::from(in_hull && in_truth), u64::from(in_hull || in_truth))
         })
         .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
@@ -70,10 +165,15 @@ pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) ->
 /// Points on a mesh's surface about `spacing` apart (at least one per triangle's area share),
 /// deterministic.
 pub fn sample_surface(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
+    sample_surface_with_triangles(mesh, spacing).into_iter().map(|(p, _)| p).collect()
+}
+
+/// [`sample_surface`] with the triangle each point lies on.
+fn sample_surface_with_triangles(mesh: &Mesh, spacing: f64) -> Vec<(Point3<f64>, usize)> {
     let mut out = Vec::new();
     let mut counter = 0u64;
     let mut carry = 0.0;
-    for t in &mesh.triangles {
+    for (k, t) in mesh.triangles.iter().enumerate() {
         let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
         let area = (b - a).cross(&(c - a)).norm() / 2.0;
         carry += area / (spacing * spacing);
@@ -84,7 +184,7 @@ pub fn sample_surface(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
             if r1 + r2 > 1.0 {
                 (r1, r2) = (1.0 - r1, 1.0 - r2);
             }
-            out.push(a + (b - a) * r1 + (c - a) * r2);
+            out.push((a + (b - a) * r1 + (c - a) * r2, k));
         }
     }
     out
@@ -161,10 +261,19 @@ pub fn surface_distance(a: &[Point3<f64>], b: &[Point3<f64>], cell: f64) -> Opti
 }
 
 /// Surface samples of a truth mesh made of overlapping closed parts, keeping only points on the
-/// outer surface (winding number of the whole mesh below 1: a point on one part's surface has ½
-/// from that part, plus 1 for every other part it lies inside).
+/// outer surface: moved a micrometre off their triangle, outward, a point on the outer surface
+/// lies inside no part (a point of one part's surface that lies inside another does).
 pub fn outer_surface_samples(truth: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
-    sample_surface(truth, spacing).into_par_iter().filter(|p| winding_number(truth, p) < 1.0).collect()
+    let solid = Solid::new(truth);
+    sample_surface_with_triangles(truth, spacing)
+        .into_par_iter()
+        .filter(|(p, k)| {
+            let [a, b, c] = truth.triangles[*k].map(|i| truth.vertices[i as usize]);
+            let n = (b - a).cross(&(c - a)).try_normalize(1e-30).unwrap_or_default();
+            solid.winding(&(p + n * 1e-6)) < 1
+        })
+        .map(|(p, _)| p)
+        .collect()
 }
 
 /// IoU of two leaf grids, from a regular lattice of about `samples` points over their joint

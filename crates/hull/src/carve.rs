@@ -16,6 +16,12 @@
 //!
 //! A blade thinner than a cell survives: its pixels lie in the cell's footprint in every view that
 //! sees it, so no such view refutes the cell.
+//!
+//! The working volume bounds carving: the octree's cube (leaf size × 2^depth, anchored at the
+//! volume's lower corner, so the leaf is exactly the one asked for) is clipped to the volume's box,
+//! and a cell that fewer than `min_views` views can see (its footprint inside their image) is
+//! outside the volume too: a cell only one or two cameras see cannot be carved by the others, and
+//! keeping it would leave a ghost volume.
 
 use hullcut_dataset::label;
 use nalgebra::{Point3, Vector3};
@@ -33,29 +39,51 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    /// The default rig's workspace: x, y in ±0.2 m, z in 0..0.4 m.
-    pub fn default_workspace() -> Self {
-        let h = hullcut_rig::DEFAULT_WORKSPACE / 2.0;
-        Aabb { min: Point3::new(-h, -h, 0.0), max: Point3::new(h, h, 2.0 * h) }
+    /// A cube of side `side` with its lower corner at `min`.
+    pub fn cube(min: Point3<f64>, side: f64) -> Self {
+        Aabb { min, max: min + Vector3::repeat(side) }
     }
 
     /// The longest side.
     pub fn extent(&self) -> f64 {
         (self.max - self.min).max()
     }
+
+    /// Whether a point lies inside (faces included).
+    pub fn contains(&self, p: &Point3<f64>) -> bool {
+        (0..3).all(|a| p[a] >= self.min[a] && p[a] <= self.max[a])
+    }
+
+    /// Checks the box: finite corners and `min < max` on every axis.
+    pub fn check(&self) -> Result<(), HullError> {
+        let finite = self.min.iter().chain(self.max.iter()).all(|c| c.is_finite());
+        if !finite || (0..3).any(|a| self.min[a] >= self.max[a]) {
+            return Err(HullError::Volume(format!(
+                "the working volume must have finite corners with min < max on every axis, got min {:?}, max {:?}",
+                [self.min.x, self.min.y, self.min.z],
+                [self.max.x, self.max.y, self.max.z]
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Settings of carving.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HullParams {
-    /// Region carved (a cube is made of its longest side, anchored at `min`).
+    /// The working volume: cells outside it are never kept ([`crate::WorkingVolume`] says where it
+    /// comes from).
     pub workspace: Aabb,
-    /// Requested leaf size, metres; the effective one is `extent / 2^depth`, not larger.
+    /// Leaf size, metres: the octree's cube has a side of `leaf_size × 2^depth` (the smallest
+    /// that holds the volume), so the leaves are exactly this size.
     pub leaf_size: f64,
     /// Views that must see a cell as pure background to carve it (k of N).
     pub carve_votes: usize,
     /// Views that must see a label in a cell's footprint for the cell to carry that label.
     pub min_support: usize,
+    /// Views that must see a cell (its footprint inside their image) for it to be kept; fewer, and
+    /// the cell is outside the volume. At most the views present.
+    pub min_views: usize,
     /// Footprint margin, pixels.
     pub margin_px: f64,
     /// Octree level at which carving starts (8^level cells, in parallel).
@@ -65,17 +93,42 @@ pub struct HullParams {
     pub exclusive_labels: bool,
 }
 
-impl Default for HullParams {
-    fn default() -> Self {
+/// The deepest octree carving accepts (65,536 leaves per side).
+pub const MAX_DEPTH: u32 = 16;
+
+impl HullParams {
+    /// The default settings for a working volume and a leaf size: classic carving (one refuting
+    /// view carves), labels supported by two views, cells seen by at least three views.
+    pub fn new(workspace: Aabb, leaf_size: f64) -> Self {
         HullParams {
-            workspace: Aabb::default_workspace(),
-            leaf_size: hullcut_rig::DEFAULT_WORKSPACE / 128.0,
+            workspace,
+            leaf_size,
             carve_votes: 1,
             min_support: 2,
+            min_views: 3,
             margin_px: 1.0,
             start_level: 3,
             exclusive_labels: true,
         }
+    }
+
+    /// The octree's depth (leaves per side = 2^depth) for this volume and leaf.
+    pub fn depth(&self) -> Result<u32, HullError> {
+        let extent = self.workspace.extent();
+        let depth = (extent / self.leaf_size).log2().ceil().max(0.0);
+        if depth.is_nan() || depth > f64::from(MAX_DEPTH) {
+            return Err(HullError::Params(format!(
+                "a {:.3} mm leaf over a {:.3} m volume needs more than 2^{MAX_DEPTH} leaves per side",
+                self.leaf_size * 1e3,
+                extent
+            )));
+        }
+        Ok(depth as u32)
+    }
+
+    /// The side of the octree's cube, metres.
+    pub fn cube_side(&self) -> Result<f64, HullError> {
+        Ok(self.leaf_size * f64::from(1u32 << self.depth()?))
     }
 }
 
@@ -123,6 +176,9 @@ pub struct CarveStats {
     pub kept_against_refutation: u64,
     /// Kept cells with no label reaching `min_support` (occupied, label unknown).
     pub unlabelled_cells: u64,
+    /// Cells dropped because fewer than `min_views` views see them (outside the volume), or fewer
+    /// see foreground in them than keeping any part of them would need (no view refuted them).
+    pub unseen_cells: u64,
     /// Lone refutations per view, one entry per view passed to [`carve`] (rig camera order; 0
     /// for a missing view): cells (of any octree level) that this view refuted while every other
     /// present view saw foreground in the cell's footprint, so that the view disagreed with all
@@ -188,28 +244,50 @@ impl Occupancy {
 enum Verdict {
     /// Footprint inside the image and all background.
     Refutes,
-    /// The view cannot tell (behind the camera, outside the image, beyond the lens' valid range).
-    Abstains,
-    /// Label counts inside the footprint.
-    Sees(crate::silhouette::Counts),
+    /// The view cannot tell: a corner lies behind the camera or beyond the lens' valid range (the
+    /// cell may still be partly in view, with anything in it).
+    Unknown,
+    /// The footprint lies partly off the image, with only background on the part inside it: no
+    /// part of the cell that this view sees whole can be kept.
+    Partial,
+    /// The footprint lies wholly off the image.
+    Off,
+    /// Label counts inside the footprint (`inside`: the whole footprint lies in the image).
+    Sees {
+        /// The counts.
+        counts: crate::silhouette::Counts,
+        /// The footprint lies inside the image.
+        inside: bool,
+    },
 }
 
-/// A point projected into a view (pixel), or None where the view cannot tell (behind the camera,
-/// beyond the lens' invertible range).
-type Projected = Option<[f64; 2]>;
+/// A point projected into a view.
+#[derive(Debug, Clone, Copy)]
+enum Projected {
+    /// Its pixel (outside the image, maybe far, for a point beyond the field's radius, which is
+    /// clamped to it).
+    Pixel([f64; 2]),
+    /// Behind the camera (or within a millimetre of its plane).
+    Behind,
+    /// Beyond the lens' invertible radius of a camera whose image reaches that far.
+    Unknown,
+}
 
 fn project(view: &Silhouette, p: &Point3<f64>) -> Projected {
     let cam = view.camera();
     let pc = cam.world_to_camera(p);
     if pc.z <= 1e-3 {
-        return None;
+        return Projected::Behind;
     }
-    let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
-    if xn.norm() >= view.monotonic_radius() {
-        return None;
+    let mut xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
+    let r = xn.norm();
+    match view.field_radius() {
+        Some(limit) if r >= limit => xn *= limit / r,
+        None if r >= view.monotonic_radius() => return Projected::Unknown,
+        _ => {}
     }
     let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
-    Some([uv.x, uv.y])
+    Projected::Pixel([uv.x, uv.y])
 }
 
 /// Offset of corner `k` (bits x, y, z) of a cell, in cell sizes.
@@ -236,32 +314,83 @@ fn floor(x: f64) -> f64 {
 fn judge(view: &Silhouette, corners: &[Projected; 8], margin: f64) -> Verdict {
     let cam = view.camera();
     let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    let (mut behind, mut unknown) = (0, false);
     for c in corners {
-        let Some([u, v]) = *c else { return Verdict::Abstains };
+        let [u, v] = match *c {
+            Projected::Pixel(uv) => uv,
+            Projected::Behind => {
+                behind += 1;
+                continue;
+            }
+            Projected::Unknown => {
+                unknown = true;
+                continue;
+            }
+        };
         u0 = u0.min(u);
         v0 = v0.min(v);
         u1 = u1.max(u);
         v1 = v1.max(v);
+    }
+    if behind == 8 {
+        // A box wholly behind the camera: nothing of it is in view.
+        return Verdict::Off;
+    }
+    if behind > 0 || unknown {
+        return Verdict::Unknown;
     }
     let (w, h) = (cam.width as f64, cam.height as f64);
     let (i0, j0, i1, j1) = (ceil(u0 - margin), ceil(v0 - margin), floor(u1 + margin), floor(v1 + margin));
     let inside = i0 >= 0.0 && j0 >= 0.0 && i1 <= w - 1.0 && j1 <= h - 1.0;
     let (ci0, cj0, ci1, cj1) = (i0.max(0.0), j0.max(0.0), i1.min(w - 1.0), j1.min(h - 1.0));
     if ci0 > ci1 || cj0 > cj1 {
-        return Verdict::Abstains;
+        return Verdict::Off;
     }
     let counts = view.counts(ci0 as usize, cj0 as usize, ci1 as usize, cj1 as usize);
     if counts.foreground() == 0 {
-        if inside { Verdict::Refutes } else { Verdict::Abstains }
+        if inside { Verdict::Refutes } else { Verdict::Partial }
     } else {
-        Verdict::Sees(counts)
+        Verdict::Sees { counts, inside }
     }
+}
+
+/// Where a cell lies against the working volume's box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BoxSide {
+    Inside,
+    Straddles,
+    Outside,
+}
+
+/// The working volume's upper corner in leaves from its lower one (the octree's origin). Cells
+/// are compared with it in whole leaves, as the GPU carver does, so both agree on every cell.
+pub(crate) fn box_in_leaves(params: &HullParams) -> Vector3<f64> {
+    (params.workspace.max - params.workspace.min) / params.leaf_size
+}
+
+/// Where the cell at leaf coordinates `lo` (whole numbers) and `n` leaves wide lies against a box
+/// from the origin to `hi` (leaves); a leaf straddling the box counts as inside when its centre is.
+fn box_side(hi: &Vector3<f64>, lo: [f64; 3], n: f64) -> BoxSide {
+    if (0..3).any(|a| lo[a] >= hi[a]) {
+        return BoxSide::Outside;
+    }
+    if (0..3).all(|a| lo[a] + n <= hi[a]) {
+        return BoxSide::Inside;
+    }
+    if n <= 1.0 {
+        return if (0..3).all(|a| lo[a] + 0.5 <= hi[a]) { BoxSide::Inside } else { BoxSide::Outside };
+    }
+    BoxSide::Straddles
 }
 
 struct Carver<'a> {
     views: Vec<&'a Silhouette>,
     params: &'a HullParams,
     leaf_level: u32,
+    /// `min_views`, at most the views present.
+    min_views: usize,
+    /// The volume's box in leaves ([`box_in_leaves`]).
+    box_hi: Vector3<f64>,
 }
 
 #[derive(Default)]
@@ -293,7 +422,7 @@ impl Carver<'_> {
     fn rest_see(&self, v: usize, corners: &[[Projected; 8]], out: &mut Local) -> bool {
         self.views.iter().zip(corners).skip(v + 1).all(|(view, c)| {
             out.stats.footprint_tests += 1;
-            matches!(judge(view, c, self.params.margin_px), Verdict::Sees(_))
+            matches!(judge(view, c, self.params.margin_px), Verdict::Sees { .. })
         })
     }
 
@@ -301,7 +430,17 @@ impl Carver<'_> {
     /// parent's corners and share the 19 new lattice points between them.
     /// A root cell (`corners` None) projects its corners itself: all views up front when it may be
     /// split, view by view otherwise (a dense grid of leaves then stops at the first refuting view).
+    ///
+    /// A cell outside the working volume's box is dropped; a leaf straddling the box is kept only
+    /// if its centre lies inside, and a larger cell straddling it is split.
     fn visit(&self, min: Point3<f64>, size: f64, level: u32, corners: Option<&[[Projected; 8]]>, out: &mut Local) {
+        out.stats.cells_visited += 1;
+        let leaf = self.params.leaf_size;
+        let lo = [0, 1, 2].map(|a| ((min[a] - self.params.workspace.min[a]) / leaf).round());
+        let side = box_side(&self.box_hi, lo, f64::from(1u32 << (self.leaf_level - level)));
+        if side == BoxSide::Outside {
+            return;
+        }
         let owned;
         let corners = match corners {
             None if level < self.leaf_level => {
@@ -310,10 +449,13 @@ impl Carver<'_> {
             }
             other => other,
         };
-        out.stats.cells_visited += 1;
-        let (mut refutes, mut hand, mut scalpel, mut uniform) = (0usize, 0usize, 0usize, true);
+        let (mut refutes, mut hand, mut scalpel) = (0usize, 0usize, 0usize);
+        let mut uniform = side == BoxSide::Inside;
         // Views so far that saw foreground, and the last refuting one.
         let (mut sees, mut refuter) = (0usize, 0usize);
+        // Views whose image holds the whole footprint, views that may see part of the cell, and
+        // views that cannot tell.
+        let (mut covered, mut reach, mut unknown) = (0usize, 0usize, 0usize);
         let (mut hand_share, mut scalpel_share) = (0.0f64, 0.0f64);
         let mut uniform_label = None;
         for (v, view) in self.views.iter().enumerate() {
@@ -329,6 +471,8 @@ impl Carver<'_> {
             match judge(view, view_corners, self.params.margin_px) {
                 Verdict::Refutes => {
                     refutes += 1;
+                    covered += 1;
+                    reach += 1;
                     uniform = false;
                     if refutes >= self.params.carve_votes {
                         // Lone only if it is the first refutation and every view before saw
@@ -346,9 +490,20 @@ impl Carver<'_> {
                     }
                     refuter = v;
                 }
-                Verdict::Abstains => uniform = false,
-                Verdict::Sees(c) => {
+                Verdict::Unknown => {
+                    uniform = false;
+                    reach += 1;
+                    unknown += 1;
+                }
+                Verdict::Partial => {
+                    uniform = false;
+                    reach += 1;
+                }
+                Verdict::Off => uniform = false,
+                Verdict::Sees { counts: c, inside } => {
                     sees += 1;
+                    reach += 1;
+                    covered += usize::from(inside);
                     hand += usize::from(c.hand > 0);
                     scalpel += usize::from(c.scalpel > 0);
                     hand_share += f64::from(c.hand) / f64::from(c.total);
@@ -371,7 +526,18 @@ impl Carver<'_> {
         if refutes == 1 && sees + 1 == self.views.len() && sees > 0 {
             out.lone(refuter, self.views.len());
         }
-        if let (true, Some(corners)) = (level < self.leaf_level && !uniform, corners) {
+        // A part of the cell is kept only if `min_views` views see it whole with fewer than
+        // `carve_votes` refuting it; a view that sees only background in the cell's footprint
+        // refutes every part it sees whole. So fewer views reaching the cell, or fewer that see
+        // foreground in it (or cannot tell) than `min_views - (carve_votes - 1)`, and no part of it
+        // can be kept: outside the volume, or seen as foreground by too few views.
+        let may_keep = sees + unknown + self.params.carve_votes - 1;
+        if reach < self.min_views || may_keep < self.min_views {
+            out.stats.unseen_cells += 1;
+            return;
+        }
+        let split = !uniform || covered < self.min_views;
+        if let (true, Some(corners)) = (level < self.leaf_level && split, corners) {
             let half = size / 2.0;
             // The 3x3x3 lattice of the children's corners, per view (index a + 3b + 9c).
             let lattice: Vec<[Projected; 27]> = self
@@ -404,6 +570,10 @@ impl Carver<'_> {
             }
             return;
         }
+        if covered < self.min_views {
+            out.stats.unseen_cells += 1;
+            return;
+        }
         if refutes > 0 {
             out.stats.kept_against_refutation += 1;
         }
@@ -422,42 +592,26 @@ impl Carver<'_> {
 
 /// Checks the parameters against the views; the leaf level and the carved cube's side.
 pub(crate) fn check(views: &[Option<Silhouette>], params: &HullParams) -> Result<(u32, f64), HullError> {
-    if params.leaf_size.is_nan() || params.leaf_size <= 0.0 || params.carve_votes == 0 {
+    if !(params.leaf_size.is_finite() && params.leaf_size > 0.0) || params.carve_votes == 0 || params.min_views == 0 {
         return Err(HullError::Params(format!(
-            "leaf_size must be positive and carve_votes at least 1 (got {} m, {})",
-            params.leaf_size, params.carve_votes
+            "leaf_size must be positive and carve_votes and min_views at least 1 (got {} m, {}, {})",
+            params.leaf_size, params.carve_votes, params.min_views
         )));
+    }
+    if !(params.margin_px.is_finite() && params.margin_px >= 0.0) {
+        return Err(HullError::Params(format!("margin_px must be 0 or more, got {}", params.margin_px)));
     }
     let present = views.iter().flatten().count();
     if present < params.carve_votes {
         return Err(HullError::TooFewViews { present, needed: params.carve_votes });
     }
-    let extent = params.workspace.extent();
-    if extent.is_nan() || extent <= 0.0 {
-        return Err(HullError::Params("the workspace is empty".into()));
-    }
-    Ok(((extent / params.leaf_size).log2().ceil().max(0.0) as u32, extent))
+    params.workspace.check()?;
+    let depth = params.depth()?;
+    Ok((depth, params.leaf_size * f64::from(1u32 << depth)))
 }
 
-/// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
-pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
-    let (leaf_level, extent) = check(views, params)?;
-    let present: Vec<&Silhouette> = views.iter().flatten().collect();
-    let start = params.start_level.min(leaf_level);
-    let carver = Carver { views: present, params, leaf_level };
-    let n = 1usize << start;
-    let size = extent / n as f64;
-    let origin = params.workspace.min;
-    let locals: Vec<Local> = (0..n * n * n)
-        .into_par_iter()
-        .map(|k| {
-            let (i, j, l) = (k % n, (k / n) % n, k / (n * n));
-            let min = origin + Vector3::new(i as f64, j as f64, l as f64) * size;
-            let mut local = Local::default();
-            carver.visit(min, size, start, None, &mut local);
-            local
-        })
-        .collect();
+/// Sums the workers' cells and counters into one occupancy.
+fn gather(views: &[Option<Silhouette>], carver: &Carver, locals: Vec<Local>, side: f64) -> Occupancy {
     let mut stats = CarveStats {
         views_used: carver.views.len(),
         views_missing: views.len() - carver.views.len(),
@@ -466,7 +620,7 @@ pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupa
     };
     // Present view n is entry rig_index[n] of `views`.
     let rig_index: Vec<usize> = views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(k, _)| k).collect();
-    let mut cells = Vec::new();
+    let mut cells = Vec::with_capacity(locals.iter().map(|l| l.cells.len()).sum());
     for local in locals {
         for (&k, n) in rig_index.iter().zip(&local.stats.lone_refutations) {
             stats.lone_refutations[k] += n;
@@ -476,7 +630,85 @@ pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupa
         stats.cells_visited += local.stats.cells_visited;
         stats.kept_against_refutation += local.stats.kept_against_refutation;
         stats.unlabelled_cells += local.stats.unlabelled_cells;
+        stats.unseen_cells += local.stats.unseen_cells;
     }
-    let resolution = 1usize << leaf_level;
-    Ok(Occupancy { cells, leaf_size: extent / resolution as f64, origin, resolution, stats })
+    let resolution = 1usize << carver.leaf_level;
+    Occupancy { cells, leaf_size: side / resolution as f64, origin: carver.params.workspace.min, resolution, stats }
+}
+
+fn carver<'a>(views: &'a [Option<Silhouette>], params: &'a HullParams, leaf_level: u32) -> Carver<'a> {
+    let present: Vec<&Silhouette> = views.iter().flatten().collect();
+    let min_views = params.min_views.min(present.len()).max(1);
+    Carver { views: present, params, leaf_level, min_views, box_hi: box_in_leaves(params) }
+}
+
+/// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
+pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
+    let (leaf_level, side) = check(views, params)?;
+    let carver = carver(views, params, leaf_level);
+    let start = params.start_level.min(leaf_level);
+    let n = 1usize << start;
+    let size = side / n as f64;
+    let origin = params.workspace.min;
+    // Only the roots that reach into the volume's box.
+    let reach = |a: usize| ((params.workspace.max[a] - origin[a]) / size).ceil().clamp(1.0, n as f64) as usize;
+    let dims = [reach(0), reach(1), reach(2)];
+    let locals: Vec<Local> = (0..dims[0] * dims[1] * dims[2])
+        .into_par_iter()
+        .map(|k| {
+            let (i, j, l) = (k % dims[0], (k / dims[0]) % dims[1], k / (dims[0] * dims[1]));
+            let min = origin + Vector3::new(i as f64, j as f64, l as f64) * size;
+            let mut local = Local::default();
+            carver.visit(min, size, start, None, &mut local);
+            local
+        })
+        .collect();
+    Ok(gather(views, &carver, locals, side))
+}
+
+/// Carves only inside `seeds`: cells of this octree (the same volume's lower corner and a leaf
+/// size that divides theirs by a power of two), each carved down to `params.leaf_size` with the
+/// rules of [`carve`]. With the kept cells of a coarser carving of the same views as seeds, this
+/// gives the finer hull at a fraction of the cost, since carving is conservative (a cell the
+/// coarse carving dropped holds nothing the fine one keeps); with a previous frame's cells,
+/// dilated, it carves only where the hull can have moved.
+pub fn carve_within(views: &[Option<Silhouette>], params: &HullParams, seeds: &[Cell]) -> Result<Occupancy, HullError> {
+    let (leaf_level, side) = check(views, params)?;
+    let origin = params.workspace.min;
+    let mut roots = Vec::with_capacity(seeds.len());
+    for s in seeds {
+        let ratio = s.size / params.leaf_size;
+        let up = ratio.log2().round();
+        let aligned = (0..3).all(|a| {
+            let q = (s.min[a] - origin[a]) / s.size;
+            (q - q.round()).abs() < 1e-6
+        });
+        let on_octree = ratio.is_finite()
+            && up >= 0.0
+            && up <= f64::from(leaf_level)
+            && (ratio - up.exp2()).abs() < 1e-6 * ratio
+            && aligned;
+        if !on_octree {
+            return Err(HullError::Params(format!(
+                "a seed cell of {:.4} mm at {:?} is not a cell of this octree ({:.4} mm leaves from {:?})",
+                s.size * 1e3,
+                [s.min.x, s.min.y, s.min.z],
+                params.leaf_size * 1e3,
+                [origin.x, origin.y, origin.z]
+            )));
+        }
+        roots.push((s.min, leaf_level - up as u32));
+    }
+    let carver = carver(views, params, leaf_level);
+    let locals: Vec<Local> = roots
+        .par_chunks(64)
+        .map(|chunk| {
+            let mut local = Local::default();
+            for &(min, level) in chunk {
+                carver.visit(min, side / f64::from(1u32 << level), level, None, &mut local);
+            }
+            local
+        })
+        .collect();
+    Ok(gather(views, &carver, locals, side))
 }

@@ -28,10 +28,10 @@ const WORKGROUP: u32 = 64;
 pub const MAX_VIEWS: usize = 16;
 
 /// Counter slots: next-level cells, kept cells, kept against a refutation, unlabelled, near
-/// threshold, then lone refutations per view.
-const COUNTERS: usize = 5 + MAX_VIEWS;
+/// threshold, unseen (too few views), then lone refutations per view.
+const COUNTERS: usize = 6 + MAX_VIEWS;
 
-/// Per-dispatch constants (48 bytes).
+/// Per-dispatch constants (64 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct Params {
@@ -45,6 +45,9 @@ struct Params {
     leaf_level: u32,
     count: u32,
     level: u32,
+    /// The working volume's upper corner in leaves from the origin (`carve::box_in_leaves`).
+    box_hi: [f32; 3],
+    min_views: u32,
 }
 
 /// A view's camera and the place of its table (112 bytes).
@@ -59,7 +62,8 @@ struct View {
     d: [f32; 4],
     /// k3, the lens' invertible radius, width, height.
     e: [f32; 4],
-    /// Offset of the table (in entries of three counts), its row stride, unused.
+    /// Offset of the table (in entries of three counts), its row stride, 1 where points beyond the
+    /// radius in `e` are clamped to it (the field's radius) rather than unknown, unused.
     table: [u32; 4],
 }
 
@@ -75,6 +79,8 @@ struct Params {
     leaf_level: u32,
     count: u32,
     level: u32,
+    box_hi: vec3<f32>,
+    min_views: u32,
 }
 struct View {
     r0: vec4<f32>,
@@ -94,18 +100,24 @@ struct View {
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>>;
 
 // A footprint bound closer than 2e-3 px to a pixel edge counts as within rounding (near_edge).
-// Pixel of world point p, or w < 0 where the view cannot tell (behind the camera, beyond the
-// lens' invertible radius).
+// Pixel of world point p (w = 1), or w = -2 behind the camera, w = -1 beyond the lens' invertible
+// radius of a camera whose image reaches it (points beyond the field's radius are clamped to it).
 fn project(v: View, p: vec3<f32>) -> vec3<f32> {
     let pc = vec3<f32>(dot(v.r0.xyz, p) + v.r0.w, dot(v.r1.xyz, p) + v.r1.w, dot(v.r2.xyz, p) + v.r2.w);
     if (pc.z <= 1e-3) {
-        return vec3<f32>(0.0, 0.0, -1.0);
+        return vec3<f32>(0.0, 0.0, -2.0);
     }
-    let x = pc.x / pc.z;
-    let y = pc.y / pc.z;
-    let r2 = x * x + y * y;
-    if (sqrt(r2) >= v.e.y) {
-        return vec3<f32>(0.0, 0.0, -1.0);
+    var x = pc.x / pc.z;
+    var y = pc.y / pc.z;
+    var r2 = x * x + y * y;
+    let r = sqrt(r2);
+    if (r >= v.e.y) {
+        if (v.table.z == 0u) {
+            return vec3<f32>(0.0, 0.0, -1.0);
+        }
+        x = x * (v.e.y / r);
+        y = y * (v.e.y / r);
+        r2 = x * x + y * y;
     }
     let radial = 1.0 + r2 * (v.d.x + r2 * (v.d.y + r2 * v.e.x));
     let xd = x * radial + 2.0 * v.d.z * x * y + v.d.w * (r2 + 2.0 * x * x);
@@ -132,6 +144,19 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cell = cells[idx];
     let size = c.extent / f32(1u << c.level);
     let lo_corner = c.origin + vec3<f32>(cell.xyz) * size;
+    // The cell against the volume's box, in whole leaves (as the CPU carver does).
+    let n = f32(1u << (c.leaf_level - c.level));
+    let lo_leaf = vec3<f32>(cell.xyz) * n;
+    if (any(lo_leaf >= c.box_hi)) {
+        return;
+    }
+    let inside_box = all(lo_leaf + vec3<f32>(n) <= c.box_hi);
+    if (!inside_box && n <= 1.0 && any(lo_leaf + vec3<f32>(0.5) > c.box_hi)) {
+        return;
+    }
+    var covered = 0u;
+    var reach = 0u;
+    var unknown = 0u;
     var refutes = 0u;
     var sees = 0u;
     var refuter = 0u;
@@ -139,7 +164,7 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
     var scalpel = 0u;
     var hand_share = 0.0;
     var scalpel_share = 0.0;
-    var uniform_cell = true;
+    var uniform_cell = inside_box || n <= 1.0;
     var uniform_label = 0u;
     var near = false;
     for (var v = 0u; v < c.views; v++) {
@@ -147,12 +172,14 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
         var lo = vec2<f32>(3.0e38);
         var hi = vec2<f32>(-3.0e38);
         var seen = true;
+        var behind = 0u;
         for (var k = 0u; k < 8u; k++) {
             let offset = vec3<f32>(f32(k & 1u), f32((k >> 1u) & 1u), f32((k >> 2u) & 1u));
             let uv = project(view, lo_corner + offset * size);
             if (uv.z < 0.0) {
                 seen = false;
-                break;
+                behind += select(0u, 1u, uv.z < -1.5);
+                continue;
             }
             lo = min(lo, uv.xy);
             hi = max(hi, uv.xy);
@@ -161,6 +188,11 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
         var verdict = 0u;
         var counts = vec3<u32>(0u);
         var total = 0u;
+        var footprint_inside = false;
+        // An unprojectable corner: part of the cell may be in view, unless the whole cell lies
+        // behind the camera.
+        let all_behind = behind == 8u;
+        var reaches = !seen && !all_behind;
         if (seen) {
             let a = lo - vec2<f32>(c.margin);
             let b = hi + vec2<f32>(c.margin);
@@ -184,6 +216,8 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
                 counts = entry(view, x1 + 1u, y1 + 1u) + entry(view, x0, y0) - entry(view, x1 + 1u, y0)
                     - entry(view, x0, y1 + 1u);
                 total = (x1 - x0 + 1u) * (y1 - y0 + 1u);
+                reaches = true;
+                footprint_inside = inside;
                 if (counts.x + counts.y + counts.z == 0u) {
                     verdict = select(0u, 1u, inside);
                 } else {
@@ -191,6 +225,9 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
         }
+        reach += select(0u, 1u, reaches);
+        unknown += select(0u, 1u, !seen && !all_behind);
+        covered += select(0u, 1u, footprint_inside && verdict != 0u);
         if (verdict == 1u) {
             refutes += 1u;
             refuter = v;
@@ -220,16 +257,24 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
         atomicAdd(&counters[4], 1u);
     }
     if (refutes == 1u && sees + 1u == c.views && sees > 0u) {
-        atomicAdd(&counters[5u + refuter], 1u);
+        atomicAdd(&counters[6u + refuter], 1u);
     }
     if (refutes >= c.votes) {
         return;
     }
-    if (c.level < c.leaf_level && !uniform_cell) {
+    if (reach < c.min_views || sees + unknown + c.votes - 1u < c.min_views) {
+        atomicAdd(&counters[5], 1u);
+        return;
+    }
+    if (c.level < c.leaf_level && (!uniform_cell || covered < c.min_views)) {
         let base = atomicAdd(&counters[0], 8u);
         for (var k = 0u; k < 8u; k++) {
             next[base + k] = vec4<u32>(2u * cell.x + (k & 1u), 2u * cell.y + ((k >> 1u) & 1u), 2u * cell.z + ((k >> 2u) & 1u), 0u);
         }
+        return;
+    }
+    if (covered < c.min_views) {
+        atomicAdd(&counters[5], 1u);
         return;
     }
     if (refutes > 0u) {
@@ -350,11 +395,11 @@ impl GpuCarver {
                 d: [d.k1 as f32, d.k2 as f32, d.p1 as f32, d.p2 as f32],
                 e: [
                     d.k3 as f32,
-                    s.monotonic_radius().min(f64::from(f32::MAX)) as f32,
+                    s.field_radius().unwrap_or(s.monotonic_radius()).min(f64::from(f32::MAX)) as f32,
                     cam.width as f32,
                     cam.height as f32,
                 ],
-                table: [(table.len() / 3) as u32, stride as u32, 0, 0],
+                table: [(table.len() / 3) as u32, stride as u32, u32::from(s.field_radius().is_some()), 0],
             });
             table.extend(entries.iter().flatten());
         }
@@ -365,8 +410,16 @@ impl GpuCarver {
 
         let start = params.start_level.min(leaf_level);
         let n = 1u32 << start;
-        let roots: Vec<[u32; 4]> = (0..n * n * n).map(|k| [k % n, (k / n) % n, k / (n * n), 0]).collect();
         let origin = params.workspace.min;
+        // Only the roots that reach into the volume's box.
+        let size0 = extent / f64::from(n);
+        let reach = |a: usize| ((params.workspace.max[a] - origin[a]) / size0).ceil().clamp(1.0, f64::from(n)) as u32;
+        let dims = [reach(0), reach(1), reach(2)];
+        let roots: Vec<[u32; 4]> = (0..dims[0] * dims[1] * dims[2])
+            .map(|k| [k % dims[0], (k / dims[0]) % dims[1], k / (dims[0] * dims[1]), 0])
+            .collect();
+        let box_hi = crate::carve::box_in_leaves(params);
+        let min_views = params.min_views.min(present.len()).max(1) as u32;
         let mut p = Params {
             origin: origin.coords.cast::<f32>().into(),
             extent: extent as f32,
@@ -378,6 +431,8 @@ impl GpuCarver {
             leaf_level,
             count: roots.len() as u32,
             level: start,
+            box_hi: [box_hi.x as f32, box_hi.y as f32, box_hi.z as f32],
+            min_views,
         };
         let list = self.lists[0].with_room(gpu, "octree cells", 16 * roots.len() as u64)?;
         gpu.queue.write_buffer(list, 0, bytemuck::cast_slice(&roots));
@@ -423,10 +478,11 @@ impl GpuCarver {
             stats.footprint_tests += count * present.len() as u64;
             stats.kept_against_refutation += u64::from(counters[2]);
             stats.unlabelled_cells += u64::from(counters[3]);
+            stats.unseen_cells += u64::from(counters[5]);
             last.near_threshold += u64::from(counters[4]);
             last.levels += 1;
             let rig_index = views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(k, _)| k);
-            for (k, n) in rig_index.zip(&counters[5..]) {
+            for (k, n) in rig_index.zip(&counters[6..]) {
                 stats.lone_refutations[k] += u64::from(*n);
             }
             p.count = counters[0];

@@ -3,8 +3,12 @@
 //! Entry points:
 //! - [`Silhouette`]: a view's label mask as summed-area tables (label counts in any rectangle in
 //!   four lookups); [`silhouettes`] builds them for a rig, checking sizes.
+//! - [`WorkingVolume`]: the box carving covers, given (command line, dataset) or derived from the
+//!   rig ([`seen_volume`]: the space at least three cameras see), with its source for reports.
 //! - [`carve`] with [`HullParams`]: octree carving where each cell is tested against its whole
-//!   projected footprint in every view, k-of-N carving, occlusion-aware labels; returns an
+//!   projected footprint in every view, k-of-N carving, occlusion-aware labels, cells seen by too
+//!   few views dropped; [`carve_within`] carves only inside given cells (a finer hull inside a
+//!   coarser one, or the neighbourhood of the last frame's hull); both return an
 //!   [`Occupancy`] (kept cells with labels, counters, among them which view disagreed with all the
 //!   others: [`CarveStats::lone_refutations`]).
 //! - [`DenseGrid`]: one label's occupancy on the leaf grid and its closed surface
@@ -20,10 +24,12 @@ mod carve;
 pub mod gpu;
 mod silhouette;
 mod surface;
+mod volume;
 
-pub use carve::{Aabb, CarveStats, Cell, HullParams, Occupancy, carve};
+pub use carve::{Aabb, CarveStats, Cell, HullParams, MAX_DEPTH, Occupancy, carve, carve_within};
 pub use silhouette::{Counts, Silhouette};
 pub use surface::{DenseGrid, is_watertight};
+pub use volume::{SeenVolume, VolumeSource, WorkingVolume, seen_volume};
 
 use hullcut_rig::Rig;
 use image::GrayImage;
@@ -34,6 +40,9 @@ pub enum HullError {
     /// Bad parameters.
     #[error("visual hull: {0}")]
     Params(String),
+    /// The working volume is unusable (empty, not finite, seen by too few cameras).
+    #[error("working volume: {0}")]
+    Volume(String),
     /// Fewer views than the carving rule needs.
     #[error("visual hull: {present} views present, the k-of-N rule needs at least {needed}")]
     TooFewViews {

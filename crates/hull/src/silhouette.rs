@@ -5,6 +5,31 @@ use hullcut_dataset::label;
 use hullcut_rig::Camera;
 use image::GrayImage;
 
+/// The largest undistorted radius of the image's border pixels (sampled every 8 pixels and at the
+/// corners), widened by 1%, if every one undistorts within `monotonic` and the widened radius stays
+/// below it.
+fn field_radius(camera: &Camera, monotonic: f64) -> Option<f64> {
+    let (w, h) = (f64::from(camera.width) - 1.0, f64::from(camera.height) - 1.0);
+    let mut border = Vec::new();
+    let steps = |len: f64| ((len / 8.0).ceil() as usize).max(1);
+    for k in 0..=steps(w) {
+        let x = w * k as f64 / steps(w) as f64;
+        border.push((x, 0.0));
+        border.push((x, h));
+    }
+    for k in 0..=steps(h) {
+        let y = h * k as f64 / steps(h) as f64;
+        border.push((0.0, y));
+        border.push((w, y));
+    }
+    let mut r = 0.0f64;
+    for (u, v) in border {
+        r = r.max(camera.undistort(nalgebra::Point2::new(u, v))?.norm());
+    }
+    let r = r * 1.01;
+    (r < monotonic).then_some(r)
+}
+
 /// Pixel counts of each class inside a rectangle of a mask.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counts {
@@ -41,6 +66,9 @@ pub struct Silhouette {
     camera: Camera,
     /// The lens' invertible radius, computed once (it is a root search).
     monotonic_radius: f64,
+    /// The undistorted radius the image's border reaches, when it lies within the invertible
+    /// radius: nothing farther from the axis is in view.
+    field_radius: Option<f64>,
     stride: usize,
     table: Vec<[u32; 3]>,
 }
@@ -65,7 +93,16 @@ impl Silhouette {
                 table[(j + 1) * stride + i + 1] = [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
             }
         }
-        Silhouette { camera: camera.clone(), monotonic_radius: camera.distortion.monotonic_radius(), stride, table }
+        let monotonic_radius = camera.distortion.monotonic_radius();
+        let field_radius = field_radius(camera, monotonic_radius);
+        Silhouette { camera: camera.clone(), monotonic_radius, field_radius, stride, table }
+    }
+
+    /// The undistorted normalized radius beyond which nothing is in view, when the whole image
+    /// lies within the lens' invertible radius (a point farther out then projects, clamped to this
+    /// radius, outside the image); `None` when the image reaches beyond it.
+    pub fn field_radius(&self) -> Option<f64> {
+        self.field_radius
     }
 
     /// The camera.

@@ -260,9 +260,11 @@ impl Tracker {
                 hull.second_fraction * 100.0
             ));
         }
+        // A gross mismatch only (a tool.json in millimetres, another tool): the hand may hide all
+        // but the blade of a long tool, so the visible hull can be a sixth of the tool or less.
         let extent = hull.span.1 - hull.span.0;
         let length = self.template.length;
-        if length > 2.5 * extent + 0.05 || extent > 2.0 * length + 0.02 {
+        if length > 10.0 * extent + 0.05 || extent > 2.0 * length + 0.02 {
             return Err(format!(
                 "the tool does not match the hull: tool.json's tool is {length:.3} m long, the scalpel hull {extent:.3} m"
             ));

@@ -1,15 +1,42 @@
 //! The blade pose on rendered scenes with exact truth: accuracy, refusal, holding, bad input.
 
 use hullcut_dataset::{ToolGeometry, label};
-use hullcut_hull::{HullParams, carve, silhouettes};
+use hullcut_hull::{HullParams, WorkingVolume, carve, silhouettes};
 use hullcut_pose::{
     PoseError, PoseEstimate, Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error,
 };
-use hullcut_synth::{CameraRenderer, Light, Part, Scene, SceneConfig, SceneKind};
+use hullcut_rig::RigPreset;
+use hullcut_synth::{CameraRenderer, Light, Part, Scene, SceneConfig, SceneKind, ToolKind};
 use image::GrayImage;
 use nalgebra::{Isometry3, Matrix4, Vector3};
 
 const LEAF: f64 = 0.4 / 128.0;
+
+/// A rig and a tool: the built-in scene's, and others, so that nothing is tuned to one geometry.
+#[derive(Debug, Clone, Copy)]
+struct Setup {
+    rig: RigPreset,
+    tool: ToolKind,
+}
+
+const BUILTIN: Setup = Setup { rig: RigPreset::Default, tool: ToolKind::Standard };
+/// Eight 1280x720 cameras (one overhead, one strongly distorted) and the pointed scalpel.
+const LAB8: Setup = Setup { rig: RigPreset::Lab8, tool: ToolKind::Pointed };
+/// A seeded random rig (seed 5: six cameras of mixed sizes) and the standard scalpel.
+const RANDOM: Setup = Setup { rig: RigPreset::Random(5), tool: ToolKind::Standard };
+
+fn scene(setup: Setup, kind: SceneKind, seed: u64, frames: u64) -> Scene {
+    let mut config = SceneConfig::new(kind, seed, frames);
+    config.rig = setup.rig.rig();
+    config.tool = setup.tool;
+    Scene::new(config).expect("scene")
+}
+
+/// Carving as `reconstruct` does it: the rig's own working volume, three views per cell.
+fn hull_params(rig: &hullcut_rig::Rig) -> HullParams {
+    let volume = WorkingVolume::from_rig(rig, 3, true).expect("volume");
+    HullParams::new(volume.aabb, LEAF)
+}
 
 /// One frame's estimate and, for a frame that hands out a pose (trusted or held), its error.
 struct Step {
@@ -19,7 +46,9 @@ struct Step {
 
 /// Tracks `frames` frames of a rendered scene from `first`, with truth masks passed through `edit`
 /// (camera index, frame, mask) and the tool as `tool` (the scene's own when `None`).
+#[allow(clippy::too_many_arguments)] // the clip, the tool and the edit, each named
 fn track(
+    setup: Setup,
     kind: SceneKind,
     seed: u64,
     first: u64,
@@ -27,12 +56,12 @@ fn track(
     tool: Option<&ToolGeometry>,
     edit: impl Fn(usize, u64, &mut GrayImage),
 ) -> Vec<Step> {
-    let scene = Scene::new(SceneConfig::new(kind, seed, first + frames)).expect("scene");
+    let scene = scene(setup, kind, seed, first + frames);
     let rig = scene.config().rig.clone();
     let truth_template = Template::new(&scene.scalpel().geometry).expect("template");
     let template = Template::new(tool.unwrap_or(&scene.scalpel().geometry)).expect("template");
     let mut tracker = Tracker::new(template, TrackerParams::default());
-    let params = HullParams { leaf_size: LEAF, ..HullParams::default() };
+    let params = hull_params(&rig);
     (first..first + frames)
         .map(|f| {
             let masks: Vec<Option<GrayImage>> = (0..rig.cameras.len())
@@ -92,17 +121,23 @@ fn summary(name: &str, steps: &[Step]) -> ([f64; 3], [f64; 3], f64) {
 fn no_edit(_: usize, _: u64, _: &mut GrayImage) {}
 
 #[test]
-fn static_and_cut_scenes_are_within_a_degree_and_a_millimetre() {
-    // Measured: static (seed 1, frames 0..12) 0.87° / 0.23 mm, a pose at rest;
+fn static_and_cut_scenes_are_within_a_degree_and_a_millimetre_on_every_rig() {
+    // Measured on the built-in rig: static (seed 1, frames 0..12) 0.87° / 0.23 mm, a pose at rest;
     // cut (seed 2, frames 30..60) mean 0.23° / 0.23 mm, p95 0.47° / 0.32 mm.
-    for (name, kind, seed, first, frames) in
-        [("static", SceneKind::Static, 1, 0, 12), ("cut", SceneKind::Cut, 2, 30, 30)]
-    {
-        let steps = track(kind, seed, first, frames, None, no_edit);
+    // A millimetre everywhere; a degree on the built-in rig, two on the others (measured: lab8
+    // 0.69-0.74°, the random rig's six mixed cameras 1.43°).
+    for (name, setup, kind, seed, first, frames, degrees) in [
+        ("static", BUILTIN, SceneKind::Static, 1, 0, 12, 1.0),
+        ("cut", BUILTIN, SceneKind::Cut, 2, 30, 30, 1.0),
+        ("static lab8", LAB8, SceneKind::Static, 1, 0, 6, 2.0),
+        ("cut lab8", LAB8, SceneKind::Cut, 2, 30, 12, 2.0),
+        ("cut random rig", RANDOM, SceneKind::Cut, 4, 30, 12, 2.0),
+    ] {
+        let steps = track(setup, kind, seed, first, frames, None, no_edit);
         let (normal, tip, valid) = summary(name, &steps);
         assert_eq!(valid, 1.0, "{name}: every frame should be trusted");
-        assert!(normal[0] <= 1.0 && tip[0] <= 1.0, "{name}: mean {normal:?} deg, {tip:?} mm");
-        assert!(normal[1] <= 2.0 && tip[1] <= 2.0, "{name}: p95 {normal:?} deg, {tip:?} mm");
+        assert!(normal[0] <= degrees && tip[0] <= 1.0, "{name}: mean {normal:?} deg, {tip:?} mm");
+        assert!(normal[1] <= 2.0 * degrees && tip[1] <= 2.0, "{name}: p95 {normal:?} deg, {tip:?} mm");
     }
 }
 
@@ -110,13 +145,15 @@ fn static_and_cut_scenes_are_within_a_degree_and_a_millimetre() {
 fn hard_scene_never_trusts_a_pose_off_by_5_degrees_or_5_mm() {
     // Fast strokes edge-on to two cameras, the index finger over the spine, camera 4 dropping
     // frames. Measured (seed 3, frames 20..50): all valid, mean 1.31° / 0.40 mm, max 2.96° / 1.73 mm.
-    let steps = track(SceneKind::Hard, 3, 20, 30, None, no_edit);
-    let (_, _, valid) = summary("hard", &steps);
-    for s in steps.iter().filter(|s| s.estimate.valid) {
-        let e = s.error.expect("a trusted frame has a pose");
-        assert!(!e.exceeds(5.0, 5.0), "frame {} trusted with {e:?}", s.estimate.frame);
+    for (name, setup, frames) in [("hard", BUILTIN, 30), ("hard lab8", LAB8, 15)] {
+        let steps = track(setup, SceneKind::Hard, 3, 20, frames, None, no_edit);
+        let (_, _, valid) = summary(name, &steps);
+        for s in steps.iter().filter(|s| s.estimate.valid) {
+            let e = s.error.expect("a trusted frame has a pose");
+            assert!(!e.exceeds(5.0, 5.0), "{name}: frame {} trusted with {e:?}", s.estimate.frame);
+        }
+        assert!(valid >= 0.8, "{name}: valid fraction {valid}");
     }
-    assert!(valid >= 0.8, "valid fraction {valid}");
 }
 
 #[test]
@@ -128,7 +165,7 @@ fn a_frame_without_the_scalpel_is_refused_and_the_last_pose_held_for_a_bounded_t
             m.pixels_mut().filter(|p| p.0[0] == label::SCALPEL).for_each(|p| p.0[0] = label::BACKGROUND);
         }
     };
-    let steps = track(SceneKind::Cut, 2, 30, 6, None, gone);
+    let steps = track(BUILTIN, SceneKind::Cut, 2, 30, 6, None, gone);
     let last_trusted = steps[2].estimate.pose.clone().expect("frame 32 is trusted");
     for s in &steps[3..] {
         let e = &s.estimate;
@@ -143,7 +180,7 @@ fn a_frame_without_the_scalpel_is_refused_and_the_last_pose_held_for_a_bounded_t
     let rig = scene.config().rig.clone();
     let mut tracker =
         Tracker::new(Template::new(&scene.scalpel().geometry).expect("template"), TrackerParams::default());
-    let params = HullParams { leaf_size: LEAF, ..HullParams::default() };
+    let params = hull_params(&rig);
     let masks = |f: u64, keep: bool| -> Vec<Option<GrayImage>> {
         (0..rig.cameras.len())
             .map(|c| {
@@ -188,7 +225,7 @@ fn two_scalpel_like_components_are_refused() {
         .collect();
     let mut tracker =
         Tracker::new(Template::new(&scene.scalpel().geometry).expect("template"), TrackerParams::default());
-    let params = HullParams { leaf_size: LEAF, ..HullParams::default() };
+    let params = hull_params(&rig);
     let e = estimate(&mut tracker, &rig, &masks, &params, 35, scene.frame_timestamp(35));
     assert!(!e.valid && !e.held && e.pose.is_none());
     let reason = e.reason.expect("a reason");
@@ -207,7 +244,7 @@ fn a_tool_file_in_millimetres_does_not_match_the_hull() {
         o.iter_mut().for_each(mm);
     }
     tool.blade_thickness *= 1000.0;
-    let steps = track(SceneKind::Cut, 2, 30, 3, Some(&tool), no_edit);
+    let steps = track(BUILTIN, SceneKind::Cut, 2, 30, 3, Some(&tool), no_edit);
     for s in &steps {
         let e = &s.estimate;
         assert!(!e.valid && e.pose.is_none());

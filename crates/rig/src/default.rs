@@ -36,7 +36,7 @@ pub fn default_rig() -> Rig {
             cam.looking_at(eye, target, Vector3::z())
         })
         .collect();
-    Rig::new(cameras, WorldFrame::Other("table: origin at the table top's centre, z up".to_owned()))
+    Rig::new(cameras, WorldFrame::Table("table: origin at the table top's centre, z up".to_owned()))
 }
 
 #[cfg(test)]

@@ -7,8 +7,11 @@
 //! - [`Distortion`]: the five coefficients (k1, k2, p1, p2, k3) and the radius within which the
 //!   distortion map is invertible ([`Distortion::monotonic_radius`]).
 //! - [`Rig`]: N cameras in one world frame; [`Rig::load`] / [`Rig::save`] read and write `rig.yaml`
-//!   (OpenCV FileStorage YAML; files written by OpenCV itself are accepted).
-//! - [`default_rig`]: the six-camera rig of the synthetic scenes (`calibration/default-rig.yaml`).
+//!   (OpenCV FileStorage YAML; files written by OpenCV itself are accepted);
+//!   [`colmap::read_colmap`] / [`colmap::write_colmap`] read and write COLMAP's text model.
+//! - [`default_rig`]: the six-camera rig of the synthetic scenes (`calibration/default-rig.yaml`);
+//!   [`lab8_rig`] (eight 1280x720 cameras, one overhead, one strongly distorted) and
+//!   [`random_rig`] (seeded) so that nothing is tuned to one rig; [`RigPreset`] names them.
 //!
 //! Conventions (see DESIGN.md): SI units, OpenCV camera axes (x right, y down, z forward),
 //! extrinsics world→camera `x_cam = R · x_world + t`, the centre of pixel (col i, row j) at (i, j).
@@ -17,9 +20,11 @@
 #![warn(missing_docs)]
 
 mod camera;
+pub mod colmap;
 mod default;
 mod distortion;
 mod error;
+mod presets;
 mod rig;
 mod yaml;
 
@@ -27,4 +32,41 @@ pub use camera::{Camera, Projection, Ray};
 pub use default::{DEFAULT_TARGET, DEFAULT_WORKSPACE, default_rig};
 pub use distortion::{Distortion, UNDISTORT_MAX_ITERATIONS, UNDISTORT_TOLERANCE};
 pub use error::RigError;
+pub use presets::{RigPreset, lab8_rig, random_rig};
 pub use rig::{Rig, WorldFrame};
+
+/// The most cameras a rig may have (a file claiming more is refused before anything is allocated).
+pub const MAX_CAMERAS: usize = 64;
+
+/// The longest image side a camera may have, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+
+/// Orders strings so that embedded numbers compare by value ("cam2" < "cam10"): the order of
+/// camera folders and names everywhere in hullcut.
+pub fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
+    fn chunks(s: &str) -> Vec<(bool, &str)> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        let bytes = s.as_bytes();
+        for i in 1..=bytes.len() {
+            if i == bytes.len() || bytes[i].is_ascii_digit() != bytes[start].is_ascii_digit() {
+                out.push((bytes[start].is_ascii_digit(), &s[start..i]));
+                start = i;
+            }
+        }
+        out
+    }
+    let (ca, cb) = (chunks(a), chunks(b));
+    for ((da, sa), (db, sb)) in ca.iter().zip(&cb) {
+        let ord = if *da && *db {
+            let (ta, tb) = (sa.trim_start_matches('0'), sb.trim_start_matches('0'));
+            ta.len().cmp(&tb.len()).then_with(|| ta.cmp(tb))
+        } else {
+            sa.cmp(sb)
+        };
+        if ord.is_ne() {
+            return ord;
+        }
+    }
+    ca.len().cmp(&cb.len()).then_with(|| a.cmp(b))
+}

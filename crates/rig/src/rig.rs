@@ -15,7 +15,10 @@ pub enum WorldFrame {
         /// File name of the image that showed the board.
         image: String,
     },
-    /// Any other frame, described in words (e.g. a synthetic scene's table frame).
+    /// A table's frame, described in words (key starting with `table`): z up, the table top at
+    /// z = 0, as the synthetic scenes use.
+    Table(String),
+    /// Any other frame, described in words.
     Other(String),
 }
 
@@ -25,7 +28,7 @@ impl WorldFrame {
         match self {
             Self::Camera0 => "camera_0".to_owned(),
             Self::Board { image } => format!("board:{image}"),
-            Self::Other(s) => s.clone(),
+            Self::Table(s) | Self::Other(s) => s.clone(),
         }
     }
 
@@ -35,9 +38,16 @@ impl WorldFrame {
             "camera_0" => Self::Camera0,
             _ => match s.strip_prefix("board:") {
                 Some(image) => Self::Board { image: image.to_owned() },
+                None if s.starts_with("table") => Self::Table(s.to_owned()),
                 None => Self::Other(s.to_owned()),
             },
         }
+    }
+
+    /// Whether the frame is a table's (z up, the table top at z = 0): a world board's, or one
+    /// described as a table's. The working volume derived from the rig then stays above z = 0.
+    pub fn is_table(&self) -> bool {
+        matches!(self, Self::Board { .. } | Self::Table(_))
     }
 }
 

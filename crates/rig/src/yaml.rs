@@ -51,7 +51,10 @@ impl Reader<'_> {
         if n == 0 {
             return Err(RigError::ZeroImageSize { file: self.file.to_owned(), key: full });
         }
-        u32::try_from(n).map_err(|_| self.invalid(&full, format!("{n} is not a valid image size")))
+        u32::try_from(n)
+            .ok()
+            .filter(|&v| v <= crate::MAX_IMAGE_SIDE)
+            .ok_or_else(|| self.invalid(&full, format!("{n} is not an image size in 1..={}", crate::MAX_IMAGE_SIDE)))
     }
 
     /// A `rows x cols` opencv-matrix; `alt_shapes` lists other accepted shapes (e.g. 5x1 for 1x5).
@@ -209,6 +212,11 @@ pub(crate) fn parse_rig(text: &str, file: &str) -> Result<Rig, RigError> {
         .as_i64()
         .filter(|&n| n > 0)
         .ok_or_else(|| r.invalid("camera_count", format!("expected a positive integer, found {}", describe(count))))?;
+    if count as u64 > crate::MAX_CAMERAS as u64 {
+        return Err(
+            r.invalid("camera_count", format!("{count} exceeds the {} cameras a rig may have", crate::MAX_CAMERAS))
+        );
+    }
     let mut cameras = Vec::with_capacity(count as usize);
     for i in 0..count as usize {
         let key = format!("camera_{i}");

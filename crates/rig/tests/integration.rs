@@ -213,3 +213,117 @@ fn a_scaled_camera_sees_the_same_point_at_the_scaled_pixel() {
     // Pixel centres at integers: u' = (u + 0.5) / 2 - 0.5.
     assert!(((a.x + 0.5) * 0.5 - 0.5 - b.x).abs() < 1e-9 && ((a.y + 0.5) * 0.5 - 0.5 - b.y).abs() < 1e-9);
 }
+
+mod colmap {
+    use hullcut_rig::colmap::{read_colmap, write_colmap};
+    use hullcut_rig::{Rig, lab8_rig, random_rig};
+
+    use super::*;
+
+    fn assert_same(a: &Rig, b: &Rig) {
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.cameras.iter().zip(&b.cameras) {
+            assert_eq!((&x.name, x.width, x.height), (&y.name, y.width, y.height));
+            let close = |p: f64, q: f64| (p - q).abs() <= 1e-12 * p.abs().max(1.0);
+            for (p, q) in [(x.fx, y.fx), (x.fy, y.fy), (x.cx, y.cx), (x.cy, y.cy)] {
+                assert!(close(p, q), "{}: {p} vs {q}", x.name);
+            }
+            for (p, q) in x.distortion.to_array().iter().zip(y.distortion.to_array()) {
+                assert!(close(*p, q), "{}: distortion {p} vs {q}", x.name);
+            }
+            assert!((x.rotation.matrix() - y.rotation.matrix()).abs().max() < 1e-14, "{}", x.name);
+            assert!((x.translation - y.translation).abs().max() < 1e-14, "{}", x.name);
+        }
+    }
+
+    #[test]
+    fn rigs_round_trip_through_colmaps_text_model() {
+        for rig in [default_rig(), lab8_rig(), random_rig(3)] {
+            let dir = tempfile::tempdir().expect("tempdir");
+            write_colmap(&rig, dir.path(), 1.0).expect("write");
+            assert_same(&rig, &read_colmap(dir.path(), 1.0).expect("read"));
+            // In millimetres (scale 0.001 m per unit) the translations are read back in metres.
+            write_colmap(&rig, dir.path(), 0.001).expect("write");
+            let text = std::fs::read_to_string(dir.path().join("images.txt")).expect("images.txt");
+            assert!(text.contains(&format!("{:.17e}", rig.cameras[0].translation.x * 1000.0)));
+            assert_same(&rig, &read_colmap(dir.path(), 0.001).expect("read"));
+        }
+    }
+
+    /// A model as COLMAP's documentation shows it: comments, a SIMPLE_RADIAL and a PINHOLE camera,
+    /// images in camera folders with their 2-D points lines (one empty).
+    fn write_model(dir: &std::path::Path, cameras: &str, images: &str) {
+        std::fs::write(dir.join("cameras.txt"), cameras).expect("cameras.txt");
+        std::fs::write(dir.join("images.txt"), images).expect("images.txt");
+    }
+
+    #[test]
+    fn a_hand_written_model_reads_with_colmaps_conventions() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_model(
+            dir.path(),
+            "# Camera list with one line of data per camera:\n\
+             #   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n\
+             # Number of cameras: 2\n\
+             1 SIMPLE_RADIAL 640 480 600.0 320.5 240.5 -0.1\n\
+             2 PINHOLE 800 600 700.0 710.0 400.0 300.0\n",
+            "# Image list with two lines of data per image:\n\
+             1 1 0 0 0 0.1 0.2 0.3 2 cam10/000000.png\n\
+             \n\
+             2 0.7071067811865476 0 0.7071067811865476 0 1 2 3 1 cam2/000000.png\n\
+             240.0 10.0 -1 300.5 20.25 7\n",
+        );
+        let rig = read_colmap(dir.path(), 2.0).expect("read");
+        let names: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, ["cam2", "cam10"], "natural order");
+        let (c2, c10) = (&rig.cameras[0], &rig.cameras[1]);
+        // SIMPLE_RADIAL: one focal length, k1; the principal point moves by half a pixel.
+        assert_eq!((c2.fx, c2.fy, c2.cx, c2.cy, c2.distortion.k1), (600.0, 600.0, 320.0, 240.0, -0.1));
+        assert_eq!((c10.fx, c10.fy, c10.cx, c10.cy), (700.0, 710.0, 399.5, 299.5));
+        assert!(c10.distortion.is_none());
+        // Identity rotation, translation scaled to metres.
+        assert!((c10.rotation.matrix() - nalgebra::Matrix3::identity()).abs().max() < 1e-15);
+        assert!((c10.translation - Vector3::new(0.2, 0.4, 0.6)).norm() < 1e-15);
+        // A quarter turn about y: camera z is world x... x_cam = R x_world + t.
+        let p = c2.world_to_camera(&Point3::new(1.0, 0.0, 0.0));
+        assert!((p - Point3::new(2.0, 4.0, 5.0)).norm() < 1e-12, "{p}");
+    }
+
+    #[test]
+    fn bad_models_are_refused_naming_the_file_and_line() {
+        let cases = [
+            (
+                "1 OPENCV_FISHEYE 640 480 600 600 320 240 0 0 0 0\n",
+                "1 1 0 0 0 0 0 0 1 a.png\n\n",
+                "cameras.txt",
+                "line 1",
+                "OPENCV_FISHEYE",
+            ),
+            ("# c\n1 FOV 640 480 600 600 320 240 0.1\n", "1 1 0 0 0 0 0 0 1 a.png\n\n", "cameras.txt", "line 2", "FOV"),
+            ("1 FULL_OPENCV 640 480 600 600 320 240 0 0 0 0 0 0.1 0 0\n", "", "cameras.txt", "line 1", "rational"),
+            ("1 PINHOLE 640 480 600 600 320\n", "", "cameras.txt", "line 1", "takes 4 parameters"),
+            ("1 PINHOLE 0 480 600 600 320 240\n", "", "cameras.txt", "line 1", "image size"),
+            ("1 PINHOLE 640 480 600 nan 320 240\n", "", "cameras.txt", "line 1", "not finite"),
+            ("1 PINHOLE 640 480 600 600 320 240\n", "1 1 0 0 0 0 0 0 7 a.png\n\n", "images.txt", "line 1", "camera 7"),
+            ("1 PINHOLE 640 480 600 600 320 240\n", "1 2 0 0 0 0 0 0 1 a.png\n\n", "images.txt", "line 1", "length 2"),
+            (
+                "1 PINHOLE 640 480 600 600 320 240\n",
+                "1 1 0 0 0 0 0 0 1 a/1.png\n\n2 1 0 0 0 0 0 0 1 a/2.png\n\n",
+                "images.txt",
+                "line 3",
+                "second image of camera `a`",
+            ),
+            ("1 PINHOLE 640 480 600 600 320 240\n", "# nothing\n", "images.txt", "", "no images"),
+        ];
+        for (cameras, images, file, line, what) in cases {
+            let dir = tempfile::tempdir().expect("tempdir");
+            write_model(dir.path(), cameras, images);
+            let e = read_colmap(dir.path(), 1.0).expect_err(what).to_string();
+            assert!(e.contains(file) && e.contains(line) && e.contains(what), "{what}: {e}");
+        }
+        let empty = tempfile::tempdir().expect("tempdir");
+        let e = read_colmap(empty.path(), 1.0).expect_err("no files").to_string();
+        assert!(e.contains("cameras.txt"), "{e}");
+        assert!(read_colmap(empty.path(), 0.0).is_err(), "a scale of 0");
+    }
+}

@@ -7,6 +7,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::TriMesh;
+use crate::scalpel::HandleFit;
 
 /// Segments around each capsule and ellipsoid.
 const SEGMENTS: usize = 20;
@@ -14,9 +15,17 @@ const SEGMENTS: usize = 20;
 /// Finger radius, metres (a gloved adult finger).
 const FINGER_RADIUS: f64 = 0.0085;
 
-/// Builds the hand's closed meshes in the tool frame for a grip in [0, 1].
+/// Builds the hand's closed meshes in the tool frame for a grip in [0, 1], holding the standard
+/// scalpel's handle.
 pub fn hand_mesh(grip: f64) -> TriMesh {
+    hand_mesh_on(grip, &crate::Scalpel::new().fit)
+}
+
+/// Builds the hand's closed meshes in the tool frame for a grip in [0, 1], its fingers resting on a
+/// handle of the given size.
+pub fn hand_mesh_on(grip: f64, handle: &HandleFit) -> TriMesh {
     let g = grip.clamp(0.0, 1.0);
+    let handle_top = handle.half_width;
     let p = Point3::new;
     let mut mesh = TriMesh::default();
     // Palm above and behind the handle, tilted along the tool.
@@ -29,12 +38,12 @@ pub fn hand_mesh(grip: f64) -> TriMesh {
     // covers the end of the handle, as a real palm does.
     mesh.append(&TriMesh::capsule(p(-0.122, 0.030, 0.0), p(-0.195, 0.002, 0.0), 0.027, SEGMENTS));
     // Index finger along the spine side of the handle; its tip slides toward the blade with grip.
-    let index_tip = p(-0.040 + 0.048 * g, HANDLE_TOP + FINGER_RADIUS * 0.9 + 0.002 * (1.0 - g), 0.0);
-    let index_mid = p(-0.062 + 0.020 * g, HANDLE_TOP + FINGER_RADIUS + 0.004, 0.0);
+    let index_tip = p(-0.040 + 0.048 * g, handle_top + FINGER_RADIUS * 0.9 + 0.002 * (1.0 - g), 0.0);
+    let index_mid = p(-0.062 + 0.020 * g, handle_top + FINGER_RADIUS + 0.004, 0.0);
     mesh.append(&TriMesh::capsule(p(-0.085, 0.030, 0.0), index_mid, FINGER_RADIUS, SEGMENTS));
     mesh.append(&TriMesh::capsule(index_mid, index_tip, FINGER_RADIUS * 0.95, SEGMENTS));
     // Thumb on the +z face, middle finger on the −z face.
-    let side = HANDLE_SIDE + FINGER_RADIUS;
+    let side = handle.half_thickness + FINGER_RADIUS;
     mesh.append(&TriMesh::capsule(p(-0.095, 0.020, 0.030), p(-0.058 + 0.010 * g, 0.0, side), FINGER_RADIUS, SEGMENTS));
     mesh.append(&TriMesh::capsule(
         p(-0.088, 0.018, -0.030),
@@ -47,11 +56,6 @@ pub fn hand_mesh(grip: f64) -> TriMesh {
     mesh.append(&TriMesh::capsule(p(-0.112, 0.008, -0.020), p(-0.104, -0.014, -0.008), FINGER_RADIUS * 0.85, SEGMENTS));
     mesh
 }
-
-/// y of the handle's spine-side face.
-const HANDLE_TOP: f64 = crate::scalpel::HANDLE_WIDTH / 2.0;
-/// z of the handle's +z face.
-const HANDLE_SIDE: f64 = crate::scalpel::HANDLE_THICKNESS / 2.0;
 
 #[cfg(test)]
 mod tests {

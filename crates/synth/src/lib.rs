@@ -1,9 +1,11 @@
 //! Synthetic capture scenes with exact ground truth, written in the same dataset format as real
 //! recordings.
 //!
-//! - Scene model: a [`Scalpel`] (handle and a No. 10-style blade, described by `tool.json`), a
-//!   gloved hand ([`hand_mesh`]) whose grip changes over time, and [`Trajectory`]s (approach, press,
-//!   cut strokes, lift) for the scenes of [`SceneKind`].
+//! - Scene model: a [`Scalpel`] of a [`ToolKind`] (handle and blade, described by `tool.json`), a
+//!   hand ([`hand_mesh_on`]) whose grip changes over time, and [`Trajectory`]s (approach, press,
+//!   cut strokes, lift) for the scenes of [`SceneKind`], on any rig.
+//! - Looks: [`Appearance`] (hand colour, tool finish, table [`Background`], light colour and
+//!   drift, cast shadows through a [`ShadowMap`]), by preset name or seeded at random.
 //! - Renderer: [`CameraRenderer`], a z-buffered rasterizer in double precision that applies the
 //!   rig's distortion exactly (per-pixel undistorted rays), with Lambert shading, a textured static
 //!   background, sensor noise, motion blur and exposure drift ([`Scene::render_view`]); labels and
@@ -14,6 +16,7 @@
 //! Everything is deterministic for a seed. No OpenCV, no rerun.
 #![warn(missing_docs)]
 
+mod appearance;
 mod hand;
 mod mesh;
 pub mod render;
@@ -24,14 +27,15 @@ mod synthesize;
 pub mod texture;
 mod trajectory;
 
-pub use hand::hand_mesh;
+pub use appearance::{Appearance, Background};
+pub use hand::{hand_mesh, hand_mesh_on};
 pub use mesh::TriMesh;
-pub use render::{CameraRenderer, Layers, Light, Part};
-pub use scalpel::{BLADE_LENGTH, BLADE_THICKNESS, BLADE_WIDTH, HANDLE_LENGTH, HANDLE_THICKNESS, HANDLE_WIDTH, Scalpel};
-pub use scene::{
-    BLADE_ALBEDO, DEFAULT_STROKE_DEPTH, DepthImage, GLOVE_ALBEDO, HANDLE_ALBEDO, RenderedView, START_NS, Scene,
-    SceneConfig,
+pub use render::{CameraRenderer, Layers, Light, Part, ShadowMap};
+pub use scalpel::{
+    BLADE_LENGTH, BLADE_THICKNESS, BLADE_WIDTH, HANDLE_LENGTH, HANDLE_THICKNESS, HANDLE_WIDTH, HandleFit, Scalpel,
+    ToolKind,
 };
+pub use scene::{DEFAULT_STROKE_DEPTH, DepthImage, RenderedView, START_NS, Scene, SceneConfig};
 pub use synthesize::{SynthSummary, synthesize};
 pub use trajectory::{Key, ORGAN_TOP, SceneKind, ToolState, Trajectory, tool_rotation};
 

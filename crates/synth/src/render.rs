@@ -11,8 +11,8 @@
 use hullcut_rig::Camera;
 use nalgebra::{Point3, Vector2, Vector3};
 
-use crate::TriMesh;
-use crate::texture::{BackgroundHit, trace_background};
+use crate::texture::{BackgroundHit, table_hit, trace_background_on};
+use crate::{Background, TriMesh};
 
 /// Triangles with a vertex closer than this to the camera plane are skipped (and counted).
 pub const NEAR: f64 = 0.02;
@@ -75,14 +75,24 @@ pub struct CameraRenderer {
     rays: Vec<[f64; 2]>,
     background_rgb: Vec<[f32; 3]>,
     background_depth: Vec<f64>,
+    /// Table position seen through each pixel centre, NaN where the ray misses the table (for
+    /// shadows).
+    table_xy: Vec<[f32; 2]>,
+    background: Background,
     light: Light,
     /// The lens' invertible radius, computed once (it is a root search).
     monotonic_radius: f64,
 }
 
 impl CameraRenderer {
-    /// Precomputes rays and the background for `camera` under `light`.
+    /// Precomputes rays and the background (the green drape) for `camera` under `light`.
     pub fn new(camera: &Camera, light: Light) -> Self {
+        Self::with_background(camera, light, Background::Drape)
+    }
+
+    /// Precomputes rays and the background for `camera` under `light`, the table covered by
+    /// `background`.
+    pub fn with_background(camera: &Camera, light: Light, background: Background) -> Self {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let mut rays = vec![[f64::NAN; 2]; w * h];
         for j in 0..h {
@@ -97,6 +107,8 @@ impl CameraRenderer {
             rays,
             background_rgb: vec![[0.0; 3]; w * h],
             background_depth: vec![0.0; w * h],
+            table_xy: vec![[f32::NAN; 2]; w * h],
+            background,
             light,
             monotonic_radius: camera.distortion.monotonic_radius(),
         };
@@ -144,14 +156,17 @@ impl CameraRenderer {
                 let k = j * w + i;
                 let Some(centre) = self.ray(i, j) else { continue };
                 let world = |r: Vector2<f64>| to_world * Vector3::new(r.x, r.y, 1.0);
-                self.background_depth[k] = match trace_background(&origin, &world(centre)) {
+                self.background_depth[k] = match trace_background_on(&origin, &world(centre), &self.background) {
                     BackgroundHit::Surface { s, .. } => s,
                     BackgroundHit::Wall(_) => 0.0,
                 };
+                if let Some((x, y)) = table_hit(&origin, &world(centre)) {
+                    self.table_xy[k] = [x as f32, y as f32];
+                }
                 let mut sum = [0.0f32; 3];
                 for (du, dv) in offsets {
                     let r = self.ray_at(i as f64 + du, j as f64 + dv).unwrap_or(centre);
-                    let c = match trace_background(&origin, &world(r)) {
+                    let c = match trace_background_on(&origin, &world(r), &self.background) {
                         BackgroundHit::Surface { albedo, .. } => albedo.map(|a| a * up_shade),
                         BackgroundHit::Wall(c) => c,
                     };
@@ -166,8 +181,29 @@ impl CameraRenderer {
 
     /// Renders the parts over the static background.
     pub fn render(&self, parts: &[Part]) -> Layers {
+        self.render_shadowed(parts, None)
+    }
+
+    /// Renders the parts over the static background, the table darkened where `shadow` says the
+    /// parts hide the light (the diffuse term goes, the ambient one stays).
+    pub fn render_shadowed(&self, parts: &[Part], shadow: Option<&ShadowMap>) -> Layers {
+        let mut rgb = self.background_rgb.clone();
+        if let Some(shadow) = shadow {
+            let lit = self.light.lambert(&Vector3::z());
+            let dark = if lit > 0.0 { self.light.ambient / lit } else { 1.0 };
+            for (px, xy) in rgb.iter_mut().zip(&self.table_xy) {
+                if xy[0].is_nan() {
+                    continue;
+                }
+                let s = shadow.at(f64::from(xy[0]), f64::from(xy[1]));
+                if s > 0.0 {
+                    let f = 1.0 - s * (1.0 - dark);
+                    *px = px.map(|c| c * f);
+                }
+            }
+        }
         let mut layers = Layers {
-            rgb: self.background_rgb.clone(),
+            rgb,
             labels: vec![hullcut_dataset::label::BACKGROUND; self.rays.len()],
             depth: vec![f64::INFINITY; self.rays.len()],
             skipped_triangles: 0,
@@ -262,5 +298,107 @@ impl CameraRenderer {
                 }
             }
         }
+    }
+}
+
+/// The shadow the parts cast on the table (z = 0) under a directional light, on a 1 mm grid,
+/// softened over 3 mm (a penumbra): 0 lit, 1 in full shadow.
+#[derive(Debug, Clone)]
+pub struct ShadowMap {
+    origin: [f64; 2],
+    dims: [usize; 2],
+    shade: Vec<f32>,
+}
+
+/// Cell of the shadow grid, metres.
+const SHADOW_CELL: f64 = 0.001;
+
+impl ShadowMap {
+    /// Casts the parts' shadow along `light`; `None` when the light is at or below the horizon or
+    /// nothing casts a shadow on the table.
+    pub fn cast(parts: &[Part], light: &Light) -> Option<Self> {
+        let l = light.direction;
+        if l.z <= 1e-6 {
+            return None;
+        }
+        let onto_table = |p: &Point3<f64>| [p.x - l.x * p.z / l.z, p.y - l.y * p.z / l.z];
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        let flat: Vec<Vec<[f64; 2]>> = parts
+            .iter()
+            .map(|part| {
+                part.mesh
+                    .vertices
+                    .iter()
+                    .map(|p| {
+                        let q = onto_table(p);
+                        for a in 0..2 {
+                            lo[a] = lo[a].min(q[a]);
+                            hi[a] = hi[a].max(q[a]);
+                        }
+                        q
+                    })
+                    .collect()
+            })
+            .collect();
+        if lo[0] > hi[0] {
+            return None;
+        }
+        // Two cells of padding each side for the penumbra; at most a 2 m square of shadow.
+        let origin = [lo[0] - 2.0 * SHADOW_CELL, lo[1] - 2.0 * SHADOW_CELL];
+        let dims = [0, 1].map(|a| (((hi[a] - lo[a]) / SHADOW_CELL).ceil() as usize + 5).min(2000));
+        let mut hard = vec![0u8; dims[0] * dims[1]];
+        for (part, q) in parts.iter().zip(&flat) {
+            for t in &part.mesh.triangles {
+                let [a, b, c] = t.map(|i| q[i as usize]);
+                let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+                if area.abs() < 1e-14 {
+                    continue;
+                }
+                let cell = |v: f64, a: usize| ((v - origin[a]) / SHADOW_CELL - 0.5).max(0.0);
+                let i0 = cell(a[0].min(b[0]).min(c[0]), 0).floor() as usize;
+                let i1 = (cell(a[0].max(b[0]).max(c[0]), 0).ceil() as usize).min(dims[0] - 1);
+                let j0 = cell(a[1].min(b[1]).min(c[1]), 1).floor() as usize;
+                let j1 = (cell(a[1].max(b[1]).max(c[1]), 1).ceil() as usize).min(dims[1] - 1);
+                let edge =
+                    |p: [f64; 2], q: [f64; 2], x: f64, y: f64| (q[0] - p[0]) * (y - p[1]) - (q[1] - p[1]) * (x - p[0]);
+                for j in j0..=j1 {
+                    let y = origin[1] + (j as f64 + 0.5) * SHADOW_CELL;
+                    for i in i0..=i1 {
+                        let x = origin[0] + (i as f64 + 0.5) * SHADOW_CELL;
+                        let (e0, e1, e2) = (edge(a, b, x, y), edge(b, c, x, y), edge(c, a, x, y));
+                        if e0 * area >= 0.0 && e1 * area >= 0.0 && e2 * area >= 0.0 {
+                            hard[j * dims[0] + i] = 1;
+                        }
+                    }
+                }
+            }
+        }
+        // A 3x3 box filter: a penumbra of about 3 mm.
+        let mut shade = vec![0.0f32; hard.len()];
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let mut sum = 0u32;
+                for dj in j.saturating_sub(1)..=(j + 1).min(dims[1] - 1) {
+                    for di in i.saturating_sub(1)..=(i + 1).min(dims[0] - 1) {
+                        sum += u32::from(hard[dj * dims[0] + di]);
+                    }
+                }
+                shade[j * dims[0] + i] = sum as f32 / 9.0;
+            }
+        }
+        Some(ShadowMap { origin, dims, shade })
+    }
+
+    /// The shadow at table position (x, y): 0 lit, 1 in full shadow.
+    pub fn at(&self, x: f64, y: f64) -> f32 {
+        let (fi, fj) = ((x - self.origin[0]) / SHADOW_CELL, (y - self.origin[1]) / SHADOW_CELL);
+        if !(fi >= 0.0 && fj >= 0.0) {
+            return 0.0;
+        }
+        let (i, j) = (fi as usize, fj as usize);
+        if i >= self.dims[0] || j >= self.dims[1] {
+            return 0.0;
+        }
+        self.shade[j * self.dims[0] + i]
     }
 }

@@ -6,20 +6,13 @@ use image::{GrayImage, ImageBuffer, Luma, RgbImage};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
-use crate::render::{CameraRenderer, Layers, Light, Part};
-use crate::sensor::expose;
+use crate::render::{CameraRenderer, Layers, Part, ShadowMap};
+use crate::sensor::expose_channels;
 use crate::texture::mix64;
-use crate::{Scalpel, SceneKind, SynthError, Trajectory, TriMesh, hand_mesh};
+use crate::{Appearance, Scalpel, SceneKind, SynthError, ToolKind, Trajectory, TriMesh, hand_mesh_on};
 
 /// Start of every synthetic recording: 2026-11-18 00:00:00 UTC, in nanoseconds since the epoch.
 pub const START_NS: i64 = 1_795_478_400_000_000_000;
-
-/// Albedo of the blue nitrile glove.
-pub const GLOVE_ALBEDO: [f32; 3] = [60.0 / 255.0, 110.0 / 255.0, 200.0 / 255.0];
-/// Albedo of the steel handle.
-pub const HANDLE_ALBEDO: [f32; 3] = [150.0 / 255.0, 150.0 / 255.0, 155.0 / 255.0];
-/// Albedo of the polished blade.
-pub const BLADE_ALBEDO: [f32; 3] = [205.0 / 255.0, 205.0 / 255.0, 210.0 / 255.0];
 
 /// A 16-bit depth image in millimetres.
 pub type DepthImage = ImageBuffer<Luma<u16>, Vec<u16>>;
@@ -59,6 +52,10 @@ pub struct SceneConfig {
     /// uniformly from this range per stroke (`cut` and `hard` scenes, and `resect` after its
     /// resection).
     pub stroke_depth: [f64; 2],
+    /// How the scene looks (hand, tool finish, table, light, shadows).
+    pub appearance: Appearance,
+    /// Which scalpel the hand holds.
+    pub tool: ToolKind,
 }
 
 /// Default of [`SceneConfig::stroke_depth`]: shallow strokes, the tool's pose being what these
@@ -85,6 +82,8 @@ impl SceneConfig {
             truth_meshes: true,
             compression: hullcut_dataset::PngCompression::Fast,
             stroke_depth: DEFAULT_STROKE_DEPTH,
+            appearance: Appearance::classic(),
+            tool: ToolKind::Standard,
         }
     }
 }
@@ -127,12 +126,22 @@ impl Scene {
         if config.motion_blur_samples == 0 {
             return Err(SynthError::Config("motion_blur_samples must be at least 1".into()));
         }
-        let scalpel = Scalpel::new();
+        let scalpel = Scalpel::of(config.tool);
         let duration = config.frames as f64 / config.fps;
-        let trajectory =
-            Trajectory::for_scene(config.kind, config.seed, duration, scalpel.geometry.tip, config.stroke_depth);
-        let light = Light::default();
-        let renderers = config.rig.cameras.par_iter().map(|c| CameraRenderer::new(c, light)).collect();
+        // The cameras' azimuths about the working area (the hard scene strokes edge-on to them).
+        let azimuths: Vec<f64> =
+            config.rig.cameras.iter().map(|c| c.centre().y.atan2(c.centre().x).to_degrees()).collect();
+        let trajectory = Trajectory::for_scene(
+            config.kind,
+            config.seed,
+            duration,
+            scalpel.geometry.tip,
+            config.stroke_depth,
+            &azimuths,
+        );
+        let (light, background) = (config.appearance.light, config.appearance.background);
+        let renderers =
+            config.rig.cameras.par_iter().map(|c| CameraRenderer::with_background(c, light, background)).collect();
         let schedule = Self::schedule(&config);
         Ok(Scene { config, scalpel, trajectory, renderers, schedule })
     }
@@ -206,11 +215,30 @@ impl Scene {
     pub fn parts_at(&self, t: f64) -> Vec<Part> {
         let state = self.trajectory.state_at(t);
         let pose = state.tool_to_world;
+        let look = &self.config.appearance;
         vec![
-            Part { label: label::HAND, albedo: GLOVE_ALBEDO, mesh: hand_mesh(state.grip).transformed(&pose) },
-            Part { label: label::SCALPEL, albedo: HANDLE_ALBEDO, mesh: self.scalpel.handle.transformed(&pose) },
-            Part { label: label::SCALPEL, albedo: BLADE_ALBEDO, mesh: self.scalpel.blade.transformed(&pose) },
+            Part {
+                label: label::HAND,
+                albedo: look.hand,
+                mesh: hand_mesh_on(state.grip, &self.scalpel.fit).transformed(&pose),
+            },
+            Part { label: label::SCALPEL, albedo: look.handle, mesh: self.scalpel.handle.transformed(&pose) },
+            Part { label: label::SCALPEL, albedo: look.blade, mesh: self.scalpel.blade.transformed(&pose) },
         ]
+    }
+
+    /// Renders the parts at time `t` through a camera, with their shadow when the look has them.
+    fn render_at(&self, renderer: &CameraRenderer, t: f64) -> Layers {
+        let parts = self.parts_at(t);
+        let look = &self.config.appearance;
+        let shadow = if look.shadows { ShadowMap::cast(&parts, &look.light) } else { None };
+        renderer.render_shadowed(&parts, shadow.as_ref())
+    }
+
+    /// Per-channel gains of a camera's frame: its exposure and the light's colour then.
+    fn gains(&self, frame: u64, camera: usize, t: f64) -> [f32; 3] {
+        let g = self.exposure_gain(frame, camera);
+        self.config.appearance.colour_gains(t).map(|c| c * g)
     }
 
     /// Exposure gain of a camera's frame: a slow drift, different per camera.
@@ -226,14 +254,13 @@ impl Scene {
         let renderer = self.renderers.get(camera)?;
         let cam = renderer.camera();
         let t = Self::seconds(timestamp_ns);
-        let centre = renderer.render(&self.parts_at(t));
+        let centre = self.render_at(renderer, t);
         let n = self.config.motion_blur_samples;
         let rgb = if n > 1 {
             let mut sum: Vec<[f32; 3]> = vec![[0.0; 3]; centre.rgb.len()];
             for k in 0..n {
                 let offset = self.config.shutter_s * (k as f64 / (n - 1) as f64 - 0.5);
-                let layers: Layers =
-                    if 2 * k + 1 == n { centre.clone() } else { renderer.render(&self.parts_at(t + offset)) };
+                let layers: Layers = if 2 * k + 1 == n { centre.clone() } else { self.render_at(renderer, t + offset) };
                 for (s, c) in sum.iter_mut().zip(&layers.rgb) {
                     for ch in 0..3 {
                         s[ch] += c[ch] / n as f32;
@@ -246,7 +273,7 @@ impl Scene {
         };
         let salt = mix64(self.config.seed ^ mix64(frame << 8 | camera as u64) ^ 0x5e45);
         let image =
-            expose(&rgb, cam.width, cam.height, self.exposure_gain(frame, camera), self.config.noise_sigma, salt);
+            expose_channels(&rgb, cam.width, cam.height, self.gains(frame, camera, t), self.config.noise_sigma, salt);
         let mask = GrayImage::from_raw(cam.width, cam.height, centre.labels).unwrap_or_default();
         let depth_mm: Vec<u16> =
             centre.depth.iter().map(|&z| (z * 1000.0).round().clamp(0.0, 65535.0) as u16).collect();
@@ -261,8 +288,9 @@ impl Scene {
         let cam = renderer.camera();
         let layers = renderer.render(&[]);
         let gain = 1.0 + 0.5 * self.config.exposure_drift * ((index as f32) * 1.7).sin();
+        let gains = self.config.appearance.colour_gains(0.0).map(|c| c * gain);
         let salt = mix64(self.config.seed ^ 0xb6 ^ mix64((index as u64) << 8 | camera as u64));
-        Some(expose(&layers.rgb, cam.width, cam.height, gain, self.config.noise_sigma, salt))
+        Some(expose_channels(&layers.rgb, cam.width, cam.height, gains, self.config.noise_sigma, salt))
     }
 
     /// The true tool pose at a frame set's time.

@@ -7,13 +7,25 @@ use crate::texture::mix64;
 
 /// Turns lit colour into an 8-bit image: `round(255 · gain · rgb + noise)`, clamped.
 pub fn expose(rgb: &[[f32; 3]], width: u32, height: u32, gain: f32, noise_sigma: f32, salt: u64) -> RgbImage {
+    expose_channels(rgb, width, height, [gain; 3], noise_sigma, salt)
+}
+
+/// [`expose`] with a gain per channel (exposure times the light's colour).
+pub fn expose_channels(
+    rgb: &[[f32; 3]],
+    width: u32,
+    height: u32,
+    gains: [f32; 3],
+    noise_sigma: f32,
+    salt: u64,
+) -> RgbImage {
     let mut out = Vec::with_capacity(rgb.len() * 3);
     for (k, px) in rgb.iter().enumerate() {
         let h = mix64(salt ^ (k as u64).wrapping_mul(0x2545_f491_4f6c_dd1d));
         for (ch, &value) in px.iter().enumerate() {
             let noise =
                 if noise_sigma > 0.0 { noise_sigma * standard_normal(mix64(h.wrapping_add(ch as u64))) } else { 0.0 };
-            out.push((255.0 * gain * value + noise).round().clamp(0.0, 255.0) as u8);
+            out.push((255.0 * gains[ch] * value + noise).round().clamp(0.0, 255.0) as u8);
         }
     }
     // The buffer has exactly width x height x 3 entries.

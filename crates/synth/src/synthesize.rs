@@ -49,6 +49,7 @@ pub fn synthesize(
         fps: config.fps,
         frame_count: config.frames,
         cameras: rig.cameras.iter().map(|c| c.name.clone()).collect(),
+        workspace: None,
     };
     let writer = DatasetWriter::create(out, meta, rig, force)?.with_compression(config.compression);
     writer.write_tool(&scene.scalpel().geometry)?;

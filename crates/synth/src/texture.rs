@@ -24,7 +24,7 @@ pub fn mix64(mut z: u64) -> u64 {
 }
 
 /// Smooth value noise in [-1, 1] with unit lattice spacing.
-fn value_noise(x: f64, y: f64, salt: u64) -> f64 {
+pub(crate) fn value_noise(x: f64, y: f64, salt: u64) -> f64 {
     let (xf, yf) = (x.floor(), y.floor());
     let (fx, fy) = (x - xf, y - yf);
     let (ix, iy) = (xf as i64, yf as i64);
@@ -53,13 +53,27 @@ pub enum BackgroundHit {
     Wall([f32; 3]),
 }
 
-/// Traces a ray `origin + s * direction` against the table, the floor and the walls.
+/// Traces a ray `origin + s * direction` against the table (the green drape), the floor and the
+/// walls.
 pub fn trace_background(origin: &Point3<f64>, direction: &Vector3<f64>) -> BackgroundHit {
+    trace_background_on(origin, direction, &crate::Background::Drape)
+}
+
+/// The table position a ray hits, if it hits the table top.
+pub fn table_hit(origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<(f64, f64)> {
+    if direction.z >= -1e-12 {
+        return None;
+    }
+    let p = origin + direction * (-origin.z / direction.z);
+    (p.x.abs() <= TABLE_HALF[0] && p.y.abs() <= TABLE_HALF[1]).then_some((p.x, p.y))
+}
+
+/// Traces a ray against a table covered by `table`, the floor and the walls.
+pub fn trace_background_on(origin: &Point3<f64>, direction: &Vector3<f64>, table: &crate::Background) -> BackgroundHit {
     if direction.z < -1e-12 {
         let s = -origin.z / direction.z;
-        let p = origin + direction * s;
-        if p.x.abs() <= TABLE_HALF[0] && p.y.abs() <= TABLE_HALF[1] {
-            return BackgroundHit::Surface { s, albedo: drape_albedo(p.x, p.y) };
+        if let Some((x, y)) = table_hit(origin, direction) {
+            return BackgroundHit::Surface { s, albedo: table.albedo(x, y) };
         }
         let s = (FLOOR_Z - origin.z) / direction.z;
         let p = origin + direction * s;

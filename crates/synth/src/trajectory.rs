@@ -192,13 +192,16 @@ impl Trajectory {
     }
 
     /// The trajectory of a scene, `duration` seconds long, deterministic for a seed; strokes press
-    /// the tip `stroke_depth` (a range, metres) below [`ORGAN_TOP`].
+    /// the tip `stroke_depth` (a range, metres) below [`ORGAN_TOP`]. `camera_azimuths` (degrees,
+    /// the rig's cameras about the working area) are the directions the hard scene strokes along,
+    /// edge-on to those cameras (the first three; the default rig's 15°, 75° and 135° without).
     pub fn for_scene(
         kind: SceneKind,
         seed: u64,
         duration: f64,
         tip_in_tool: Point3<f64>,
         stroke_depth: [f64; 2],
+        camera_azimuths: &[f64],
     ) -> Self {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x7a3c_91e5_0d42_b6f1);
         let deg = f64::to_radians;
@@ -219,9 +222,11 @@ impl Trajectory {
             }
             SceneKind::Cut | SceneKind::Hard | SceneKind::Resect => {
                 let hard = kind == SceneKind::Hard;
-                // The default rig's camera azimuths: a stroke along one of them is edge-on to it
-                // and to the camera opposite.
-                let camera_azimuths = [15.0, 75.0, 135.0];
+                // A stroke along a camera's azimuth is edge-on to it (and to a camera opposite).
+                let edge_on: Vec<f64> = match camera_azimuths {
+                    [] => vec![15.0, 75.0, 135.0],
+                    a => a.iter().take(3).copied().collect(),
+                };
                 let mut t = 0.0;
                 let mut cycle = 0usize;
                 let mut previous: Option<Key> = None;
@@ -234,7 +239,7 @@ impl Trajectory {
                 let (transfer_s, approach_s, lift_s) = if hard { (0.7, 0.5, 0.45) } else { (1.0, 1.0, 1.0) };
                 while t < duration + 1.0 {
                     let azimuth = if hard {
-                        deg(camera_azimuths[cycle % 3] + rng.random_range(-2.0..2.0))
+                        deg(edge_on[cycle % edge_on.len()] + rng.random_range(-2.0..2.0))
                     } else {
                         deg(rng.random_range(0.0..360.0))
                     };
@@ -294,7 +299,7 @@ mod tests {
     #[test]
     fn the_resection_reaches_the_table_twice_along_one_line_then_cuts_as_usual() {
         let tip = Point3::new(0.038, 0.003, 0.0);
-        let tr = Trajectory::for_scene(SceneKind::Resect, 1, 8.0, tip, DEFAULT_STROKE_DEPTH);
+        let tr = Trajectory::for_scene(SceneKind::Resect, 1, 8.0, tip, DEFAULT_STROKE_DEPTH, &[]);
         let tips: Vec<Point3<f64>> = (0..800).map(|i| tr.state_at(i as f64 * 0.01).tool_to_world * tip).collect();
         let low: Vec<&Point3<f64>> = tips[..400].iter().filter(|p| p.z < ORGAN_TOP - 0.02).collect();
         assert!(!low.is_empty());
@@ -322,16 +327,16 @@ mod tests {
     #[test]
     fn tip_follows_keys_and_hard_strokes_peak_at_half_a_metre_per_second() {
         let tip = Point3::new(0.038, 0.003, 0.0);
-        let tr = Trajectory::for_scene(SceneKind::Hard, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
+        let tr = Trajectory::for_scene(SceneKind::Hard, 3, 6.0, tip, DEFAULT_STROKE_DEPTH, &[]);
         for k in tr.keys() {
             let s = tr.state_at(k.time);
             assert!((s.tool_to_world * tip - k.tip).norm() < 1e-12);
         }
         let peak = tr.peak_tip_speed(6.0);
         assert!((0.45..0.56).contains(&peak), "peak {peak} m/s");
-        let cut = Trajectory::for_scene(SceneKind::Cut, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
+        let cut = Trajectory::for_scene(SceneKind::Cut, 3, 6.0, tip, DEFAULT_STROKE_DEPTH, &[]);
         assert!(cut.peak_tip_speed(6.0) < 0.25);
-        let still = Trajectory::for_scene(SceneKind::Static, 3, 6.0, tip, DEFAULT_STROKE_DEPTH);
+        let still = Trajectory::for_scene(SceneKind::Static, 3, 6.0, tip, DEFAULT_STROKE_DEPTH, &[]);
         assert_eq!(still.peak_tip_speed(6.0), 0.0);
     }
 
@@ -339,12 +344,12 @@ mod tests {
     fn same_seed_same_trajectory() {
         let tip = Point3::new(0.038, 0.003, 0.0);
         assert_eq!(
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH),
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH)
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH, &[]),
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH, &[])
         );
         assert_ne!(
-            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH),
-            Trajectory::for_scene(SceneKind::Cut, 10, 5.0, tip, DEFAULT_STROKE_DEPTH)
+            Trajectory::for_scene(SceneKind::Cut, 9, 5.0, tip, DEFAULT_STROKE_DEPTH, &[]),
+            Trajectory::for_scene(SceneKind::Cut, 10, 5.0, tip, DEFAULT_STROKE_DEPTH, &[])
         );
     }
 }

@@ -26,7 +26,7 @@ mod undistort;
 
 pub use error::VizError;
 pub use log::{
-    RERUN_PIXEL_OFFSET, WORLD, camera_entity_path, image_entity_path, log_camera, log_clear, log_image_jpeg,
+    RERUN_PIXEL_OFFSET, WORLD, camera_entity_path, image_entity_path, log_box3d, log_camera, log_clear, log_image_jpeg,
     log_image_points, log_image_rgb, log_label_classes, log_labels, log_line_strips3d, log_mesh3d, log_points3d,
     log_points3d_colored, log_rig, log_scalar, log_world,
 };

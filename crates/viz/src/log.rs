@@ -238,6 +238,16 @@ pub fn log_line_strips3d(
     log_at(rec, EntityPath::from(path), &strips, false)
 }
 
+/// Logs an axis-aligned box (world metres, from `min` to `max`) with a label at `path` (e.g. the
+/// working volume at `world/workspace`), static: it holds for the whole recording.
+pub fn log_box3d(rec: &RecordingStream, path: &str, min: [f32; 3], max: [f32; 3], label: &str) -> Result<(), VizError> {
+    let size = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+    let boxes = rerun::Boxes3D::from_mins_and_sizes([min], [size])
+        .with_labels([label.to_owned()])
+        .with_colors([Rgba32::from_unmultiplied_rgba(160, 160, 160, 255)]);
+    log_at(rec, EntityPath::from(path), &boxes, true)
+}
+
 /// Logs one scalar at `path` (the full path, e.g. `metrics/time/carve`), at the current time.
 pub fn log_scalar(rec: &RecordingStream, path: &str, value: f64) -> Result<(), VizError> {
     log_at(rec, EntityPath::from(path), &Scalars::single(value), false)

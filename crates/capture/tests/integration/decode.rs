@@ -54,6 +54,7 @@ fn write_dataset(dir: &Path) -> Result<Vec<Vec<Option<RgbImage>>>> {
         fps: 30.0,
         frame_count: FRAMES,
         cameras: rig.cameras.iter().map(|c| c.name.clone()).collect(),
+        workspace: None,
     };
     let writer = DatasetWriter::create(dir, meta, &rig, false)?;
     let mut originals = vec![vec![None; FRAMES as usize]; CAMERAS];

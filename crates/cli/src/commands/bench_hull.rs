@@ -48,9 +48,10 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     let refs: Vec<Option<&image::GrayImage>> = masks.iter().map(Some).collect();
     let views = silhouettes(rig, &refs)?;
-    let extent = HullParams::default().workspace.extent();
+    let extent = crate::volume::BENCH_SIDE_M;
+    let base = crate::volume::hull_params(rig, extent / 128.0)?;
     let reference_n = if quick { 128 } else { 512 };
-    let exact = carve(&views, &HullParams { leaf_size: extent / reference_n as f64, ..HullParams::default() })?;
+    let exact = carve(&views, &HullParams { leaf_size: extent / reference_n as f64, ..base.clone() })?;
     let exact_grids: Vec<Option<DenseGrid>> =
         label::NAMED.iter().map(|&(l, _)| DenseGrid::from_occupancy(&exact, Some(l))).collect();
     let resolutions: &[usize] = if quick { &[16, 32, 64] } else { &[32, 64, 128, 256] };
@@ -82,7 +83,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             if method == "dense" && n > dense_limit || method == "gpu" && gpu.is_none() {
                 continue;
             }
-            let params = HullParams { leaf_size: leaf, start_level, ..HullParams::default() };
+            let params = HullParams { leaf_size: leaf, start_level, ..base.clone() };
             let on_gpu = if method == "gpu" { gpu.as_mut() } else { None };
             let (occ, ms) = timed_carve(&views, &params, repeats, on_gpu)?;
             let ious: Vec<Option<f64>> = label::NAMED
@@ -167,11 +168,8 @@ fn robustness(
     exact_grids: &[Option<DenseGrid>],
 ) -> anyhow::Result<()> {
     let n = if quick { 64 } else { 128 };
-    let params = |votes: usize| HullParams {
-        leaf_size: HullParams::default().workspace.extent() / n as f64,
-        carve_votes: votes,
-        ..HullParams::default()
-    };
+    let base = crate::volume::hull_params(rig, crate::volume::BENCH_SIDE_M / n as f64)?;
+    let params = |votes: usize| HullParams { carve_votes: votes, ..base.clone() };
     let carve_masks = |masks: &[Option<image::GrayImage>], votes: usize| -> anyhow::Result<(Occupancy, f64)> {
         let refs: Vec<Option<&image::GrayImage>> = masks.iter().map(Option::as_ref).collect();
         let t = Instant::now();

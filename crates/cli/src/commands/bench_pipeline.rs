@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use hullcut_dataset::label;
-use hullcut_hull::{DenseGrid, HullParams, carve, silhouettes};
+use hullcut_hull::{DenseGrid, carve, silhouettes};
 use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
 use hullcut_sim::HybridParams;
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
@@ -79,7 +79,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     }
     pb.finish_and_clear();
     let decode = StageTiming::from_durations(&decode);
-    let extent = HullParams::default().workspace.extent();
+    let extent = crate::volume::BENCH_SIDE_M;
     let configs = [
         Config { voxel: extent / 64.0, cell: 0.006, hybrid: None },
         Config { voxel: extent / 128.0, cell: 0.006, hybrid: None },
@@ -97,7 +97,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     );
     let mut series: Vec<Series> = Vec::new();
     for config in &configs {
-        let hull = HullParams { leaf_size: config.voxel, ..HullParams::default() };
+        let hull = crate::volume::hull_params(&scene.config().rig, config.voxel)?;
         let hybrid = config.hybrid.map(|radius| HybridParams { radius, ..HybridParams::default() });
         let mut sim = tissue::build("organ", config.cell, hybrid, None)?;
         let mut tled_cells = Vec::new();

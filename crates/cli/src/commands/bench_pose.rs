@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context as _;
-use hullcut_hull::{HullParams, carve, silhouettes};
+use hullcut_hull::{carve, silhouettes};
 use hullcut_pose::{PoseError, Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
 use image::GrayImage;
@@ -81,7 +81,7 @@ fn track(clip: &Clip, leaf: f64, cameras: usize, edit: impl Fn(usize, &GrayImage
     let rig = &clip.scene.config().rig;
     let template = Template::new(&clip.scene.scalpel().geometry)?;
     let mut tracker = Tracker::new(template.clone(), TrackerParams::default());
-    let params = HullParams { leaf_size: leaf, ..HullParams::default() };
+    let params = crate::volume::hull_params(&clip.scene.config().rig, leaf)?;
     let mut run = Run::default();
     for (&f, views) in clip.frames.iter().zip(&clip.masks) {
         let masks: Vec<Option<GrayImage>> =
@@ -120,7 +120,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         Clip::render("cut", SceneKind::Cut, 2, 30, count)?,
         Clip::render("hard", SceneKind::Hard, 3, 20, count)?,
     ];
-    let extent = HullParams::default().workspace.extent();
+    let extent = crate::volume::BENCH_SIDE_M;
     let default_leaf = extent / 128.0;
     let mut csv = String::from(
         "experiment,scene,leaf_mm,cameras,noise,frames,invalid_rate,trusted_wrong,normal_deg_mean,normal_deg_p95,\

@@ -6,6 +6,7 @@ pub mod bench_pipeline;
 pub mod bench_pose;
 pub mod calibrate;
 pub mod gpu_info;
+pub mod import;
 pub mod reconstruct;
 pub mod rig;
 pub mod run;

@@ -11,7 +11,7 @@ use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
 use hullcut_hull::accuracy::{
     grid_iou, outer_surface_samples, sample_surface, silhouette_consistency, surface_distance, volumetric_iou,
 };
-use hullcut_hull::{DenseGrid, HullParams, Occupancy, carve, silhouettes};
+use hullcut_hull::{DenseGrid, HullParams, Occupancy, WorkingVolume, carve, carve_within, silhouettes};
 use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
 use serde::Serialize;
 
@@ -22,15 +22,19 @@ use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, PoseWriter, log_blade, no_tool_estimate};
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+use crate::volume::{MIN_VIEWS, WorkspaceArg};
 
 /// Carve the visual hull of hand and scalpel from every frame set of a dataset.
 ///
 /// Each view's label mask (from masks/, or segmented from the images) becomes summed-area tables;
-/// an octree over the workspace (x, y in ±0.2 m, z in 0..0.4 m) is carved by testing every cell's
-/// whole projected footprint in every view, so a blade thinner than a voxel survives; pixels of the
-/// other label never carve (occlusion-aware labels); a missing view is left out; with
-/// --carve-votes K a cell needs K background views to go (one bad silhouette cannot delete the
-/// tool). Surfaces are closed meshes by surface nets. Where the dataset has truth, the report
+/// an octree over the working volume is carved by testing every cell's whole projected footprint in
+/// every view, so a blade thinner than a voxel survives; pixels of the other label never carve
+/// (occlusion-aware labels); a missing view is left out; a cell fewer than three views can see is
+/// outside the volume (no ghost volumes where only one or two cameras look); with --carve-votes K a
+/// cell needs K background views to go (one bad silhouette cannot delete the tool). The working
+/// volume is --workspace, else dataset.toml's `workspace`, else the space at least three of the
+/// rig's cameras see (above the table when the rig's world frame is a table's); it is printed,
+/// and the report and the recording (world/workspace) state it and its source. Surfaces are closed meshes by surface nets. Where the dataset has truth, the report
 /// gives volumetric IoU against the true shapes and against the exact visual hull (the best any
 /// silhouette method reaches from these views: truth masks carved at a quarter of the voxel), and
 /// Chamfer and Hausdorff distances to the true surfaces. Per camera, the report counts the cells
@@ -60,10 +64,13 @@ pub struct Args {
     /// Output folder.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Leaf (voxel) size, metres, above 0 and at most the workspace's 0.4 m side; the effective one
-    /// is 0.4 m / 2^n, not larger.
+    /// Leaf (voxel) size, metres, above 0 and at most the working volume's longest side.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
+    /// The working volume, world metres (default: dataset.toml's `workspace`, else the space at
+    /// least three cameras see).
+    #[arg(long, value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ", allow_hyphen_values = true)]
+    workspace: Option<WorkspaceArg>,
     /// Frames: A:B (half-open) or N (the first N).
     #[arg(long, value_name = "A:B|N")]
     frames: Option<String>,
@@ -145,6 +152,8 @@ struct Counters {
     cells_kept: u64,
     kept_against_refutation: u64,
     unlabelled_cells: u64,
+    /// Cells dropped as seen by fewer than `min_views` views (outside the volume).
+    unseen_cells: u64,
     footprint_tests: u64,
     empty_label_frames: usize,
     meshes_written: usize,
@@ -161,10 +170,12 @@ struct Report<'a> {
     frames: [u64; 2],
     backend: Backend,
     masks: &'a str,
+    workspace: &'a WorkingVolume,
     voxel_m: f64,
     resolution: usize,
     carve_votes: usize,
     min_support: usize,
+    min_views: usize,
     counters: Counters,
     accuracy: Vec<LabelAccuracy>,
     silhouette_consistency: Vec<Consistency>,
@@ -180,11 +191,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.accuracy_every == 0 || args.rrd_every == 0 {
         bail!("--accuracy-every and --rrd-every must be at least 1");
     }
-    checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
     let ds = Dataset::open(&args.dataset)?;
+    let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
+    checks::voxel(args.voxel, volume.aabb.extent())?;
     let use_files = checks::masks_from_files(&ds, &args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
-    let params = HullParams { leaf_size: args.voxel, carve_votes: args.carve_votes, ..HullParams::default() };
+    let params =
+        HullParams { carve_votes: args.carve_votes, min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, args.voxel) };
     let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };
     let tool = ds.tool()?;
     let poses = ds.truth_poses()?.unwrap_or_default();
@@ -198,6 +211,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         Some(path) => {
             let rec = hullcut_viz::open_recording("hullcut-reconstruct", &hullcut_viz::Sink::File(path.clone()))?;
             hullcut_viz::log_world(&rec)?;
+            crate::volume::log(&rec, &volume)?;
             let cams = CameraLogger::new(&rec, ds.rig())?;
             Some((rec, cams))
         }
@@ -246,6 +260,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         counters.cells_kept += occ.cells.len() as u64;
         counters.kept_against_refutation += occ.stats.kept_against_refutation;
         counters.unlabelled_cells += occ.stats.unlabelled_cells;
+        counters.unseen_cells += occ.stats.unseen_cells;
         counters.footprint_tests += occ.stats.footprint_tests;
         disagreement.add(&occ.stats);
 
@@ -300,10 +315,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let pose = poses.iter().find(|p| p.frame == frame);
             let truth_masks: Vec<Option<&image::GrayImage>> =
                 if segmenter.is_some() { set_aside.iter().map(Option::as_ref).collect() } else { masks.clone() };
+            // The exact visual hull: the truth masks carved at a quarter leaf, inside the cells that
+            // carving the truth masks at this leaf keeps (carving is conservative), so it costs a
+            // few times one carving instead of a whole octree four levels deeper.
             let exact = if truth_masks.iter().any(Option::is_some) {
-                let refs = truth_masks;
-                let fine = HullParams { leaf_size: occ.leaf_size / 4.0, ..params.clone() };
-                Some(carve(&silhouettes(ds.rig(), &refs)?, &fine)?)
+                let truth_views = silhouettes(ds.rig(), &truth_masks)?;
+                let coarse = if segmenter.is_some() { Some(carve(&truth_views, &params)?) } else { None };
+                let seeds = coarse.as_ref().unwrap_or(&occ);
+                let fine = HullParams { leaf_size: params.leaf_size / 4.0, ..params.clone() };
+                Some(carve_within(&truth_views, &fine, &seeds.cells)?)
             } else {
                 None
             };
@@ -381,7 +401,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     println!(
         "carved {} frame sets at {resolution}³ ({:.2} mm leaves): carve {:.2} ms, surfaces {:.2} ms per frame (mean)",
         counters.frame_sets,
-        params.workspace.extent() / resolution.max(1) as f64 * 1e3,
+        params.leaf_size * 1e3,
         carve_t.mean_ms,
         StageTiming::from_durations(&t.surface).mean_ms
     );
@@ -412,10 +432,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             frames: [range.start, range.end],
             backend: args.backend,
             masks: if use_files { "files" } else { "segment" },
-            voxel_m: params.workspace.extent() / resolution.max(1) as f64,
+            workspace: &volume,
+            voxel_m: params.leaf_size,
             resolution,
             carve_votes: params.carve_votes,
             min_support: params.min_support,
+            min_views: params.min_views,
             counters,
             accuracy,
             silhouette_consistency: consistency,

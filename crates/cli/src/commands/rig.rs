@@ -2,7 +2,8 @@
 
 use std::path::PathBuf;
 
-use hullcut_rig::{Rig, default_rig};
+use anyhow::bail;
+use hullcut_rig::{Rig, RigPreset};
 
 /// Inspect or create rig files (rig.yaml, OpenCV FileStorage YAML).
 #[derive(Debug, clap::Args)]
@@ -13,22 +14,44 @@ pub struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum RigCommand {
-    /// Print a table of the rig's cameras (K, distortion, centre, viewing direction, RMS) and
-    /// optionally log the rig to a rerun recording.
+    /// Print a table of the rig's cameras (K, distortion, centre, viewing direction, RMS) and the
+    /// working volume derived from it (the space at least three cameras see), and optionally log
+    /// the rig to a rerun recording.
     ///
-    /// Writes: the .rrd given by --rrd (cameras as Transform3D + Pinhole under world/cams/NAME).
+    /// Writes: the .rrd given by --rrd (cameras as Transform3D + Pinhole under world/cams/NAME, the
+    /// volume under world/workspace).
     Show {
-        /// The rig file.
-        file: PathBuf,
+        /// The rig: a rig.yaml file, or a built-in rig (default, lab8, random:SEED).
+        file: String,
         /// Also log the rig to this rerun recording (.rrd).
         #[arg(long, value_name = "FILE")]
         rrd: Option<PathBuf>,
     },
-    /// Write the default six-camera rig of the synthetic scenes (a ring around a 0.4 m workspace
-    /// above the table, 640x480, mixed elevations, mild distortion).
+    /// Write a rig (a rig.yaml file or a built-in rig) as a COLMAP text model: cameras.txt (OPENCV
+    /// cameras, FULL_OPENCV where k3 is not zero), images.txt (one image NAME.png per camera, poses
+    /// world → camera), an empty points3D.txt; the principal point moved by half a pixel to COLMAP's
+    /// convention. `hullcut import-calibration --colmap` reads it back.
+    ///
+    /// Writes: OUT/cameras.txt, OUT/images.txt, OUT/points3D.txt.
+    Export {
+        /// The rig: a rig.yaml file, or a built-in rig (default, lab8, random:SEED).
+        file: String,
+        /// The folder to write the COLMAP model into.
+        #[arg(long, value_name = "DIR")]
+        colmap: PathBuf,
+        /// Metres per unit of the model's translations.
+        #[arg(long, value_name = "M", default_value_t = 1.0)]
+        scale: f64,
+    },
+    /// Write a built-in rig of the synthetic scenes: `default` (six 640x480 cameras on a ring,
+    /// mixed elevations, mild distortion), `lab8` (eight 1280x720 cameras, one overhead, one with
+    /// strong distortion) or `random:SEED`.
     ///
     /// Writes: OUT (rig.yaml).
     Default {
+        /// Which rig.
+        #[arg(long, value_name = "NAME", default_value = "default")]
+        rig: String,
         /// Where to write it.
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
@@ -43,22 +66,36 @@ enum RigCommand {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     match &args.command {
         RigCommand::Show { file, rrd } => {
-            let rig = Rig::load(file)?;
+            let rig = load_rig(file)?;
             print_table(&rig);
+            let volume = crate::volume::resolve(None, None, &rig)?;
             if let Some(path) = rrd {
                 let rec = hullcut_viz::open_recording("hullcut-rig", &hullcut_viz::Sink::File(path.clone()))?;
                 hullcut_viz::log_world(&rec)?;
                 hullcut_viz::log_rig(&rec, &rig)?;
+                crate::volume::log(&rec, &volume)?;
                 hullcut_viz::flush(&rec)?;
                 println!("wrote {}", path.display());
             }
             Ok(())
         }
-        RigCommand::Default { out, scale } => {
+        RigCommand::Export { file, colmap, scale } => {
             if !(*scale > 0.0 && scale.is_finite()) {
-                anyhow::bail!("--scale must be a positive number, got {scale}");
+                bail!("--scale must be a positive number of metres per unit, got {scale}");
             }
-            let mut rig = default_rig();
+            let rig = load_rig(file)?;
+            hullcut_rig::colmap::write_colmap(&rig, colmap, *scale)?;
+            println!("wrote {} (COLMAP text model, {} cameras)", colmap.display(), rig.len());
+            Ok(())
+        }
+        RigCommand::Default { rig, out, scale } => {
+            if !(*scale > 0.0 && scale.is_finite()) {
+                bail!("--scale must be a positive number, got {scale}");
+            }
+            let Some(preset) = RigPreset::parse(rig) else {
+                bail!("--rig {rig}: not a built-in rig ({})", RigPreset::NAMES);
+            };
+            let mut rig = preset.rig();
             for camera in &mut rig.cameras {
                 *camera = camera.scaled(*scale);
             }
@@ -66,6 +103,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
+    }
+}
+
+/// A rig by built-in name (default, lab8, random:SEED) or from a rig.yaml file.
+pub(crate) fn load_rig(name: &str) -> anyhow::Result<Rig> {
+    match RigPreset::parse(name) {
+        Some(preset) => Ok(preset.rig()),
+        None if std::path::Path::new(name).exists() => Ok(Rig::load(name)?),
+        None => bail!("{name}: neither a built-in rig ({}) nor a rig.yaml file", RigPreset::NAMES),
     }
 }
 

@@ -25,6 +25,7 @@ use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, log_blade};
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+use crate::volume::{MIN_VIEWS, WorkspaceArg};
 
 /// Run the whole pipeline: segment → hull → pose → cut → simulate, logged to rerun.
 ///
@@ -101,6 +102,10 @@ pub struct Args {
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
+    /// The working volume carved, world metres (default: dataset.toml's `workspace`, else the
+    /// space at least three cameras see, above the table when the rig's frame is a table's).
+    #[arg(long, value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ", allow_hyphen_values = true)]
+    workspace: Option<WorkspaceArg>,
     /// Replay the frame sets this many times, each pass's capture times following the last
     /// pass's (a long run from a short recording: memory over 10 minutes). Later passes log on
     /// the `frame` timeline after the first; snapshots come from the first pass only.
@@ -230,6 +235,7 @@ struct Report {
     repeat: u64,
     backend: Backend,
     masks: &'static str,
+    workspace: hullcut_hull::WorkingVolume,
     voxel_m: f64,
     realtime: bool,
     queue: usize,
@@ -287,7 +293,7 @@ impl MemorySample {
 const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
 
 /// The rerun entities a run logs (DESIGN's tree).
-pub const ENTITIES: [&str; 12] = [
+pub const ENTITIES: [&str; 13] = [
     "world/cams/NAME",
     "world/cams/NAME/image",
     "world/cams/NAME/labels",
@@ -300,6 +306,7 @@ pub const ENTITIES: [&str; 12] = [
     "metrics/time/STAGE",
     "metrics/accuracy/NAME",
     "world",
+    "world/workspace",
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
@@ -321,7 +328,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.queue == 0 || args.rrd_every == 0 || args.snapshot_every == 0 {
         bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
     }
-    checks::voxel(args.voxel, HullParams::default().workspace.extent())?;
     if let Some(r) = args.operational_radius
         && !(r.is_finite() && r >= 0.0)
     {
@@ -389,7 +395,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
     let truth = ds.truth_poses()?.unwrap_or_default();
-    let hull = HullParams { leaf_size: args.voxel, ..HullParams::default() };
+    let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
+    checks::voxel(args.voxel, volume.aabb.extent())?;
+    let hull = HullParams { min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, args.voxel) };
 
     let clock = Instant::now();
     let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });
@@ -430,6 +438,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let rec = hullcut_viz::open_recording("hullcut-run", &sink)?;
     hullcut_viz::log_world(&rec)?;
+    crate::volume::log(&rec, &volume)?;
     let cams = CameraLogger::new(&rec, ds.rig())?;
 
     let policy = if args.realtime { Policy::DropOldest } else { Policy::Block };
@@ -608,6 +617,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             repeat: args.repeat,
             backend: args.backend,
             masks: if use_files { "files" } else { "segment" },
+            workspace: volume,
             voxel_m: args.voxel,
             realtime: args.realtime,
             queue: args.queue,

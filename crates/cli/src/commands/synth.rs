@@ -1,12 +1,11 @@
-//! `hullcut synth`: a synthetic six-camera recording with exact ground truth.
+//! `hullcut synth`: a synthetic recording (any rig, tool and look) with exact ground truth.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use hullcut_dataset::Dataset;
-use hullcut_rig::Rig;
-use hullcut_synth::{SceneConfig, SceneKind, synthesize};
+use hullcut_synth::{Appearance, SceneConfig, SceneKind, ToolKind, synthesize};
 use serde::Serialize;
 
 use crate::logging::{CameraLogger, log_tool};
@@ -42,15 +41,21 @@ pub struct Args {
     /// Seed for the trajectory, timing jitter, drops and noise.
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
-    /// Scene: cut, static or hard.
-    #[arg(long, value_name = "NAME", default_value = "cut")]
-    scene: String,
+    /// Scene: cut, static, hard or resect.
+    #[arg(long, value_name = "NAME", default_value = "cut", value_parser = parse_scene)]
+    scene: SceneKind,
     /// Frame rate, frames per second.
     #[arg(long, value_name = "FPS", default_value_t = 30.0)]
     fps: f64,
-    /// Render with this rig instead of the default six-camera rig.
-    #[arg(long, value_name = "rig.yaml")]
-    rig: Option<PathBuf>,
+    /// The rig: default, lab8, random:SEED, or a rig.yaml file.
+    #[arg(long, value_name = "NAME|rig.yaml", default_value = "default")]
+    rig: String,
+    /// The scalpel: standard or pointed (written to tool.json).
+    #[arg(long, value_name = "NAME", default_value = "standard", value_parser = parse_tool)]
+    tool: ToolKind,
+    /// The look: classic, purple-nitrile, latex, skin-light, skin-medium, skin-dark, random:SEED.
+    #[arg(long, value_name = "NAME", default_value = "classic", value_parser = parse_appearance)]
+    appearance: Appearance,
     /// Empty-scene images per camera (CAM/backgroundNN.png) for the background model.
     #[arg(long, value_name = "N", default_value_t = 5)]
     background_frames: usize,
@@ -81,6 +86,9 @@ struct Report<'a> {
     #[serde(flatten)]
     provenance: Provenance,
     scene: &'a str,
+    rig: &'a str,
+    tool: &'a str,
+    appearance: &'a str,
     seed: u64,
     fps: f64,
     frames: u64,
@@ -96,12 +104,27 @@ struct Report<'a> {
     frame_sets_per_s: f64,
 }
 
+fn parse_scene(s: &str) -> Result<SceneKind, String> {
+    SceneKind::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = SceneKind::ALL.iter().map(|(_, n)| *n).collect();
+        format!("unknown scene (known: {})", names.join(", "))
+    })
+}
+
+fn parse_tool(s: &str) -> Result<ToolKind, String> {
+    ToolKind::from_name(s).ok_or_else(|| {
+        let names: Vec<&str> = ToolKind::ALL.iter().map(|(_, n)| *n).collect();
+        format!("unknown tool (known: {})", names.join(", "))
+    })
+}
+
+fn parse_appearance(s: &str) -> Result<Appearance, String> {
+    Appearance::from_name(s).ok_or_else(|| format!("unknown look (known: {})", Appearance::NAMES))
+}
+
 /// Runs the command.
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    let Some(kind) = SceneKind::from_name(&args.scene) else {
-        let names: Vec<&str> = SceneKind::ALL.iter().map(|(_, n)| *n).collect();
-        bail!("--scene {}: unknown scene (known: {})", args.scene, names.join(", "));
-    };
+    let kind = args.scene;
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
@@ -110,22 +133,23 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let mut config = SceneConfig::new(kind, args.seed, args.frames);
     config.fps = args.fps;
+    config.tool = args.tool;
+    config.appearance = args.appearance.clone();
     config.truth_meshes = !args.no_truth_meshes;
     config.background_frames = args.background_frames;
     if args.compact {
         config.compression = hullcut_dataset::PngCompression::Best;
     }
-    if let Some(path) = &args.rig {
-        config.rig = Rig::load(path)?;
-        if kind == SceneKind::Hard && config.rig.len() <= 4 {
-            config.dropping_camera = Some((config.rig.len() - 1, 0.1));
-        }
+    config.rig = crate::commands::rig::load_rig(&args.rig).context("--rig")?;
+    if kind == SceneKind::Hard && config.rig.len() <= 4 {
+        config.dropping_camera = Some((config.rig.len() - 1, 0.1));
     }
     let t0 = Instant::now();
     let scene = hullcut_synth::Scene::new(config).context("preparing the scene")?;
     tracing::info!(seconds = t0.elapsed().as_secs_f64(), "cameras prepared");
     let pb = bar(args.frames, "rendering");
-    let name = format!("{}-seed{}", kind.name(), args.seed);
+    let name =
+        format!("{}-{}-{}-seed{}", kind.name(), args.appearance.name.replace(':', ""), args.tool.name(), args.seed);
     let summary = synthesize(&scene, &args.out, &name, args.force, &|| pb.inc(1))
         .with_context(|| format!("writing {}", args.out.display()))?;
     pb.finish_and_clear();
@@ -144,6 +168,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             kind: "synth",
             provenance: Provenance::current(),
             scene: kind.name(),
+            rig: &args.rig,
+            tool: args.tool.name(),
+            appearance: &args.appearance.name,
             seed: args.seed,
             fps: args.fps,
             frames: args.frames,

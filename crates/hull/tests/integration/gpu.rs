@@ -34,48 +34,54 @@ fn leaves(occ: &Occupancy) -> HashMap<[i64; 3], u8> {
 #[test]
 fn the_gpu_carves_what_the_cpu_carves_up_to_rounding() {
     let Some(gpu) = hullcut_gpu::for_tests() else { return };
-    let rig = default_rig();
-    let hand = TriMesh::ellipsoid(&Isometry3::translation(-0.03, 0.0, 0.15), Vector3::repeat(0.04), 64);
-    let bar = TriMesh::cuboid(Point3::new(0.0, -0.005, 0.147), Point3::new(0.09, 0.005, 0.153));
+    let hand = TriMesh::ellipsoid(&Isometry3::translation(-0.03, 0.0, 0.12), Vector3::repeat(0.04), 64);
+    let bar = TriMesh::cuboid(Point3::new(0.0, -0.005, 0.117), Point3::new(0.09, 0.005, 0.123));
     let parts = [
         Part { label: label::HAND, albedo: [0.3, 0.4, 0.8], mesh: hand },
         Part { label: label::SCALPEL, albedo: [0.6; 3], mesh: bar },
     ];
-    let masks = render(&rig, &parts);
-    let mut all = views(&rig, &masks);
     let mut carver = GpuCarver::new(Arc::new(gpu)).expect("carver");
-    // The default rule, two votes, and a missing view.
-    for (case, votes, drop) in [("default", 1, None), ("two votes", 2, None), ("camera 2 missing", 1, Some(2))] {
-        if let Some(k) = drop {
-            all[k] = None;
-        }
-        let params = HullParams { carve_votes: votes, ..HullParams::default() };
-        let cpu = carve(&all, &params).expect("cpu");
-        let on_gpu = carver.carve(&all, &params).expect("gpu");
-        let (a, b) = (leaves(&cpu), leaves(&on_gpu));
-        let differ =
-            a.iter().filter(|(k, v)| b.get(*k) != Some(v)).count() + b.keys().filter(|k| !a.contains_key(*k)).count();
-        let near = carver.last.near_threshold;
-        eprintln!(
-            "{case}: {} leaves on the CPU, {} on the GPU, {differ} differ; {near} of {} cells tested within rounding",
-            a.len(),
-            b.len(),
-            on_gpu.stats.cells_visited
-        );
-        assert!(a.len() > 1000, "{case}: a hull to compare");
-        assert!((differ as f64) <= 1e-3 * a.len() as f64, "{case}: {differ} of {} leaves differ", a.len());
-        assert!(differ == 0 || near > 0, "{case}: differences without a cell near a pixel edge");
-        assert_eq!(on_gpu.stats.views_used, cpu.stats.views_used);
-        assert_eq!(on_gpu.stats.views_missing, cpu.stats.views_missing);
-        assert_eq!((on_gpu.resolution, on_gpu.leaf_size), (cpu.resolution, cpu.leaf_size));
-        // The same cells visited, so the same counters (but footprint tests: the GPU tests every
-        // view of every cell, the CPU stops at the first refutation).
-        if differ == 0 {
+    // Both rigs with their own working volume: the default rule, two votes, and a missing view.
+    for (name, rig) in [("default", default_rig()), ("lab8", hullcut_rig::lab8_rig())] {
+        let masks = render(&rig, &parts);
+        let mut all = views(&rig, &masks);
+        for (case, votes, drop) in [("default", 1, None), ("two votes", 2, None), ("camera 2 missing", 1, Some(2))] {
+            let case = format!("{name}, {case}");
+            if let Some(k) = drop {
+                all[k] = None;
+            }
+            let params = HullParams { carve_votes: votes, ..super::params(&rig, super::LEAF) };
+            let cpu = carve(&all, &params).expect("cpu");
+            let on_gpu = carver.carve(&all, &params).expect("gpu");
+            let (a, b) = (leaves(&cpu), leaves(&on_gpu));
+            let differ = a.iter().filter(|(k, v)| b.get(*k) != Some(v)).count()
+                + b.keys().filter(|k| !a.contains_key(*k)).count();
+            let near = carver.last.near_threshold;
+            eprintln!(
+                "{case}: {} leaves on the CPU, {} on the GPU, {differ} differ; {near} of {} cells tested within rounding",
+                a.len(),
+                b.len(),
+                on_gpu.stats.cells_visited
+            );
+            assert!(a.len() > 1000, "{case}: a hull to compare");
+            assert!((differ as f64) <= 1e-3 * a.len() as f64, "{case}: {differ} of {} leaves differ", a.len());
+            assert!(differ == 0 || near > 0, "{case}: differences without a cell near a pixel edge");
+            assert_eq!(on_gpu.stats.views_used, cpu.stats.views_used);
+            assert_eq!(on_gpu.stats.views_missing, cpu.stats.views_missing);
+            assert_eq!((on_gpu.resolution, on_gpu.leaf_size), (cpu.resolution, cpu.leaf_size));
+            // The same cells visited, so the same counters (but footprint tests: the GPU tests every
+            // view of every cell, the CPU stops at the first refutation). A cell within rounding of
+            // a pixel edge may be uniform on one side and split into the same leaves on the other:
+            // then the visits differ by a few cells.
             let s = (&cpu.stats, &on_gpu.stats);
-            assert_eq!(s.0.cells_visited, s.1.cells_visited, "{case}");
-            assert_eq!(s.0.lone_refutations, s.1.lone_refutations, "{case}");
-            assert_eq!(s.0.kept_against_refutation, s.1.kept_against_refutation, "{case}");
-            assert_eq!(s.0.unlabelled_cells, s.1.unlabelled_cells, "{case}");
+            let visits = s.0.cells_visited.abs_diff(s.1.cells_visited);
+            assert!(visits as f64 <= 1e-3 * s.0.cells_visited as f64, "{case}: visits {visits}");
+            if differ == 0 && visits == 0 {
+                assert_eq!(s.0.lone_refutations, s.1.lone_refutations, "{case}");
+                assert_eq!(s.0.kept_against_refutation, s.1.kept_against_refutation, "{case}");
+                assert_eq!(s.0.unlabelled_cells, s.1.unlabelled_cells, "{case}");
+                assert_eq!(s.0.unseen_cells, s.1.unseen_cells, "{case}");
+            }
         }
     }
 }

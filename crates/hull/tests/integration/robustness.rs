@@ -1,23 +1,26 @@
 //! Where carving breaks: bad, missing or misplaced silhouettes against the clean hull of the
-//! sphere (rendered exactly through the default rig), at 6.25 mm leaves (64 per side) so that each
-//! carving takes milliseconds.
+//! sphere (rendered exactly through the default rig), at 6.25 mm leaves (64 per side of a 0.4 m
+//! cube given as the working volume, as a lab gives one with --workspace, the cube every default
+//! camera sees whole) so that each carving takes milliseconds.
 
 use std::sync::OnceLock;
 
 use hullcut_dataset::label;
 use hullcut_hull::accuracy::occupancy_iou;
-use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, carve, silhouettes};
+use hullcut_hull::{Aabb, DenseGrid, HullParams, Occupancy, Silhouette, carve, silhouettes};
 use hullcut_rig::{Rig, default_rig};
 use hullcut_synth::texture::mix64;
 use image::GrayImage;
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Point3, Rotation3, Vector3};
 
 use super::{inside_sphere, render, sphere};
 
 const LEAF: f64 = hullcut_rig::DEFAULT_WORKSPACE / 64.0;
 
 fn params(carve_votes: usize) -> HullParams {
-    HullParams { leaf_size: LEAF, carve_votes, ..HullParams::default() }
+    let h = hullcut_rig::DEFAULT_WORKSPACE / 2.0;
+    let cube = Aabb { min: Point3::new(-h, -h, 0.0), max: Point3::new(h, h, 2.0 * h) };
+    HullParams { carve_votes, ..HullParams::new(cube, LEAF) }
 }
 
 /// The default rig and the sphere's exact masks, rendered once for the whole module.
