@@ -1,9 +1,12 @@
 //! Octree carving with whole-footprint tests and occlusion-aware labels.
 //!
-//! A cell is projected into every view; its footprint is the pixel rectangle around its eight
-//! projected corners, widened by a margin (so that the curvature distortion gives projected edges,
-//! and pixels that the footprint only touches, are included). With the summed-area tables of
-//! [`Silhouette`], the label counts inside that rectangle cost four lookups per class:
+//! A cell is projected into every view; its footprint is the pixels whose centres lie in the
+//! rectangle around its eight projected corners (masks are samples at pixel centres), widened by a
+//! margin that bounds how far the lens' distortion bows a projected edge out of that rectangle
+//! ([`Silhouette::curvature`] times the rectangle's size squared, plus `margin_px` for rounding);
+//! a cell smaller than a pixel that holds no pixel centre takes the pixels whose centres bracket
+//! it. With the summed-area tables of [`Silhouette`], the label counts inside that rectangle cost
+//! four lookups per class:
 //!
 //! - a view *refutes* a cell when the footprint lies inside its image and holds only background;
 //!   `carve_votes` refuting views carve it (1 is the classic hull; 2 keeps one bad silhouette from
@@ -84,13 +87,19 @@ pub struct HullParams {
     /// Views that must see a cell (its footprint inside their image) for it to be kept; fewer, and
     /// the cell is outside the volume. At most the views present.
     pub min_views: usize,
-    /// Footprint margin, pixels.
+    /// Footprint margin for rounding, pixels (added to the distortion's bound).
     pub margin_px: f64,
     /// Octree level at which carving starts (8^level cells, in parallel).
     pub start_level: u32,
     /// A cell both labels reach goes to the one covering more of its footprints (summed over
     /// views), instead of carrying both.
     pub exclusive_labels: bool,
+    /// Drop the outer shell of slivers over solid leaves: a leaf whose centre lies outside the hull
+    /// (`carve_votes` views see background there) is dropped where it is the outermost layer over
+    /// a solid leaf ([`trim_slivers`]); a structure thinner than a leaf (a blade) keeps its
+    /// slivers. Without it every leaf touching the hull is kept, which fattens it by half a leaf
+    /// on average.
+    pub trim_slivers: bool,
 }
 
 /// The deepest octree carving accepts (65,536 leaves per side).
@@ -106,9 +115,10 @@ impl HullParams {
             carve_votes: 1,
             min_support: 2,
             min_views: 3,
-            margin_px: 1.0,
+            margin_px: 0.05,
             start_level: 3,
             exclusive_labels: true,
+            trim_slivers: false,
         }
     }
 
@@ -143,6 +153,8 @@ pub struct Cell {
     pub hand: bool,
     /// Carries the scalpel label.
     pub scalpel: bool,
+    /// Its centre lies inside the hull (larger uniform cells always).
+    pub solid: bool,
 }
 
 impl Cell {
@@ -179,6 +191,8 @@ pub struct CarveStats {
     /// Cells dropped because fewer than `min_views` views see them (outside the volume), or fewer
     /// see foreground in them than keeping any part of them would need (no view refuted them).
     pub unseen_cells: u64,
+    /// Leaves dropped as slivers beside solid leaves ([`HullParams::trim_slivers`]).
+    pub slivers_trimmed: u64,
     /// Lone refutations per view, one entry per view passed to [`carve`] (rig camera order; 0
     /// for a missing view): cells (of any octree level) that this view refuted while every other
     /// present view saw foreground in the cell's footprint, so that the view disagreed with all
@@ -273,21 +287,94 @@ enum Projected {
     Unknown,
 }
 
+#[inline(always)]
 fn project(view: &Silhouette, p: &Point3<f64>) -> Projected {
     let cam = view.camera();
     let pc = cam.world_to_camera(p);
     if pc.z <= 1e-3 {
         return Projected::Behind;
     }
-    let mut xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
-    let r = xn.norm();
-    match view.field_radius() {
-        Some(limit) if r >= limit => xn *= limit / r,
-        None if r >= view.monotonic_radius() => return Projected::Unknown,
-        _ => {}
+    let inv = 1.0 / pc.z;
+    let mut xn = nalgebra::Vector2::new(pc.x * inv, pc.y * inv);
+    let r2 = xn.norm_squared();
+    let limit = view.field_radius().unwrap_or(view.monotonic_radius());
+    if r2 >= limit * limit {
+        if view.field_radius().is_none() {
+            return Projected::Unknown;
+        }
+        xn *= limit / r2.sqrt();
     }
     let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
     Projected::Pixel([uv.x, uv.y])
+}
+
+/// The 3x3x3 lattice of a split cell's children's corners, per view (index a + 3b + 9c): the
+/// parent's eight corners and the 19 new points between them. Projecting a view's points lazily,
+/// on a child's first use, was tried: most views end up needed (a child that no view refutes
+/// consults them all), and the bookkeeping cost more than it saved.
+#[derive(Default)]
+#[allow(missing_debug_implementations)] // scratch, never printed
+struct Lattice {
+    points: Vec<[Projected; 27]>,
+}
+
+impl Lattice {
+    /// Fills the lattice of a cell at `min`, `2 half` wide, from its corners per view.
+    fn fill(&mut self, views: &[&Silhouette], min: Point3<f64>, half: f64, parent: impl Fn(usize, usize) -> Projected) {
+        self.points.clear();
+        for (v, view) in views.iter().enumerate() {
+            self.points.push(std::array::from_fn(|n| {
+                let (a, b, c) = (n % 3, (n / 3) % 3, n / 9);
+                if a % 2 == 0 && b % 2 == 0 && c % 2 == 0 {
+                    parent(v, a / 2 + 2 * (b / 2) + 4 * (c / 2))
+                } else {
+                    project(view, &(min + Vector3::new(a as f64, b as f64, c as f64) * half))
+                }
+            }));
+        }
+    }
+}
+
+/// Where a cell's corners come from: projected for it (a root cell), child `k` (bits x, y, z) of
+/// a split cell's [`Lattice`], or nowhere yet (a root leaf of a dense grid, projected view by view).
+#[derive(Clone, Copy)]
+#[allow(missing_debug_implementations)] // borrowed scratch, never printed
+enum Corners<'a> {
+    Own(&'a [[Projected; 8]]),
+    Child(&'a Lattice, usize),
+    Lazy,
+}
+
+/// Lattice index of corner `m` of child `k` (both bits x, y, z) in its parent's 3x3x3 lattice.
+const CHILD_CORNER: [[u8; 8]; 8] = {
+    let mut t = [[0u8; 8]; 8];
+    let mut k = 0;
+    while k < 8 {
+        let mut m = 0;
+        while m < 8 {
+            let (a, b, c) = ((k & 1) + (m & 1), ((k >> 1) & 1) + ((m >> 1) & 1), ((k >> 2) & 1) + ((m >> 2) & 1));
+            t[k][m] = (a + 3 * b + 9 * c) as u8;
+            m += 1;
+        }
+        k += 1;
+    }
+    t
+};
+
+impl Corners<'_> {
+    /// Corner `m` in view `v` (unknown for a lazy root, which projects its own).
+    #[inline(always)]
+    fn corner(&self, v: usize, m: usize) -> Projected {
+        match *self {
+            Corners::Own(c) => c[v][m],
+            Corners::Child(lattice, k) => lattice.points[v][CHILD_CORNER[k][m] as usize],
+            Corners::Lazy => Projected::Unknown,
+        }
+    }
+
+    fn known(&self) -> bool {
+        !matches!(self, Corners::Lazy)
+    }
 }
 
 /// Offset of corner `k` (bits x, y, z) of a cell, in cell sizes.
@@ -311,12 +398,12 @@ fn floor(x: f64) -> f64 {
     if t > x { t - 1.0 } else { t }
 }
 
-fn judge(view: &Silhouette, corners: &[Projected; 8], margin: f64) -> Verdict {
+fn judge(view: &Silhouette, corner: impl Fn(usize) -> Projected, margin: f64) -> Verdict {
     let cam = view.camera();
     let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     let (mut behind, mut unknown) = (0, false);
-    for c in corners {
-        let [u, v] = match *c {
+    for m in 0..8 {
+        let [u, v] = match corner(m) {
             Projected::Pixel(uv) => uv,
             Projected::Behind => {
                 behind += 1;
@@ -327,10 +414,12 @@ fn judge(view: &Silhouette, corners: &[Projected; 8], margin: f64) -> Verdict {
                 continue;
             }
         };
-        u0 = u0.min(u);
-        v0 = v0.min(v);
-        u1 = u1.max(u);
-        v1 = v1.max(v);
+        // Plain comparisons (minsd/maxsd): projections are finite, so `f64::min`'s NaN handling
+        // (half of this function's time) is not needed.
+        u0 = if u < u0 { u } else { u0 };
+        v0 = if v < v0 { v } else { v0 };
+        u1 = if u > u1 { u } else { u1 };
+        v1 = if v > v1 { v } else { v1 };
     }
     if behind == 8 {
         // A box wholly behind the camera: nothing of it is in view.
@@ -340,13 +429,27 @@ fn judge(view: &Silhouette, corners: &[Projected; 8], margin: f64) -> Verdict {
         return Verdict::Unknown;
     }
     let (w, h) = (cam.width as f64, cam.height as f64);
-    let (i0, j0, i1, j1) = (ceil(u0 - margin), ceil(v0 - margin), floor(u1 + margin), floor(v1 + margin));
+    let extent = (u1 - u0).max(v1 - v0);
+    let margin = margin + view.curvature() * extent * extent;
+    let (mut i0, mut j0, mut i1, mut j1) =
+        (ceil(u0 - margin), ceil(v0 - margin), floor(u1 + margin), floor(v1 + margin));
+    // No pixel centre inside: the two whose centres bracket the rectangle.
+    if i0 > i1 {
+        std::mem::swap(&mut i0, &mut i1);
+    }
+    if j0 > j1 {
+        std::mem::swap(&mut j0, &mut j1);
+    }
     let inside = i0 >= 0.0 && j0 >= 0.0 && i1 <= w - 1.0 && j1 <= h - 1.0;
     let (ci0, cj0, ci1, cj1) = (i0.max(0.0), j0.max(0.0), i1.min(w - 1.0), j1.min(h - 1.0));
     if ci0 > ci1 || cj0 > cj1 {
         return Verdict::Off;
     }
-    let counts = view.counts(ci0 as usize, cj0 as usize, ci1 as usize, cj1 as usize);
+    let (ci0, cj0, ci1, cj1) = (ci0 as usize, cj0 as usize, ci1 as usize, cj1 as usize);
+    if !view.may_have_foreground(ci0, cj0, ci1, cj1) {
+        return if inside { Verdict::Refutes } else { Verdict::Partial };
+    }
+    let counts = view.counts(ci0, cj0, ci1, cj1);
     if counts.foreground() == 0 {
         if inside { Verdict::Refutes } else { Verdict::Partial }
     } else {
@@ -394,9 +497,14 @@ struct Carver<'a> {
 }
 
 #[derive(Default)]
+#[allow(missing_debug_implementations)] // per-thread scratch, never printed
 struct Local {
     cells: Vec<Cell>,
     stats: CarveStats,
+    /// One lattice for each octree level, reused from cell to cell.
+    lattices: Vec<Lattice>,
+    /// A root cell's own corners, reused.
+    roots: Vec<[Projected; 8]>,
 }
 
 impl Local {
@@ -411,18 +519,47 @@ impl Local {
 }
 
 impl Carver<'_> {
-    /// The corners of a cell in every view.
-    fn corners(&self, min: &Point3<f64>, size: f64) -> Vec<[Projected; 8]> {
-        self.views.iter().map(|v| std::array::from_fn(|k| project(v, &(min + corner_offset(k) * size)))).collect()
+    /// Visits a root cell (a start cell, or a seed of [`carve_within`]): its corners are projected
+    /// here, all views up front when it may be split, view by view otherwise.
+    fn visit_root(&self, min: Point3<f64>, size: f64, level: u32, out: &mut Local) {
+        if level >= self.leaf_level {
+            self.visit(min, size, level, Corners::Lazy, out);
+            return;
+        }
+        let mut own = std::mem::take(&mut out.roots);
+        own.clear();
+        own.extend(self.views.iter().map(|v| std::array::from_fn(|k| project(v, &(min + corner_offset(k) * size)))));
+        self.visit(min, size, level, Corners::Own(&own), out);
+        out.roots = own;
+    }
+
+    /// What the pixels nearest a point's projections say: whether it lies inside the hull as the
+    /// pixel centres sample it (fewer than `carve_votes` views see background there), and how many
+    /// views see hand and scalpel there.
+    fn at_centre(&self, p: &Point3<f64>) -> (bool, usize, usize) {
+        let (mut refuting, mut hand, mut scalpel) = (0, 0, 0);
+        for view in &self.views {
+            let Projected::Pixel([u, v]) = project(view, p) else { continue };
+            let cam = view.camera();
+            let (i, j) = ((u + 0.5).floor(), (v + 0.5).floor());
+            if i >= 0.0 && j >= 0.0 && i < cam.width as f64 && j < cam.height as f64 {
+                let (i, j) = (i as usize, j as usize);
+                let c = view.counts(i, j, i, j);
+                refuting += usize::from(c.foreground() == 0);
+                hand += c.hand as usize;
+                scalpel += c.scalpel as usize;
+            }
+        }
+        (refuting < self.params.carve_votes, hand, scalpel)
     }
 
     /// Whether every view after `v` sees foreground in the cell's footprint (stopping at the first
     /// that does not).
     #[inline(never)]
-    fn rest_see(&self, v: usize, corners: &[[Projected; 8]], out: &mut Local) -> bool {
-        self.views.iter().zip(corners).skip(v + 1).all(|(view, c)| {
+    fn rest_see(&self, v: usize, corners: Corners, out: &mut Local) -> bool {
+        self.views.iter().enumerate().skip(v + 1).all(|(k, view)| {
             out.stats.footprint_tests += 1;
-            matches!(judge(view, c, self.params.margin_px), Verdict::Sees { .. })
+            matches!(judge(view, |m| corners.corner(k, m), self.params.margin_px), Verdict::Sees { .. })
         })
     }
 
@@ -433,7 +570,7 @@ impl Carver<'_> {
     ///
     /// A cell outside the working volume's box is dropped; a leaf straddling the box is kept only
     /// if its centre lies inside, and a larger cell straddling it is split.
-    fn visit(&self, min: Point3<f64>, size: f64, level: u32, corners: Option<&[[Projected; 8]]>, out: &mut Local) {
+    fn visit(&self, min: Point3<f64>, size: f64, level: u32, corners: Corners, out: &mut Local) {
         out.stats.cells_visited += 1;
         let leaf = self.params.leaf_size;
         let lo = [0, 1, 2].map(|a| ((min[a] - self.params.workspace.min[a]) / leaf).round());
@@ -441,14 +578,6 @@ impl Carver<'_> {
         if side == BoxSide::Outside {
             return;
         }
-        let owned;
-        let corners = match corners {
-            None if level < self.leaf_level => {
-                owned = self.corners(&min, size);
-                Some(&owned[..])
-            }
-            other => other,
-        };
         let (mut refutes, mut hand, mut scalpel) = (0usize, 0usize, 0usize);
         let mut uniform = side == BoxSide::Inside;
         // Views so far that saw foreground, and the last refuting one.
@@ -460,15 +589,13 @@ impl Carver<'_> {
         let mut uniform_label = None;
         for (v, view) in self.views.iter().enumerate() {
             out.stats.footprint_tests += 1;
-            let lazy;
-            let view_corners = match corners {
-                Some(c) => &c[v],
-                None => {
-                    lazy = std::array::from_fn(|k| project(view, &(min + corner_offset(k) * size)));
-                    &lazy
-                }
+            let verdict = if corners.known() {
+                judge(view, |m| corners.corner(v, m), self.params.margin_px)
+            } else {
+                let own: [Projected; 8] = std::array::from_fn(|k| project(view, &(min + corner_offset(k) * size)));
+                judge(view, |m| own[m], self.params.margin_px)
             };
-            match judge(view, view_corners, self.params.margin_px) {
+            match verdict {
                 Verdict::Refutes => {
                     refutes += 1;
                     covered += 1;
@@ -481,7 +608,7 @@ impl Carver<'_> {
                         if refutes == 1
                             && sees == v
                             && self.views.len() > 1
-                            && let Some(corners) = corners
+                            && corners.known()
                             && self.rest_see(v, corners, out)
                         {
                             out.lone(v, self.views.len());
@@ -537,37 +664,18 @@ impl Carver<'_> {
             return;
         }
         let split = !uniform || covered < self.min_views;
-        if let (true, Some(corners)) = (level < self.leaf_level && split, corners) {
+        if level < self.leaf_level && split && corners.known() {
             let half = size / 2.0;
-            // The 3x3x3 lattice of the children's corners, per view (index a + 3b + 9c).
-            let lattice: Vec<[Projected; 27]> = self
-                .views
-                .iter()
-                .zip(corners)
-                .map(|(view, parent)| {
-                    std::array::from_fn(|n| {
-                        let (a, b, c) = (n % 3, (n / 3) % 3, n / 9);
-                        if a % 2 == 0 && b % 2 == 0 && c % 2 == 0 {
-                            parent[a / 2 + 2 * (b / 2) + 4 * (c / 2)]
-                        } else {
-                            project(view, &(min + Vector3::new(a as f64, b as f64, c as f64) * half))
-                        }
-                    })
-                })
-                .collect();
-            for k in 0..8 {
-                let child: Vec<[Projected; 8]> = lattice
-                    .iter()
-                    .map(|l| {
-                        std::array::from_fn(|m| {
-                            let (a, b, c) =
-                                ((k & 1) + (m & 1), ((k >> 1) & 1) + ((m >> 1) & 1), ((k >> 2) & 1) + ((m >> 2) & 1));
-                            l[a + 3 * b + 9 * c]
-                        })
-                    })
-                    .collect();
-                self.visit(min + corner_offset(k) * half, half, level + 1, Some(&child), out);
+            // The children's corners, in this level's reused lattice.
+            if out.lattices.len() <= level as usize {
+                out.lattices.resize_with(level as usize + 1, Lattice::default);
             }
+            let mut lattice = std::mem::take(&mut out.lattices[level as usize]);
+            lattice.fill(&self.views, min, half, |v, m| corners.corner(v, m));
+            for k in 0..8 {
+                self.visit(min + corner_offset(k) * half, half, level + 1, Corners::Child(&lattice, k), out);
+            }
+            out.lattices[level as usize] = lattice;
             return;
         }
         if covered < self.min_views {
@@ -577,16 +685,24 @@ impl Carver<'_> {
         if refutes > 0 {
             out.stats.kept_against_refutation += 1;
         }
-        let (mut has_hand, mut has_scalpel) = (hand >= self.params.min_support, scalpel >= self.params.min_support);
+        // A solid leaf takes its labels from the pixels at its centre, as it took its place; a
+        // larger (uniform) cell or a sliver from its footprints.
+        let (solid, centre_hand, centre_scalpel) = if level < self.leaf_level {
+            (true, hand, scalpel)
+        } else {
+            let (solid, h, s) = self.at_centre(&(min + Vector3::repeat(size / 2.0)));
+            if solid { (true, h, s) } else { (false, hand, scalpel) }
+        };
+        let (mut has_hand, mut has_scalpel) =
+            (centre_hand >= self.params.min_support, centre_scalpel >= self.params.min_support);
         if self.params.exclusive_labels && has_hand && has_scalpel {
-            has_hand = hand_share >= scalpel_share;
+            has_hand = match centre_hand.cmp(&centre_scalpel) {
+                std::cmp::Ordering::Equal => hand_share >= scalpel_share,
+                order => order.is_gt(),
+            };
             has_scalpel = !has_hand;
         }
-        let cell = Cell { min, size, hand: has_hand, scalpel: has_scalpel };
-        if !cell.hand && !cell.scalpel {
-            out.stats.unlabelled_cells += 1;
-        }
-        out.cells.push(cell);
+        out.cells.push(Cell { min, size, hand: has_hand, scalpel: has_scalpel, solid });
     }
 }
 
@@ -629,11 +745,89 @@ fn gather(views: &[Option<Silhouette>], carver: &Carver, locals: Vec<Local>, sid
         stats.footprint_tests += local.stats.footprint_tests;
         stats.cells_visited += local.stats.cells_visited;
         stats.kept_against_refutation += local.stats.kept_against_refutation;
-        stats.unlabelled_cells += local.stats.unlabelled_cells;
         stats.unseen_cells += local.stats.unseen_cells;
     }
-    let resolution = 1usize << carver.leaf_level;
-    Occupancy { cells, leaf_size: side / resolution as f64, origin: carver.params.workspace.min, resolution, stats }
+    finish(cells, stats, carver.params, carver.leaf_level, side)
+}
+
+/// The occupancy from the kept cells (both carvers): slivers trimmed when asked, unlabelled cells
+/// counted.
+pub(crate) fn finish(
+    mut cells: Vec<Cell>,
+    mut stats: CarveStats,
+    params: &HullParams,
+    leaf_level: u32,
+    side: f64,
+) -> Occupancy {
+    if params.trim_slivers {
+        stats.slivers_trimmed = trim_slivers(&mut cells, params.workspace.min, params.leaf_size);
+    }
+    stats.unlabelled_cells = cells.iter().filter(|c| !c.hand && !c.scalpel).count() as u64;
+    let resolution = 1usize << leaf_level;
+    Occupancy { cells, leaf_size: side / resolution as f64, origin: params.workspace.min, resolution, stats }
+}
+
+/// Drops the slivers of a shell over a solid core (see [`HullParams::trim_slivers`]): a leaf that
+/// is not solid is dropped when, along some axis, the two leaves on one side are solid and the
+/// leaf on the other side was not kept, i.e. it is the outermost layer over a core at least two
+/// leaves thick. A structure thinner than that (a blade, whose hull is a leaf or less thick) keeps
+/// its slivers. Returns how many were dropped. Kept and solid leaves are
+/// marked on two bit grids over the kept cells' box, in leaves.
+pub(crate) fn trim_slivers(cells: &mut Vec<Cell>, origin: Point3<f64>, leaf: f64) -> u64 {
+    if cells.iter().all(|c| c.solid) {
+        return 0;
+    }
+    let index = |c: &Cell| [0, 1, 2].map(|a| ((c.min[a] - origin[a]) / leaf).round() as i64);
+    let span = |c: &Cell| (c.size / leaf).round().max(1.0) as i64;
+    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for c in cells.iter() {
+        let (i, n) = (index(c), span(c));
+        for a in 0..3 {
+            lo[a] = lo[a].min(i[a] - 1);
+            hi[a] = hi[a].max(i[a] + n);
+        }
+    }
+    let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
+    let at =
+        |p: [i64; 3]| ((p[2] - lo[2]) as usize * dims[1] + (p[1] - lo[1]) as usize) * dims[0] + (p[0] - lo[0]) as usize;
+    let words = (dims[0] * dims[1] * dims[2]).div_ceil(64);
+    let (mut kept, mut solid) = (vec![0u64; words], vec![0u64; words]);
+    for c in cells.iter() {
+        let (i, n) = (index(c), span(c));
+        for z in i[2]..i[2] + n {
+            for y in i[1]..i[1] + n {
+                for x in i[0]..i[0] + n {
+                    let k = at([x, y, z]);
+                    kept[k / 64] |= 1 << (k % 64);
+                    if c.solid {
+                        solid[k / 64] |= 1 << (k % 64);
+                    }
+                }
+            }
+        }
+    }
+    let bit = |grid: &[u64], p: [i64; 3]| {
+        let k = at(p);
+        grid[k / 64] & (1 << (k % 64)) != 0
+    };
+    let before = cells.len();
+    cells.retain(|c| {
+        if c.solid {
+            return true;
+        }
+        let i = index(c);
+        let outer_layer = (0..3).any(|a| {
+            [-1i64, 1].iter().any(|&d| {
+                let (mut inner, mut deeper, mut outer) = (i, i, i);
+                inner[a] += d;
+                deeper[a] += 2 * d;
+                outer[a] -= d;
+                bit(&solid, inner) && bit(&solid, deeper) && !bit(&kept, outer)
+            })
+        });
+        !outer_layer
+    });
+    (before - cells.len()) as u64
 }
 
 fn carver<'a>(views: &'a [Option<Silhouette>], params: &'a HullParams, leaf_level: u32) -> Carver<'a> {
@@ -659,7 +853,7 @@ pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupa
             let (i, j, l) = (k % dims[0], (k / dims[0]) % dims[1], k / (dims[0] * dims[1]));
             let min = origin + Vector3::new(i as f64, j as f64, l as f64) * size;
             let mut local = Local::default();
-            carver.visit(min, size, start, None, &mut local);
+            carver.visit_root(min, size, start, &mut local);
             local
         })
         .collect();
@@ -705,7 +899,7 @@ pub fn carve_within(views: &[Option<Silhouette>], params: &HullParams, seeds: &[
         .map(|chunk| {
             let mut local = Local::default();
             for &(min, level) in chunk {
-                carver.visit(min, side / f64::from(1u32 << level), level, None, &mut local);
+                carver.visit_root(min, side / f64::from(1u32 << level), level, &mut local);
             }
             local
         })

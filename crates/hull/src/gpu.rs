@@ -27,7 +27,7 @@ const WORKGROUP: u32 = 64;
 /// Most views the counters have room for.
 pub const MAX_VIEWS: usize = 16;
 
-/// Counter slots: next-level cells, kept cells, kept against a refutation, unlabelled, near
+/// Counter slots: next-level cells, kept cells, kept against a refutation, unused, near
 /// threshold, unseen (too few views), then lone refutations per view.
 const COUNTERS: usize = 6 + MAX_VIEWS;
 
@@ -63,7 +63,8 @@ struct View {
     /// k3, the lens' invertible radius, width, height.
     e: [f32; 4],
     /// Offset of the table (in entries of three counts), its row stride, 1 where points beyond the
-    /// radius in `e` are clamped to it (the field's radius) rather than unknown, unused.
+    /// radius in `e` are clamped to it (the field's radius) rather than unknown, and the bits of
+    /// the f32 distortion curvature bound (`Silhouette::curvature`).
     table: [u32; 4],
 }
 
@@ -194,13 +195,16 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
         let all_behind = behind == 8u;
         var reaches = !seen && !all_behind;
         if (seen) {
-            let a = lo - vec2<f32>(c.margin);
-            let b = hi + vec2<f32>(c.margin);
+            let extent = max(hi.x - lo.x, hi.y - lo.y);
+            let margin = c.margin + bitcast<f32>(view.table.w) * extent * extent;
+            let a = lo - vec2<f32>(margin);
+            let b = hi + vec2<f32>(margin);
             near = near || near_edge(a.x) || near_edge(a.y) || near_edge(b.x) || near_edge(b.y);
-            let i0 = ceil(a.x);
-            let j0 = ceil(a.y);
-            let i1 = floor(b.x);
-            let j1 = floor(b.y);
+            // No pixel centre inside: the two whose centres bracket the rectangle.
+            let i0 = min(ceil(a.x), floor(b.x));
+            let j0 = min(ceil(a.y), floor(b.y));
+            let i1 = max(ceil(a.x), floor(b.x));
+            let j1 = max(ceil(a.y), floor(b.y));
             let w = view.e.z;
             let h = view.e.w;
             let inside = i0 >= 0.0 && j0 >= 0.0 && i1 <= w - 1.0 && j1 <= h - 1.0;
@@ -280,17 +284,52 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (refutes > 0u) {
         atomicAdd(&counters[2], 1u);
     }
-    var has_hand = hand >= c.min_support;
-    var has_scalpel = scalpel >= c.min_support;
+    // A leaf is solid when fewer than `votes` views see background at the pixel nearest its
+    // centre's projection, and then takes its labels from those pixels; larger kept cells are
+    // uniform (solid), and slivers take their labels from their footprints.
+    var solid = true;
+    var label_hand = hand;
+    var label_scalpel = scalpel;
+    if (c.level >= c.leaf_level) {
+        let centre = lo_corner + vec3<f32>(0.5 * size);
+        var refuting = 0u;
+        var centre_hand = 0u;
+        var centre_scalpel = 0u;
+        for (var v = 0u; v < c.views; v++) {
+            let view = views[v];
+            let uv = project(view, centre);
+            if (uv.z < 0.0) {
+                continue;
+            }
+            let i = floor(uv.x + 0.5);
+            let j = floor(uv.y + 0.5);
+            if (i >= 0.0 && j >= 0.0 && i < view.e.z && j < view.e.w) {
+                let n = entry(view, u32(i) + 1u, u32(j) + 1u) + entry(view, u32(i), u32(j))
+                    - entry(view, u32(i) + 1u, u32(j)) - entry(view, u32(i), u32(j) + 1u);
+                refuting += select(0u, 1u, n.x + n.y + n.z == 0u);
+                centre_hand += n.x;
+                centre_scalpel += n.y;
+            }
+        }
+        solid = refuting < c.votes;
+        if (solid) {
+            label_hand = centre_hand;
+            label_scalpel = centre_scalpel;
+        }
+    }
+    var has_hand = label_hand >= c.min_support;
+    var has_scalpel = label_scalpel >= c.min_support;
     if (c.exclusive != 0u && has_hand && has_scalpel) {
-        has_hand = hand_share >= scalpel_share;
+        if (label_hand == label_scalpel) {
+            has_hand = hand_share >= scalpel_share;
+        } else {
+            has_hand = label_hand > label_scalpel;
+        }
         has_scalpel = !has_hand;
     }
-    if (!has_hand && !has_scalpel) {
-        atomicAdd(&counters[3], 1u);
-    }
     let out = atomicAdd(&counters[1], 1u);
-    kept[out] = vec4<u32>(cell.xyz, c.level | select(0u, 256u, has_hand) | select(0u, 512u, has_scalpel));
+    kept[out] = vec4<u32>(cell.xyz, c.level | select(0u, 256u, has_hand) | select(0u, 512u, has_scalpel)
+        | select(0u, 1024u, solid));
 }
 ";
 
@@ -399,7 +438,12 @@ impl GpuCarver {
                     cam.width as f32,
                     cam.height as f32,
                 ],
-                table: [(table.len() / 3) as u32, stride as u32, u32::from(s.field_radius().is_some()), 0],
+                table: [
+                    (table.len() / 3) as u32,
+                    stride as u32,
+                    u32::from(s.field_radius().is_some()),
+                    (s.curvature() as f32).to_bits(),
+                ],
             });
             table.extend(entries.iter().flatten());
         }
@@ -472,12 +516,12 @@ impl GpuCarver {
                     size,
                     hand: k[3] & 256 != 0,
                     scalpel: k[3] & 512 != 0,
+                    solid: k[3] & 1024 != 0,
                 });
             }
             stats.cells_visited += count;
             stats.footprint_tests += count * present.len() as u64;
             stats.kept_against_refutation += u64::from(counters[2]);
-            stats.unlabelled_cells += u64::from(counters[3]);
             stats.unseen_cells += u64::from(counters[5]);
             last.near_threshold += u64::from(counters[4]);
             last.levels += 1;
@@ -490,8 +534,7 @@ impl GpuCarver {
             current = 1 - current;
         }
         self.last = last;
-        let resolution = 1usize << leaf_level;
-        Ok(Occupancy { cells, leaf_size: extent / resolution as f64, origin, resolution, stats })
+        Ok(crate::carve::finish(cells, stats, params, leaf_level, extent))
     }
 }
 

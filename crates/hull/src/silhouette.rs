@@ -30,6 +30,19 @@ fn field_radius(camera: &Camera, monotonic: f64) -> Option<f64> {
     (r < monotonic).then_some(r)
 }
 
+/// Twice the largest sag of a distorted chord per pixel² (see [`Silhouette::curvature`]): a segment
+/// of normalized length ℓ sags from its chord by at most max|D''| ℓ² / 8, with the second derivative
+/// of the distortion D bounded over radii up to `r` by 6|k1| r + 20|k2| r³ + 42|k3| r⁵ and
+/// 6 (|p1| + |p2|) for the tangential terms; in pixels ℓ = e / f.
+fn curvature(camera: &Camera, r: f64) -> f64 {
+    let d = &camera.distortion;
+    let second = 6.0 * d.k1.abs() * r
+        + 20.0 * d.k2.abs() * r.powi(3)
+        + 42.0 * d.k3.abs() * r.powi(5)
+        + 6.0 * (d.p1.abs() + d.p2.abs());
+    2.0 * second / 8.0 / camera.fx.min(camera.fy)
+}
+
 /// Pixel counts of each class inside a rectangle of a mask.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counts {
@@ -69,9 +82,19 @@ pub struct Silhouette {
     /// The undistorted radius the image's border reaches, when it lies within the invertible
     /// radius: nothing farther from the axis is in view.
     field_radius: Option<f64>,
+    /// Bound on how far distortion bows a projected straight edge, per pixel² of its length.
+    curvature: f64,
     stride: usize,
     table: Vec<[u32; 3]>,
+    /// Foreground pixels per block of `BLOCK`² pixels, as a summed-area table over blocks
+    /// (`(w / BLOCK + 2)` columns): small enough to stay in cache, so that a footprint over
+    /// background (most of them) is settled without touching `table`.
+    blocks: Vec<u32>,
+    block_stride: usize,
 }
+
+/// Side of the blocks of [`Silhouette`]'s coarse table, pixels.
+const BLOCK: usize = 8;
 
 impl Silhouette {
     /// Builds the tables of a mask taken by `camera` (sizes must agree; the caller checks).
@@ -93,9 +116,41 @@ impl Silhouette {
                 table[(j + 1) * stride + i + 1] = [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
             }
         }
+        let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
+        let block_stride = bw + 1;
+        let mut blocks = vec![0u32; block_stride * (bh + 1)];
+        for bj in 0..bh {
+            let mut row = 0u32;
+            for bi in 0..bw {
+                let (i0, j0) = (bi * BLOCK, bj * BLOCK);
+                let (i1, j1) = ((i0 + BLOCK).min(w) - 1, (j0 + BLOCK).min(h) - 1);
+                let at = |i: usize, j: usize| table[j * stride + i];
+                let (a, b, c, d) = (at(i1 + 1, j1 + 1), at(i0, j0), at(i1 + 1, j0), at(i0, j1 + 1));
+                let fg: u32 = (0..3).map(|k| a[k] + b[k] - c[k] - d[k]).sum();
+                row += fg;
+                blocks[(bj + 1) * block_stride + bi + 1] = blocks[bj * block_stride + bi + 1] + row;
+            }
+        }
         let monotonic_radius = camera.distortion.monotonic_radius();
         let field_radius = field_radius(camera, monotonic_radius);
-        Silhouette { camera: camera.clone(), monotonic_radius, field_radius, stride, table }
+        let curvature = curvature(camera, field_radius.unwrap_or(monotonic_radius.min(2.0)));
+        Silhouette {
+            camera: camera.clone(),
+            monotonic_radius,
+            field_radius,
+            curvature,
+            stride,
+            table,
+            blocks,
+            block_stride,
+        }
+    }
+
+    /// A bound on how far, in pixels, the lens' distortion bows the image of a straight edge out of
+    /// its chord, per pixel² of the chord's length: a footprint of `e` pixels needs a margin of
+    /// `curvature · e²` to hold the cell's whole image. 0 without distortion.
+    pub fn curvature(&self) -> f64 {
+        self.curvature
     }
 
     /// The undistorted normalized radius beyond which nothing is in view, when the whole image
@@ -120,6 +175,16 @@ impl Silhouette {
     #[cfg(feature = "gpu")]
     pub(crate) fn table(&self) -> (&[[u32; 3]], usize) {
         (&self.table, self.stride)
+    }
+
+    /// Whether the blocks covering the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside
+    /// the image) hold any foreground: `false` means the rectangle holds none.
+    #[inline]
+    pub fn may_have_foreground(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> bool {
+        let s = self.block_stride;
+        let (b0, c0, b1, c1) = (i0 / BLOCK, j0 / BLOCK, i1 / BLOCK + 1, j1 / BLOCK + 1);
+        let b = &self.blocks;
+        b[c1 * s + b1] + b[c0 * s + b0] != b[c0 * s + b1] + b[c1 * s + b0]
     }
 
     /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).

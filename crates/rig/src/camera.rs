@@ -123,32 +123,38 @@ impl Camera {
     }
 
     /// World point → camera frame.
+    #[inline]
     pub fn world_to_camera(&self, p: &Point3<f64>) -> Point3<f64> {
         Point3::from(self.rotation * p.coords + self.translation)
     }
 
     /// Normalized image coordinates (after distortion) → pixel.
+    #[inline]
     pub fn normalized_to_pixel(&self, xd: Vector2<f64>) -> Point2<f64> {
         Point2::new(self.fx * xd.x + self.cx, self.fy * xd.y + self.cy)
     }
 
     /// Pixel → distorted normalized image coordinates.
+    #[inline]
     pub fn pixel_to_normalized(&self, uv: Point2<f64>) -> Vector2<f64> {
         Vector2::new((uv.x - self.cx) / self.fx, (uv.y - self.cy) / self.fy)
     }
 
     /// Whether a pixel position lies inside the image (`-0.5 <= u < width - 0.5`, likewise v).
+    #[inline]
     pub fn contains_pixel(&self, uv: Point2<f64>) -> bool {
         uv.x >= -0.5 && uv.y >= -0.5 && uv.x < self.width as f64 - 0.5 && uv.y < self.height as f64 - 0.5
     }
 
     /// A point in the camera frame → pixel, with distortion (no visibility test).
+    #[inline]
     pub fn project_camera_point(&self, pc: &Point3<f64>) -> Point2<f64> {
         let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
         self.normalized_to_pixel(self.distortion.distort(xn))
     }
 
     /// World point → pixel, with a visibility flag (see [`Projection::visible`]).
+    #[inline]
     pub fn project(&self, p: &Point3<f64>) -> Projection {
         let pc = self.world_to_camera(p);
         let depth = pc.z;

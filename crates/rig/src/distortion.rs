@@ -44,11 +44,13 @@ impl Distortion {
     }
 
     /// Whether every coefficient is zero.
+    #[inline]
     pub fn is_none(&self) -> bool {
         self.to_array().iter().all(|&c| c == 0.0)
     }
 
     /// Applies the distortion to a normalized image point.
+    #[inline]
     pub fn distort(&self, p: Vector2<f64>) -> Vector2<f64> {
         let (x, y) = (p.x, p.y);
         let r2 = x * x + y * y;
@@ -60,6 +62,7 @@ impl Distortion {
     }
 
     /// The distorted point and the 2x2 Jacobian of the distortion at `p`.
+    #[inline]
     pub fn distort_with_jacobian(&self, p: Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
         let (x, y) = (p.x, p.y);
         let r2 = x * x + y * y;

@@ -84,6 +84,12 @@ pub struct Args {
     /// Views that must see a cell as background to carve it (k of N).
     #[arg(long, value_name = "K", default_value_t = 1)]
     carve_votes: usize,
+    /// Drop the outer layer of leaves over a solid core (leaves whose centre lies outside the
+    /// silhouettes' cone): a hull centred on the surface instead of enclosing it, closer to the
+    /// exact visual hull; a blade thinner than a leaf keeps its leaves. Without it the hull
+    /// contains everything the masks show.
+    #[arg(long)]
+    trim_slivers: bool,
     /// Measure accuracy every N-th frame (it costs about a second per frame).
     #[arg(long, value_name = "N", default_value_t = 1)]
     accuracy_every: u64,
@@ -154,6 +160,8 @@ struct Counters {
     unlabelled_cells: u64,
     /// Cells dropped as seen by fewer than `min_views` views (outside the volume).
     unseen_cells: u64,
+    /// Leaves dropped as the outer layer over a solid core (--trim-slivers).
+    slivers_trimmed: u64,
     footprint_tests: u64,
     empty_label_frames: usize,
     meshes_written: usize,
@@ -176,6 +184,7 @@ struct Report<'a> {
     carve_votes: usize,
     min_support: usize,
     min_views: usize,
+    trim_slivers: bool,
     counters: Counters,
     accuracy: Vec<LabelAccuracy>,
     silhouette_consistency: Vec<Consistency>,
@@ -196,8 +205,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     checks::voxel(args.voxel, volume.aabb.extent())?;
     let use_files = checks::masks_from_files(&ds, &args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
-    let params =
-        HullParams { carve_votes: args.carve_votes, min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, args.voxel) };
+    let params = HullParams {
+        carve_votes: args.carve_votes,
+        min_views: MIN_VIEWS,
+        trim_slivers: args.trim_slivers,
+        ..HullParams::new(volume.aabb, args.voxel)
+    };
     let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };
     let tool = ds.tool()?;
     let poses = ds.truth_poses()?.unwrap_or_default();
@@ -261,6 +274,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         counters.kept_against_refutation += occ.stats.kept_against_refutation;
         counters.unlabelled_cells += occ.stats.unlabelled_cells;
         counters.unseen_cells += occ.stats.unseen_cells;
+        counters.slivers_trimmed += occ.stats.slivers_trimmed;
         counters.footprint_tests += occ.stats.footprint_tests;
         disagreement.add(&occ.stats);
 
@@ -438,6 +452,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             carve_votes: params.carve_votes,
             min_support: params.min_support,
             min_views: params.min_views,
+            trim_slivers: params.trim_slivers,
             counters,
             accuracy,
             silhouette_consistency: consistency,

@@ -102,6 +102,10 @@ pub struct Args {
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
+    /// Centre the hull on the surface: drop the outer layer of leaves over a solid core
+    /// (`reconstruct --trim-slivers`).
+    #[arg(long)]
+    trim_slivers: bool,
     /// The working volume carved, world metres (default: dataset.toml's `workspace`, else the
     /// space at least three cameras see, above the table when the rig's frame is a table's).
     #[arg(long, value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ", allow_hyphen_values = true)]
@@ -397,7 +401,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let truth = ds.truth_poses()?.unwrap_or_default();
     let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
     checks::voxel(args.voxel, volume.aabb.extent())?;
-    let hull = HullParams { min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, args.voxel) };
+    let hull = HullParams {
+        min_views: MIN_VIEWS,
+        trim_slivers: args.trim_slivers,
+        ..HullParams::new(volume.aabb, args.voxel)
+    };
 
     let clock = Instant::now();
     let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });

@@ -281,10 +281,11 @@ fn eroded_and_dilated_silhouettes_shrink_and_grow_the_hull() {
             // then its share of the clean volume), the dilated one around it.
             let expected = if grow { clean_volume / occ.volume(None) } else { occ.volume(None) / clean_volume };
             assert!((iou - expected).abs() < 1e-9, "{what}: IoU {iou} but volume ratio {expected}");
-            // Dilation keeps the sphere; erosion by 3 px starts to cut into it (measured 0.986 of
-            // the inner points kept).
+            // Dilation keeps the sphere; erosion by 3 px cuts into it (measured 0.946 of the inner
+            // points kept with footprints a twentieth of a pixel wider than the leaf's image;
+            // 0.986 with the earlier whole-pixel margin).
             let kept = kept_share(&occ);
-            assert!(if grow { kept == 1.0 } else { kept > 0.97 }, "{what}: {kept} of the sphere kept");
+            assert!(if grow { kept == 1.0 } else { r < 3 || kept > 0.93 }, "{what}: {kept} of the sphere kept");
         }
     }
 }
@@ -316,14 +317,15 @@ fn a_camera_turned_by_half_a_degree_is_named_and_costs_a_sliver() {
     // at the sphere): its silhouette cone misses one side of the sphere, which it refutes alone.
     for k in 0..rig.len() {
         let bad = turned(rig, k, 0.5);
-        for (votes, iou_floor, kept_floor) in [(1, 0.91, 0.99), (2, 0.87, 1.0)] {
+        for (votes, iou_floor, kept_floor) in [(1, 0.91, 0.97), (2, 0.87, 1.0)] {
             let occ = carve_masks(&bad, &all(masks), votes);
             let what = format!("camera {k} turned, carve_votes {votes}");
             // Measured 120-152 lone refutations for the turned camera against at most 96 (k = 3)
             // or 85 (k = 5) for the others with carve_votes 1; 215-237 against at most 148 with 2.
             assert_named(&occ, k, 1.3, &what);
             // Measured IoU 0.936-0.946 (votes 1), 0.895-0.907 (votes 2); with carve_votes 1 the
-            // turned view cuts 0.2-0.6% of the inner points, with 2 none.
+            // turned view cuts up to 2.1% of the inner points (0.2-0.6% with the earlier
+            // whole-pixel margin), with 2 none.
             let iou = iou_with_clean(&occ);
             assert!(iou > iou_floor, "{what}: IoU {iou:.3}");
             let kept = kept_share(&occ);
