@@ -368,8 +368,9 @@ fn synth_writes_a_dataset_a_report_and_a_recording() {
     let forced = hullcut(&[&args[..], &["--force"]].concat());
     assert!(forced.status.success(), "{}", stderr(&forced));
 
+    // A scene that is not one is bad usage (exit 2), and the message lists every scene.
     let unknown = hullcut(&["synth", "--out", &path(&dir.path().join("x")), "--scene", "juggling"]);
-    assert_eq!(unknown.status.code(), Some(1));
+    assert_eq!(unknown.status.code(), Some(2));
     assert!(stderr(&unknown).contains("juggling") && stderr(&unknown).contains("cut, static, hard, resect"));
     assert!(!dir.path().join("x").exists());
 }
@@ -457,7 +458,20 @@ fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report
     assert_eq!(r["kind"], "reconstruction");
     assert_eq!(r["masks"], "segment");
     assert_eq!(r["counters"]["frame_sets"], 3);
-    assert_eq!(r["resolution"], 128);
+    // The working volume is the rig's (no --workspace, none in dataset.toml): the space three of
+    // its cameras see, above the table, stated in the report; the leaves are the 3.125 mm asked for.
+    assert_eq!(r["workspace"]["source"]["kind"], "rig", "{}", r["workspace"]);
+    assert_eq!(r["workspace"]["source"]["min_views"], 3);
+    assert_eq!(r["workspace"]["aabb"]["min"][2], 0.0, "above the table");
+    assert_eq!(r["voxel_m"], 0.4 / 128.0);
+    let side = r["resolution"].as_f64().expect("resolution") * 0.4 / 128.0;
+    let extent = (0..3)
+        .map(|a| {
+            r["workspace"]["aabb"]["max"][a].as_f64().expect("max")
+                - r["workspace"]["aabb"]["min"][a].as_f64().expect("min")
+        })
+        .fold(0.0, f64::max);
+    assert!(side >= extent && side < 2.0 * extent, "octree side {side} m for a {extent} m volume");
     for a in r["accuracy"].as_array().expect("accuracy") {
         // The truth is in the dataset: every label is scored on every frame.
         assert_eq!(a["frames"], 3, "{a}");
@@ -598,14 +612,16 @@ fn reconstruct_frame(dataset: &Path, dir: &Path, extra: &[&str]) -> Output {
 #[test]
 fn reconstruct_refuses_a_voxel_of_zero_or_beyond_the_workspace() {
     let dir = tempfile::tempdir().expect("tempdir");
+    // A 0.4 m cube given as the working volume (the rig's own is 1.8 m wide).
+    let ws = "--workspace=-0.2,-0.2,0,0.2,0.2,0.4";
     for voxel in ["0", "-0.01", "0.5", "NaN"] {
-        let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &[&format!("--voxel={voxel}")]);
+        let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &[&format!("--voxel={voxel}"), ws]);
         assert_eq!(o.status.code(), Some(1), "--voxel {voxel}");
         let e = stderr(&o);
         assert!(e.contains(&format!("--voxel {voxel}")) && e.contains("0.4 m"), "--voxel {voxel}: {e}");
     }
     // The whole workspace as one leaf is allowed.
-    let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &["--voxel", "0.4"]);
+    let o = reconstruct_frame(Path::new(CUT_SMALL), dir.path(), &["--voxel", "0.4", ws]);
     assert!(o.status.success(), "{}", stderr(&o));
 }
 

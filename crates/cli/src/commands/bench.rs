@@ -27,17 +27,20 @@ use crate::progress::bar;
 ///                     against the tissue's nodes, per hull leaf;
 ///   pipeline_seed_table2.csv
 ///                     the seed paper's Table II stage times, to read beside ours.
-/// `hull` measures
+/// `hull` measures (a rendered cut-scene frame's truth masks on three rigs: the default six
+/// 640x480 cameras, lab8's eight 1280x720 cameras with the pointed scalpel, random:7)
 ///   hull.csv, hull_speed.png, hull_accuracy.png
-///                     carving time of one rendered cut-scene frame (6 x 640x480 truth masks)
-///                     against resolution, octree against a dense grid (every leaf tested) and
-///                     against the octree on the GPU (rows `gpu`, when there is an adapter; the
-///                     time includes uploading the six tables and reading the cells back), and
-///                     IoU with the exact visual hull (512³) against time;
+///                     carving time at 2 and 1 mm leaves (4 and 2 with --quick) in the box
+///                     around hand and tool (padded by 2 cm) and in the rig's own volume: the
+///                     octree (conservative, and with slivers trimmed), a dense grid (every leaf
+///                     tested, 2 mm), the octree on the GPU (when there is an adapter; uploads and
+///                     read-back included), and Open3D's VoxelGrid.carve_silhouette on the same
+///                     masks undistorted (with --open3d-python and --open3d-script); IoU per
+///                     label with the exact visual hull (a quarter leaf) against time;
 ///   hull_robustness.csv, hull_robustness_noise.png, hull_robustness_cameras.png
-///                     where carving breaks (128³): IoU with the clean six-view hull against
-///                     salt-and-pepper noise in every view (0-5% of the pixels flipped) and
-///                     against the number of cameras (the first 2-6), for carve_votes 1 and 2.
+///                     where carving breaks (default rig, 3.1 mm): IoU with the clean hull
+///                     against salt-and-pepper noise in every view (0-5% of the pixels flipped)
+///                     and against the number of cameras (the first 2-6), for carve_votes 1 and 2.
 /// `pose` measures (rendered static, cut and hard scenes, 6 x 640x480 truth masks)
 ///   pose.csv, pose_leaf.png, pose_time.png
 ///                     the blade pose's error (normal, tip; trusted frames) against leaf size
@@ -75,6 +78,13 @@ pub struct Args {
     /// Small sizes and short runs (also HULLCUT_BENCH_QUICK=1).
     #[arg(long)]
     quick: bool,
+    /// `hull`: a Python with open3d, numpy and opencv-python (a virtual environment; never a
+    /// dependency of the build) to time Open3D's carving of the same masks beside ours.
+    #[arg(long, value_name = "PYTHON", requires = "open3d_script")]
+    open3d_python: Option<PathBuf>,
+    /// `hull`: the script that runs Open3D's carving (shared/tools/vh_open3d.py).
+    #[arg(long, value_name = "FILE", requires = "open3d_python")]
+    open3d_script: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -104,7 +114,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             collision(&args.out)?;
             backends(&args.out, quick)
         })?,
-        Target::Hull => super::bench_hull::run(&args.out, quick)?,
+        Target::Hull => {
+            let open3d = args
+                .open3d_python
+                .clone()
+                .zip(args.open3d_script.clone())
+                .map(|(python, script)| super::bench_hull::Open3d { python, script });
+            super::bench_hull::run(&args.out, quick, open3d.as_ref())?
+        }
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
         Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,
     }
