@@ -28,8 +28,8 @@ mod video;
 
 pub use error::CaptureError;
 pub use segment::{
-    BackgroundModel, ColourClass, ColourClasses, IouAccumulator, LabelScore, Method, Mog2Params, SegmentParams,
-    SegmentationReport, Segmenter, iou,
+    AppearanceModel, BackgroundModel, BackgroundSource, ColourClass, ColourClasses, ColourLut, IouAccumulator,
+    LabelScore, Method, Mog2Params, SegmentParams, SegmentationReport, Segmenter, iou,
 };
 pub use source::{
     Capture, CaptureParams, CaptureStats, Clock, ClockKind, FrameSource, QueuePolicy, SourceConfig, SourceEvent,

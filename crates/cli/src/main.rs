@@ -7,6 +7,7 @@ mod backend;
 mod chart;
 mod commands;
 mod frames;
+mod labelling;
 mod logging;
 mod pose_out;
 mod progress;

@@ -399,6 +399,48 @@ fn floor(x: f64) -> f64 {
 }
 
 fn judge(view: &Silhouette, corner: impl Fn(usize) -> Projected, margin: f64) -> Verdict {
+    let (ci0, cj0, ci1, cj1, inside) = match footprint_rect(view, corner, margin) {
+        Footprint::Off => return Verdict::Off,
+        Footprint::Unknown => return Verdict::Unknown,
+        Footprint::Pixels { i0, j0, i1, j1, inside } => (i0, j0, i1, j1, inside),
+    };
+    if !view.may_have_foreground(ci0, cj0, ci1, cj1) {
+        return if inside { Verdict::Refutes } else { Verdict::Partial };
+    }
+    let counts = view.counts(ci0, cj0, ci1, cj1);
+    if counts.foreground() == 0 {
+        if inside { Verdict::Refutes } else { Verdict::Partial }
+    } else {
+        Verdict::Sees { counts, inside }
+    }
+}
+
+/// A cell's footprint in a view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Footprint {
+    /// The cell lies wholly behind the camera or off the image.
+    Off,
+    /// The view cannot tell (a corner behind the camera or beyond the lens' valid range).
+    Unknown,
+    /// The pixels whose centres the footprint covers, clipped to the image (inclusive bounds).
+    Pixels {
+        /// First column.
+        i0: usize,
+        /// First row.
+        j0: usize,
+        /// Last column.
+        i1: usize,
+        /// Last row.
+        j1: usize,
+        /// The footprint lies wholly inside the image.
+        inside: bool,
+    },
+}
+
+/// The rectangle of pixels a cell's projected corners span, grown by `margin` pixels plus the
+/// lens' bowing over the rectangle (see [`judge`]).
+#[inline(always)]
+fn footprint_rect(view: &Silhouette, corner: impl Fn(usize) -> Projected, margin: f64) -> Footprint {
     let cam = view.camera();
     let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
     let (mut behind, mut unknown) = (0, false);
@@ -423,10 +465,10 @@ fn judge(view: &Silhouette, corner: impl Fn(usize) -> Projected, margin: f64) ->
     }
     if behind == 8 {
         // A box wholly behind the camera: nothing of it is in view.
-        return Verdict::Off;
+        return Footprint::Off;
     }
     if behind > 0 || unknown {
-        return Verdict::Unknown;
+        return Footprint::Unknown;
     }
     let (w, h) = (cam.width as f64, cam.height as f64);
     let extent = (u1 - u0).max(v1 - v0);
@@ -443,18 +485,14 @@ fn judge(view: &Silhouette, corner: impl Fn(usize) -> Projected, margin: f64) ->
     let inside = i0 >= 0.0 && j0 >= 0.0 && i1 <= w - 1.0 && j1 <= h - 1.0;
     let (ci0, cj0, ci1, cj1) = (i0.max(0.0), j0.max(0.0), i1.min(w - 1.0), j1.min(h - 1.0));
     if ci0 > ci1 || cj0 > cj1 {
-        return Verdict::Off;
+        return Footprint::Off;
     }
-    let (ci0, cj0, ci1, cj1) = (ci0 as usize, cj0 as usize, ci1 as usize, cj1 as usize);
-    if !view.may_have_foreground(ci0, cj0, ci1, cj1) {
-        return if inside { Verdict::Refutes } else { Verdict::Partial };
-    }
-    let counts = view.counts(ci0, cj0, ci1, cj1);
-    if counts.foreground() == 0 {
-        if inside { Verdict::Refutes } else { Verdict::Partial }
-    } else {
-        Verdict::Sees { counts, inside }
-    }
+    Footprint::Pixels { i0: ci0 as usize, j0: cj0 as usize, i1: ci1 as usize, j1: cj1 as usize, inside }
+}
+
+/// A cell's footprint in one view, as carving computes it.
+pub fn footprint(view: &Silhouette, cell: &Cell, margin_px: f64) -> Footprint {
+    footprint_rect(view, |k| project(view, &(cell.min + corner_offset(k) * cell.size)), margin_px)
 }
 
 /// Where a cell lies against the working volume's box.
@@ -905,4 +943,50 @@ pub fn carve_within(views: &[Option<Silhouette>], params: &HullParams, seeds: &[
         })
         .collect();
     Ok(gather(views, &carver, locals, side))
+}
+
+/// Labels the cells of a hull anew from other masks of the same views, by carving's rules for
+/// labels (a label needs `min_support` views with its pixels in the cell's footprint; exclusive
+/// labels go to the larger share) without carving anything: every cell is kept, one that no
+/// label reaches is left unlabelled. For masks whose labels changed after carving (the known
+/// tool drawn into the views), this costs one footprint test per cell and view.
+pub fn relabel(occ: &Occupancy, views: &[Option<Silhouette>], params: &HullParams) -> Occupancy {
+    let present: Vec<&Silhouette> = views.iter().flatten().collect();
+    let cells: Vec<Cell> = occ
+        .cells
+        .par_iter()
+        .map(|c| {
+            let (mut hand, mut scalpel, mut hand_share, mut scalpel_share) = (0, 0, 0.0, 0.0);
+            for view in &present {
+                let corners: [Projected; 8] =
+                    std::array::from_fn(|k| project(view, &(c.min + corner_offset(k) * c.size)));
+                if let Verdict::Sees { counts, .. } = judge(view, |m| corners[m], params.margin_px) {
+                    hand += usize::from(counts.hand > 0);
+                    scalpel += usize::from(counts.scalpel > 0);
+                    hand_share += f64::from(counts.hand) / f64::from(counts.total);
+                    scalpel_share += f64::from(counts.scalpel) / f64::from(counts.total);
+                }
+            }
+            let (mut has_hand, mut has_scalpel) = (hand >= params.min_support, scalpel >= params.min_support);
+            if params.exclusive_labels && has_hand && has_scalpel {
+                has_hand = hand_share >= scalpel_share;
+                has_scalpel = !has_hand;
+            }
+            Cell { hand: has_hand, scalpel: has_scalpel, ..*c }
+        })
+        .collect();
+    let mut stats = occ.stats.clone();
+    stats.unlabelled_cells = cells.iter().filter(|c| !c.hand && !c.scalpel).count() as u64;
+    Occupancy { cells, stats, ..*occ }
+}
+
+/// The label counts in a cell's footprint in one view, as carving sees them (`None` where the view
+/// cannot tell or the footprint misses the image).
+pub fn footprint_counts(view: &Silhouette, cell: &Cell, margin_px: f64) -> Option<crate::silhouette::Counts> {
+    let corners: [Projected; 8] = std::array::from_fn(|k| project(view, &(cell.min + corner_offset(k) * cell.size)));
+    match judge(view, |m| corners[m], margin_px) {
+        Verdict::Sees { counts, .. } => Some(counts),
+        Verdict::Refutes | Verdict::Partial => Some(crate::silhouette::Counts::default()),
+        Verdict::Unknown | Verdict::Off => None,
+    }
 }

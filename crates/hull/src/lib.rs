@@ -11,6 +11,8 @@
 //!   coarser one, or the neighbourhood of the last frame's hull); both return an
 //!   [`Occupancy`] (kept cells with labels, counters, among them which view disagreed with all the
 //!   others: [`CarveStats::lone_refutations`]).
+//! - [`shadow`]: possible cast shadows resolved by the hull (kept only where some view sees sure
+//!   foreground).
 //! - [`DenseGrid`]: one label's occupancy on the leaf grid and its closed surface
 //!   ([`DenseGrid::surface`], surface nets).
 //!
@@ -22,11 +24,15 @@ pub mod accuracy;
 mod carve;
 #[cfg(feature = "gpu")]
 pub mod gpu;
+pub mod shadow;
 mod silhouette;
 mod surface;
 mod volume;
 
-pub use carve::{Aabb, CarveStats, Cell, HullParams, MAX_DEPTH, Occupancy, carve, carve_within};
+pub use carve::{
+    Aabb, CarveStats, Cell, Footprint, HullParams, MAX_DEPTH, Occupancy, carve, carve_within, footprint,
+    footprint_counts, relabel,
+};
 pub use silhouette::{Counts, Silhouette};
 pub use surface::{DenseGrid, is_watertight};
 pub use volume::{SeenVolume, VolumeSource, WorkingVolume, seen_volume};

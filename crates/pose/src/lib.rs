@@ -16,6 +16,9 @@
 //!   trusted pose; a frame below the threshold is refused with a reason, the last trusted pose is
 //!   held for a bounded time. Trusted poses pass a One Euro filter on SE(3) ([`OneEuro`]).
 //! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose.
+//! - [`ToolLabeller`]: labels from geometry: the tool fitted into the hull of the foreground
+//!   (hand and tool together), drawn into every view with the hand's occlusion, so that scalpel
+//!   and hand pixels are told apart with no colour model ([`labels`]).
 #![warn(missing_docs)]
 
 mod evidence;
@@ -23,11 +26,13 @@ mod filter;
 mod fit;
 mod geometry;
 mod init;
+pub mod labels;
 mod metrics;
 mod template;
 mod track;
 
 pub use filter::{OneEuro, OneEuroParams};
+pub use labels::{LabelParams, LabelStats, LabelledFrame, ToolLabeller, ToolRegion};
 pub use metrics::{PoseError, pose_error};
 pub use template::Template;
 pub use track::{BladePose, Diagnostics, PoseEstimate, Tracker, TrackerParams, ViewInput, isometry_from_matrix};

@@ -42,6 +42,11 @@ pub struct TrackerParams {
     pub full_leaves: usize,
     /// Levenberg–Marquardt iterations per fit.
     pub max_iterations: usize,
+    /// Agreement of the fit with the silhouettes (the lower of the share of outline samples it
+    /// explains and the share of its interior on foreground) below the first bound gives no
+    /// confidence, above the second full confidence. The geometric labeller's evidence holds some
+    /// of the hand's outline beside the tool, so it uses lower bounds.
+    pub agreement: (f64, f64),
     /// The pose filter.
     pub filter: OneEuroParams,
 }
@@ -57,6 +62,7 @@ impl Default for TrackerParams {
             min_visible_fraction: 0.5,
             full_leaves: 12,
             max_iterations: 12,
+            agreement: (0.94, 0.98),
             filter: OneEuroParams::default(),
         }
     }
@@ -346,6 +352,17 @@ impl Tracker {
         Some((best, confidence, reason))
     }
 
+    /// The track's constant-velocity prediction for a frame set at `timestamp_ns`, while the last
+    /// trusted pose is recent enough to hold (`hold_s`).
+    pub fn predicted(&self, timestamp_ns: i64) -> Option<Isometry3<f64>> {
+        let time_s = timestamp_ns as f64 * 1e-9;
+        let (t, _) = self.trusted?;
+        if !(time_s > t && time_s - t <= self.params.hold_s) {
+            return None;
+        }
+        self.predict(time_s)
+    }
+
     /// Constant-velocity prediction from the last trusted pose.
     fn predict(&self, time_s: f64) -> Option<Isometry3<f64>> {
         let (t, pose) = self.trusted?;
@@ -386,7 +403,7 @@ impl Tracker {
         let agreement = f.explained.min(f.covered);
         let factors = [
             (
-                ramp(agreement, 0.94, 0.98),
+                ramp(agreement, self.params.agreement.0, self.params.agreement.1),
                 format!(
                     "the fitted tool disagrees with the silhouettes (explains {:.0}% of the scalpel pixels, {:.0}% of it lands on foreground)",
                     f.explained * 100.0,

@@ -19,11 +19,12 @@
 //! (`pmulhuw`), every intermediate stays below 2¹⁶ (bounds at [`BackgroundModel::foreground_row`]).
 
 use image::RgbImage;
+use rayon::prelude::*;
 
 use crate::error::CaptureError;
 
-use super::SegmentParams;
 use super::classes::ClassLut;
+use super::{ENC_SHADOW, SegmentParams};
 
 /// Pixels used for the exposure estimate: every `GAIN_STEP`-th pixel of every `GAIN_STEP`-th row.
 const GAIN_STEP: usize = 16;
@@ -36,6 +37,16 @@ const GAIN_RANGE: (f64, f64) = (0.5, 1.99);
 
 /// Pixels per step of the vectorized test.
 const LANES: usize = 16;
+
+/// Half-side of the window the shadow texture test compares (5×5 pixels).
+const TEXTURE_RADIUS: usize = 2;
+/// A possible shadow whose window correlates at least this well with the background's (normalized
+/// cross-correlation of channel sums) is the background's texture, darkened: a shadow.
+const SHADOW_NCC: f64 = 0.6;
+/// The background's texture decides only where its standard deviation over the window, once
+/// darkened as much as the pixel is, reaches this fraction of the pixel's 3τ (a few noise
+/// deviations of a channel sum).
+const TEXTURE_OVER_NOISE: f64 = 0.6;
 
 /// Background colour and noise allowance per pixel.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,6 +76,9 @@ pub(crate) struct Thresholds {
     beta: u16,
     /// β for darker pixels (shadows), Q16.
     shadow: u16,
+    /// How much darker a pixel of unchanged chromaticity may be and still be a possible cast
+    /// shadow, Q16 (≥ `shadow`).
+    deep: u16,
     /// κ, Q16.
     kappa: u16,
 }
@@ -76,6 +90,7 @@ impl Thresholds {
             gain: (gain * 32768.0).round().clamp(0.0, 65535.0) as u16,
             beta: q16(params.brightness_tolerance),
             shadow: q16(params.shadow_tolerance),
+            deep: q16(params.shadow_depth.max(params.shadow_tolerance)),
             kappa: q16(params.chroma_tolerance),
         }
     }
@@ -123,6 +138,7 @@ impl BackgroundModel {
         let floor = u16::from(params.noise_floor);
         let mut tol = vec![floor; len];
         if n >= 3 {
+            let tol_of = |sd: f64| (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
             let mut sq = vec![0u32; len];
             for im in images {
                 for ((q, p), m) in sq.iter_mut().zip(im.as_raw().chunks_exact(3)).zip(mean_raw.chunks_exact(3)) {
@@ -134,10 +150,76 @@ impl BackgroundModel {
             }
             let denom = f64::from(3 * (n - 1));
             for (t, q) in tol.iter_mut().zip(&sq) {
-                let sd = (f64::from(*q) / denom).sqrt();
-                *t = (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
+                *t = tol_of((f64::from(*q) / denom).sqrt());
             }
         }
+        Ok(Self::from_mean(w, h, mean_raw, &tol))
+    }
+
+    /// Builds the model from frames of the recording itself, where the foreground moves: per pixel
+    /// and channel the median of the frames (what the pixel shows most of the time), and a noise
+    /// allowance from the median absolute deviation around it (1.4826 MAD estimates a standard
+    /// deviation without the frames where the hand passed). A pixel the foreground covers in more
+    /// than half of the frames is learned as background: the frames must be spread over the
+    /// recording, with the hand moving.
+    pub fn from_recording(camera: usize, frames: &[RgbImage], params: &SegmentParams) -> Result<Self, CaptureError> {
+        let Some(first) = frames.first() else {
+            return Err(CaptureError::Param {
+                name: "frames",
+                message: format!("camera {camera}: no frames to learn from"),
+            });
+        };
+        let (w, h) = first.dimensions();
+        if let Some((i, im)) = frames.iter().enumerate().find(|(_, im)| im.dimensions() != (w, h)) {
+            return Err(CaptureError::ImageSize {
+                camera,
+                what: format!("frame {i}"),
+                w,
+                h,
+                found_w: im.width(),
+                found_h: im.height(),
+            });
+        }
+        let len = w as usize * h as usize;
+        let floor = u16::from(params.noise_floor);
+        let rows: Vec<(Vec<u8>, Vec<u16>)> = (0..h as usize)
+            .into_par_iter()
+            .map(|y| {
+                let (mut median, mut tol) = (vec![0u8; 3 * w as usize], vec![floor; w as usize]);
+                let mut values = Vec::with_capacity(frames.len());
+                let mut deviations = Vec::with_capacity(frames.len());
+                for x in 0..w as usize {
+                    let mut mad_sum = 0.0;
+                    for c in 0..3 {
+                        values.clear();
+                        values.extend(frames.iter().map(|im| im.as_raw()[3 * (y * w as usize + x) + c]));
+                        let mid = values.len() / 2;
+                        let (_, m, _) = values.select_nth_unstable(mid);
+                        let m = *m;
+                        median[3 * x + c] = m;
+                        deviations.clear();
+                        deviations.extend(values.iter().map(|&v| v.abs_diff(m)));
+                        let (_, d, _) = deviations.select_nth_unstable(mid);
+                        mad_sum += f64::from(*d);
+                    }
+                    let sd = 1.4826 * mad_sum / 3.0;
+                    tol[x] = (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
+                }
+                (median, tol)
+            })
+            .collect();
+        let mut median_raw = Vec::with_capacity(3 * len);
+        let mut tol = Vec::with_capacity(len);
+        for (m, t) in rows {
+            median_raw.extend(m);
+            tol.extend(t);
+        }
+        Ok(Self::from_mean(w, h, median_raw, &tol))
+    }
+
+    /// The model of an expected image and per-pixel noise allowances τ.
+    fn from_mean(w: u32, h: u32, mean_raw: Vec<u8>, tol: &[u16]) -> Self {
+        let len = w as usize * h as usize;
         let mut model = Self {
             width: w,
             height: h,
@@ -157,7 +239,7 @@ impl BackgroundModel {
             model.chroma_b.push(q(b));
             model.sum2.push((2 * es) as u16);
         }
-        Ok(model)
+        model
     }
 
     /// Image width, pixels.
@@ -173,6 +255,52 @@ impl BackgroundModel {
     /// The mean empty-scene image (the model's expected image).
     pub fn mean_image(&self) -> &RgbImage {
         &self.mean
+    }
+
+    /// Settles the possible shadows ([`ENC_SHADOW`] in `labels`, rows flagged in `active`) by
+    /// texture: a cast shadow darkens the background and keeps its texture, an object of the
+    /// background's colour hides it. Where the background is textured enough in a 5×5 window, a
+    /// pixel whose window correlates with the background's ([`SHADOW_NCC`]) becomes background, any
+    /// other becomes foreground (its colour class from `lut`); on a textureless background it stays
+    /// a possible shadow for the caller.
+    pub(crate) fn settle_shadows(&self, image: &RgbImage, labels: &mut [u8], active: &[bool], lut: &ClassLut) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (raw, mean) = (image.as_raw(), self.mean.as_raw());
+        let sum =
+            |px: &[u8], k: usize| f64::from(u16::from(px[3 * k]) + u16::from(px[3 * k + 1]) + u16::from(px[3 * k + 2]));
+        let r = TEXTURE_RADIUS;
+        for y in (0..h).filter(|&y| active.get(y).copied().unwrap_or(false)) {
+            for x in 0..w {
+                let k = y * w + x;
+                if labels[k] != ENC_SHADOW {
+                    continue;
+                }
+                let (x0, x1, y0, y1) =
+                    (x.saturating_sub(r), (x + r).min(w - 1), y.saturating_sub(r), (y + r).min(h - 1));
+                let (mut n, mut sb, mut si, mut sbb, mut sii, mut sbi) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+                for yy in y0..=y1 {
+                    for xx in x0..=x1 {
+                        let q = yy * w + xx;
+                        let (b, i) = (sum(mean, q), sum(raw, q));
+                        n += 1.0;
+                        sb += b;
+                        si += i;
+                        sbb += b * b;
+                        sii += i * i;
+                        sbi += b * i;
+                    }
+                }
+                let var_b = (sbb / n - (sb / n).powi(2)).max(0.0);
+                let var_i = (sii / n - (si / n).powi(2)).max(0.0);
+                let darkening = if sb > 0.0 { (si / sb).clamp(0.0, 1.0) } else { 0.0 };
+                let texture = var_b.sqrt() * darkening;
+                if texture < TEXTURE_OVER_NOISE * f64::from(self.tol3[k]) {
+                    continue;
+                }
+                let ncc = (sbi / n - sb * si / (n * n)) / (var_b * var_i).sqrt().max(1e-9);
+                labels[k] = if ncc >= SHADOW_NCC { 0 } else { lut.get(raw[3 * k], raw[3 * k + 1], raw[3 * k + 2]) };
+            }
+        }
     }
 
     /// Exposure gain of `image` against the model, clamped to 0.5..1.99: the median brightness
@@ -252,25 +380,36 @@ impl BackgroundModel {
         // The last pixels of a row whose width is not a multiple of LANES, one at a time.
         for x in chunks * LANES..w {
             let p = [row_rgb[3 * x], row_rgb[3 * x + 1], row_rgb[3 * x + 2]];
-            let fg = test_pixel(p.map(u16::from), [hr[x], hg[x], hb[x], es2[x], tol3[x]], t);
-            out[x] = if fg { lut.get(p[0], p[1], p[2]) } else { 0 };
-            any |= fg;
+            let code = test_pixel(p.map(u16::from), [hr[x], hg[x], hb[x], es2[x], tol3[x]], t);
+            out[x] = match code {
+                SURE => lut.get(p[0], p[1], p[2]),
+                _ => code,
+            };
+            any |= code != 0;
         }
         any
     }
 }
 
-/// The foreground test for one pixel (see the module docs).
+/// [`test_pixel`]'s answer for a pixel that is foreground.
+const SURE: u8 = 2;
+
+/// The foreground test for one pixel (see the module docs): 0 background, [`SURE`] foreground,
+/// [`ENC_SHADOW`] darker than the background by between β_shadow and the shadow depth with its
+/// chromaticity unchanged (a cast shadow, or a dark object of the background's colour).
 #[inline(always)]
-fn test_pixel([r, g, b]: [u16; 3], m: [u16; 5], t: Thresholds) -> bool {
+fn test_pixel([r, g, b]: [u16; 3], m: [u16; 5], t: Thresholds) -> u8 {
     let [hr, hg, hb, es2, tol3] = m;
     let s = r + g + b;
     let ges = mulhi(t.gain, es2);
     let brighter = s.saturating_sub(ges) > mulhi(t.beta, ges) + tol3;
-    let darker = ges.saturating_sub(s) > mulhi(t.shadow, ges) + tol3;
+    let dark = ges.saturating_sub(s);
+    let darker = dark > mulhi(t.shadow, ges) + tol3;
+    let deeper = dark > mulhi(t.deep, ges) + tol3;
     let dc = r.abs_diff(mulhi(hr, s)) + g.abs_diff(mulhi(hg, s)) + b.abs_diff(mulhi(hb, s));
     let tc = mulhi(t.kappa, s) + tol3;
-    brighter | darker | (dc > tc)
+    let sure = brighter | deeper | (dc > tc);
+    SURE * u8::from(sure) + ENC_SHADOW * u8::from(darker & !sure)
 }
 
 /// The foreground test for `LANES` pixels (1 = foreground), written for the auto-vectorizer:
@@ -291,18 +430,18 @@ fn test_lanes(p: &[u8; 3 * LANES], m: [&[u16]; 5], t: Thresholds, out: &mut [u8;
     let mut acc = 0u8;
     for i in 0..LANES {
         let px = [u16::from(p[3 * i]), u16::from(p[3 * i + 1]), u16::from(p[3 * i + 2])];
-        let f = u8::from(test_pixel(px, [hr[i], hg[i], hb[i], es2[i], tol3[i]], t));
+        let f = test_pixel(px, [hr[i], hg[i], hb[i], es2[i], tol3[i]], t);
         out[i] = f;
         acc |= f;
     }
     acc != 0
 }
 
-/// Replaces foreground flags by encoded colour classes.
+/// Replaces sure foreground by encoded colour classes.
 #[inline]
 fn classify(p: &[u8; 3 * LANES], lut: &ClassLut, out: &mut [u8; LANES]) {
     for (i, o) in out.iter_mut().enumerate() {
-        if *o != 0 {
+        if *o == SURE {
             *o = lut.get(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
         }
     }

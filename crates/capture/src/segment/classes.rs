@@ -73,23 +73,6 @@ pub struct ColourClasses {
     pub reject_mahalanobis2: Option<f64>,
 }
 
-impl Default for ColourClasses {
-    /// The synthetic palette: a blue nitrile glove (60,110,200) as hand and steel (150,150,155)
-    /// handle / (205,205,210) blade as scalpel, shaded 0.3–1.0 with ±15 % exposure; chromaticity
-    /// spread 0.03 covers sensor noise on dark pixels and motion-blurred edges.
-    fn default() -> Self {
-        let shade = (0.3 * 0.85, 1.0 * 1.15);
-        Self {
-            classes: vec![
-                ColourClass::from_albedo(label::HAND, [60.0, 110.0, 200.0], shade, 0.03),
-                ColourClass::from_albedo(label::SCALPEL, [150.0, 150.0, 155.0], shade, 0.03),
-                ColourClass::from_albedo(label::SCALPEL, [205.0, 205.0, 210.0], shade, 0.03),
-            ],
-            reject_mahalanobis2: None,
-        }
-    }
-}
-
 fn features(r: f64, g: f64, b: f64) -> [f64; 3] {
     let s = r + g + b;
     if s <= 0.0 { [1.0 / 3.0, 1.0 / 3.0, 0.0] } else { [r / s, b / s, s / 765.0] }
@@ -98,8 +81,7 @@ fn features(r: f64, g: f64, b: f64) -> [f64; 3] {
 impl ColourClasses {
     /// Learns one class per foreground label ([`label::NAMED`]) from images and their truth
     /// masks: the mean and covariance of the features of the label's pixels (pixels darker than a
-    /// channel sum of 24 are skipped; a label needs `min_pixels` pixels). Keeps
-    /// `reject_mahalanobis2` of the default.
+    /// channel sum of 24 are skipped; a label needs `min_pixels` pixels); no rejection.
     pub fn fit<'a>(
         samples: impl IntoIterator<Item = (&'a RgbImage, &'a GrayImage)>,
         min_pixels: u64,
@@ -156,7 +138,7 @@ impl ColourClasses {
             }
             classes.push(ColourClass { label: lbl, mean, cov });
         }
-        Ok(Self { classes, reject_mahalanobis2: Self::default().reject_mahalanobis2 })
+        Ok(Self { classes, reject_mahalanobis2: None })
     }
 
     /// The label of one colour (maximum likelihood over the classes; [`label::UNKNOWN`] when
@@ -166,6 +148,7 @@ impl ColourClasses {
         classify_compiled(
             &compiled,
             self.reject_mahalanobis2,
+            0.0,
             features(f64::from(rgb[0]), f64::from(rgb[1]), f64::from(rgb[2])),
         )
     }
@@ -203,8 +186,12 @@ struct Compiled {
     log_det: f64,
 }
 
-fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, f: [f64; 3]) -> u8 {
+/// The most likely class's label; [`label::UNKNOWN`] when its squared Mahalanobis distance exceeds
+/// `reject`, or when it beats the runner-up by less than `margin` (in units of the score,
+/// `m² + ln det Σ`, i.e. twice the log-likelihood ratio).
+fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, margin: f64, f: [f64; 3]) -> u8 {
     let mut best = (f64::INFINITY, label::UNKNOWN, f64::INFINITY);
+    let mut second = f64::INFINITY;
     for Compiled { label: lbl, mean, inv, log_det } in compiled {
         let d = [f[0] - mean[0], f[1] - mean[1], f[2] - mean[2]];
         let mut m2 = 0.0;
@@ -216,11 +203,15 @@ fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, f: [f64; 3]) ->
         // Negative log-likelihood up to a constant.
         let score = m2 + log_det;
         if score < best.0 {
+            second = best.0;
             best = (score, *lbl, m2);
+        } else if score < second {
+            second = score;
         }
     }
     match reject {
         Some(r) if best.2 > r => label::UNKNOWN,
+        _ if second - best.0 < margin => label::UNKNOWN,
         _ => best.1,
     }
 }
@@ -235,10 +226,18 @@ pub(crate) struct ClassLut {
 }
 
 impl ClassLut {
-    /// Compiles the classes; `encode` maps a label to the working encoding.
-    pub(crate) fn new(classes: &ColourClasses, encode: impl Fn(u8) -> u8 + Sync) -> Self {
-        let compiled = classes.compile();
+    /// Compiles the classes (every colour unknown without them); `encode` maps a label to the
+    /// working encoding.
+    pub(crate) fn new(classes: Option<&ColourClasses>, encode: impl Fn(u8) -> u8 + Sync) -> Self {
+        Self::with_margin(classes, 0.0, encode)
+    }
+
+    /// As [`ClassLut::new`], leaving unknown the colours whose best class wins by less than
+    /// `margin` (see [`classify_compiled`]).
+    pub(crate) fn with_margin(classes: Option<&ColourClasses>, margin: f64, encode: impl Fn(u8) -> u8 + Sync) -> Self {
         let n = 1usize << LUT_BITS;
+        let Some(classes) = classes else { return Self { table: vec![encode(label::UNKNOWN); n * n * n] } };
+        let compiled = classes.compile();
         let step = f64::from(1u32 << (8 - LUT_BITS));
         let table = (0..n * n * n)
             .into_par_iter()
@@ -246,7 +245,7 @@ impl ClassLut {
                 let (r, g, b) = (i >> (2 * LUT_BITS), (i >> LUT_BITS) & (n - 1), i & (n - 1));
                 // Centre of the bin.
                 let c = |v: usize| v as f64 * step + 0.5 * (step - 1.0);
-                encode(classify_compiled(&compiled, classes.reject_mahalanobis2, features(c(r), c(g), c(b))))
+                encode(classify_compiled(&compiled, classes.reject_mahalanobis2, margin, features(c(r), c(g), c(b))))
             })
             .collect();
         Self { table }
@@ -258,5 +257,43 @@ impl ClassLut {
         let s = 8 - LUT_BITS;
         let i = (usize::from(r >> s) << (2 * LUT_BITS)) | (usize::from(g >> s) << LUT_BITS) | usize::from(b >> s);
         self.table.get(i).copied().unwrap_or(0)
+    }
+}
+
+/// Colour classes compiled for labelling foreground pixels (a 256 KiB lookup table).
+#[derive(Debug, Clone)]
+pub struct ColourLut {
+    lut: ClassLut,
+}
+
+impl ColourLut {
+    /// Compiles the classes.
+    pub fn new(classes: &ColourClasses) -> Self {
+        ColourLut { lut: ClassLut::new(Some(classes), |l| l) }
+    }
+
+    /// Compiles the classes, leaving [`label::UNKNOWN`] the colours whose most likely class is
+    /// not at least `e^(margin/2)` times as likely as the next: a colour both classes could
+    /// explain decides nothing.
+    pub fn confident(classes: &ColourClasses, margin: f64) -> Self {
+        ColourLut { lut: ClassLut::with_margin(Some(classes), margin, |l| l) }
+    }
+
+    /// The label of one colour.
+    pub fn get(&self, rgb: [u8; 3]) -> u8 {
+        self.lut.get(rgb[0], rgb[1], rgb[2])
+    }
+
+    /// Gives every foreground pixel of `mask` (any non-zero value) the label of its colour in
+    /// `image` (same size; nothing is done otherwise).
+    pub fn label_foreground(&self, image: &RgbImage, mask: &mut GrayImage) {
+        if image.dimensions() != mask.dimensions() {
+            return;
+        }
+        for (m, p) in mask.iter_mut().zip(image.as_raw().chunks_exact(3)) {
+            if *m != label::BACKGROUND {
+                *m = self.lut.get(p[0], p[1], p[2]);
+            }
+        }
     }
 }

@@ -1,14 +1,20 @@
 //! Segmentation of camera images into label masks (0 background, 1 hand, 2 scalpel, 255
 //! unknown).
 //!
-//! Per camera: a foreground test against a per-pixel background model built from empty-scene
-//! images ([`BackgroundModel`], robust to shading and global exposure change), or OpenCV's MOG2
-//! when a camera has none ([`Method::Mog2`]); each foreground pixel gets a label from the colour
-//! classes ([`ColourClasses`]); then clean-up: isolated pixels are removed (a pixel needs
+//! Per camera: a foreground test against a per-pixel background model ([`BackgroundModel`], robust
+//! to shading and global exposure change) built from empty-scene images ([`Method::Background`]) or
+//! from the recording itself ([`Method::Median`]: a temporal median, the moving hand rejected), or
+//! OpenCV's MOG2 on a live stream ([`Method::Mog2`]); each foreground pixel gets a label from the
+//! colour classes when there are any ([`ColourClasses`], learned: [`AppearanceModel`]; no colour is
+//! written in the code), else the unknown label (the known tool's geometry labels it then:
+//! `hullcut_pose::ToolLabeller`); a pixel darker than its background with its chromaticity
+//! unchanged may be a cast shadow and can be left for the caller to resolve
+//! ([`SegmentParams::shadow_depth`], [`SHADOW_LIKE`]); then clean-up: isolated pixels are removed (a pixel needs
 //! `min_neighbors` foreground neighbours, which keeps one-pixel-wide blade edges), an optional
 //! opening, and a closing that fills small holes. [`Segmenter::segment_frame_set`] runs the
 //! cameras in parallel (rayon) with per-camera buffers that are reused from frame to frame.
 
+mod appearance;
 mod background;
 mod classes;
 mod mog2;
@@ -20,8 +26,9 @@ use image::{GrayImage, RgbImage};
 use rayon::prelude::*;
 use serde::Serialize;
 
+pub use appearance::{AppearanceModel, AppearanceSources, LearnedColour};
 pub use background::BackgroundModel;
-pub use classes::{ColourClass, ColourClasses};
+pub use classes::{ColourClass, ColourClasses, ColourLut};
 pub use mog2::Mog2Params;
 pub use report::{IouAccumulator, LabelScore, SegmentationReport, iou};
 
@@ -42,6 +49,12 @@ pub struct SegmentParams {
     /// (the synthetic scenes have no cast shadows, and a grey scalpel darker than a grey wall is
     /// told apart only by brightness); raise it (e.g. 0.5) where the hand casts shadows.
     pub shadow_tolerance: f64,
+    /// How much darker (relative) than expected a pixel of unchanged chromaticity may be and
+    /// still be a possible cast shadow: such pixels, darker than `shadow_tolerance` allows but
+    /// not darker than this, come out as [`SHADOW_LIKE`] for the caller to resolve (a dark
+    /// object of the background's colour looks the same in one view; the hull of all views tells
+    /// them apart). At most `shadow_tolerance` (the default) turns it off.
+    pub shadow_depth: f64,
     /// κ: chromaticity distortion, relative to the pixel's channel sum, beyond which a pixel is
     /// foreground.
     pub chroma_tolerance: f64,
@@ -61,8 +74,10 @@ pub struct SegmentParams {
     pub close_radius: u32,
     /// The MOG2 fallback.
     pub mog2: Mog2Params,
-    /// Colour classes of the foreground.
-    pub classes: ColourClasses,
+    /// Colour classes of the foreground; without them every foreground pixel is unknown.
+    pub classes: Option<ColourClasses>,
+    /// Frames of the recording its background is estimated from ([`Method::Median`]).
+    pub median_frames: usize,
 }
 
 impl Default for SegmentParams {
@@ -70,6 +85,7 @@ impl Default for SegmentParams {
         Self {
             brightness_tolerance: 0.08,
             shadow_tolerance: 0.08,
+            shadow_depth: 0.08,
             chroma_tolerance: 0.06,
             noise_floor: 5,
             noise_sigmas: 3.0,
@@ -78,7 +94,8 @@ impl Default for SegmentParams {
             open_radius: 0,
             close_radius: 1,
             mog2: Mog2Params::default(),
-            classes: ColourClasses::default(),
+            classes: None,
+            median_frames: 25,
         }
     }
 }
@@ -94,6 +111,7 @@ impl SegmentParams {
         };
         check("brightness_tolerance", self.brightness_tolerance)?;
         check("shadow_tolerance", self.shadow_tolerance)?;
+        check("shadow_depth", self.shadow_depth)?;
         check("chroma_tolerance", self.chroma_tolerance)?;
         if !(self.noise_sigmas.is_finite() && self.noise_sigmas >= 0.0) {
             return Err(CaptureError::Param {
@@ -107,7 +125,7 @@ impl SegmentParams {
                 message: format!("{} exceeds 8", self.min_neighbors),
             });
         }
-        self.classes.validate()
+        self.classes.as_ref().map_or(Ok(()), ColourClasses::validate)
     }
 }
 
@@ -117,15 +135,33 @@ impl SegmentParams {
 pub enum Method {
     /// Per-pixel model from empty-scene images.
     Background,
-    /// OpenCV's MOG2, learnt from the stream (no empty-scene images).
+    /// Per-pixel model estimated from the recording's own frames (temporal median).
+    Median,
+    /// OpenCV's MOG2, learnt from the stream (no empty-scene images, no recording to look ahead).
     Mog2,
 }
 
+/// What a camera's background is learned from.
+#[derive(Debug, Clone)]
+pub enum BackgroundSource {
+    /// Images of the empty scene.
+    EmptyScene(Vec<RgbImage>),
+    /// Frames of the recording, spread over it (the foreground moving).
+    Recording(Vec<RgbImage>),
+    /// Nothing ahead of time: MOG2 learns from the stream.
+    Stream,
+}
+
 /// Working encoding of labels inside the segmenter: ordered so that dilation by maximum lets
-/// scalpel win over hand and both over unknown.
-const ENC_UNKNOWN: u8 = 1;
-const ENC_HAND: u8 = 2;
-const ENC_SCALPEL: u8 = 3;
+/// scalpel win over hand, both over unknown, and all over a possible shadow.
+const ENC_SHADOW: u8 = 1;
+const ENC_UNKNOWN: u8 = 2;
+const ENC_HAND: u8 = 3;
+const ENC_SCALPEL: u8 = 4;
+
+/// The value of a mask pixel that may be a cast shadow (see [`SegmentParams::shadow_depth`]): not
+/// a dataset label; whoever asks for it resolves it to foreground or background.
+pub const SHADOW_LIKE: u8 = 128;
 
 fn encode(l: u8) -> u8 {
     match l {
@@ -138,7 +174,7 @@ fn encode(l: u8) -> u8 {
 
 #[derive(Debug)]
 enum Model {
-    Background(BackgroundModel),
+    Background(BackgroundModel, Method),
     Mog2(Box<Mog2>),
 }
 
@@ -157,10 +193,13 @@ struct Scratch {
     act2: Vec<bool>,
 }
 
-/// Working encoding → label, without a table (vectorizes): 0 → 0, 1 → 255, 2 → 1, 3 → 2.
+/// Working encoding → label.
+const DECODE: [u8; 8] = [label::BACKGROUND, SHADOW_LIKE, label::UNKNOWN, label::HAND, label::SCALPEL, 0, 0, 0];
+
+/// Working encoding → label: 0 → 0, 1 → [`SHADOW_LIKE`], 2 → 255, 3 → 1, 4 → 2.
 #[inline(always)]
 fn decode(v: u8) -> u8 {
-    v.wrapping_sub(1) ^ u8::from(v <= 1).wrapping_neg()
+    DECODE[usize::from(v & 7)]
 }
 
 #[derive(Debug)]
@@ -185,34 +224,60 @@ impl Segmenter {
     /// A segmenter with one entry of `backgrounds` per camera: its empty-scene images, or none
     /// for the MOG2 fallback.
     pub fn new(params: SegmentParams, backgrounds: &[Vec<RgbImage>]) -> Result<Self, CaptureError> {
-        params.validate()?;
-        let cameras = backgrounds
+        let sources: Vec<BackgroundSource> = backgrounds
             .iter()
+            .map(|b| if b.is_empty() { BackgroundSource::Stream } else { BackgroundSource::EmptyScene(b.clone()) })
+            .collect();
+        Self::with_sources(params, sources)
+    }
+
+    /// A segmenter with one background source per camera.
+    pub fn with_sources(params: SegmentParams, sources: Vec<BackgroundSource>) -> Result<Self, CaptureError> {
+        params.validate()?;
+        let cameras = sources
+            .into_iter()
             .enumerate()
-            .map(|(camera, images)| {
-                let model = if images.is_empty() {
-                    tracing::info!(camera, "no empty-scene images: MOG2 background subtraction");
-                    Model::Mog2(Box::new(Mog2::new(camera, &params.mog2)?))
-                } else {
-                    Model::Background(BackgroundModel::from_images(camera, images, &params)?)
+            .map(|(camera, source)| {
+                let model = match source {
+                    BackgroundSource::Stream => {
+                        tracing::info!(camera, "no empty-scene images and no recording: MOG2 background subtraction");
+                        Model::Mog2(Box::new(Mog2::new(camera, &params.mog2)?))
+                    }
+                    BackgroundSource::EmptyScene(images) => {
+                        Model::Background(BackgroundModel::from_images(camera, &images, &params)?, Method::Background)
+                    }
+                    BackgroundSource::Recording(frames) => {
+                        Model::Background(BackgroundModel::from_recording(camera, &frames, &params)?, Method::Median)
+                    }
                 };
                 let size = match &model {
-                    Model::Background(m) => Some((m.width(), m.height())),
+                    Model::Background(m, _) => Some((m.width(), m.height())),
                     Model::Mog2(_) => None,
                 };
                 Ok(CameraSegmenter { camera, model, scratch: Scratch::default(), size, last_gain: 1.0 })
             })
             .collect::<Result<Vec<_>, CaptureError>>()?;
-        let lut = ClassLut::new(&params.classes, encode);
+        let lut = ClassLut::new(params.classes.as_ref(), encode);
         Ok(Self { params, lut, cameras })
     }
 
-    /// A segmenter for a dataset's cameras from their `<cam>/background*.png` images (MOG2 for a
-    /// camera without any).
+    /// A segmenter for a dataset's cameras: from their `<cam>/background*.png` images, or, for a
+    /// camera without any, from `median_frames` of its frames spread over the recording.
     pub fn from_dataset(dataset: &Dataset, params: SegmentParams) -> Result<Self, CaptureError> {
-        let backgrounds =
-            (0..dataset.meta().cameras.len()).map(|c| dataset.background_images(c)).collect::<Result<Vec<_>, _>>()?;
-        Self::new(params, &backgrounds)
+        let frames = dataset.frame_numbers();
+        let k = params.median_frames.clamp(1, frames.len().max(1));
+        let picked: Vec<u64> = (0..k).filter_map(|i| frames.get(i * frames.len() / k).copied()).collect();
+        let sources = (0..dataset.meta().cameras.len())
+            .map(|c| {
+                let empty = dataset.background_images(c)?;
+                if !empty.is_empty() {
+                    return Ok(BackgroundSource::EmptyScene(empty));
+                }
+                let images: Vec<RgbImage> = picked.iter().filter_map(|&f| dataset.read_image(f, c).ok()).collect();
+                Ok(if images.len() >= 3 { BackgroundSource::Recording(images) } else { BackgroundSource::Stream })
+            })
+            .collect::<Result<Vec<_>, CaptureError>>()?;
+        Self::with_sources(params, sources)
     }
 
     /// The settings.
@@ -228,7 +293,7 @@ impl Segmenter {
     /// How camera `camera` finds its foreground (`None` outside the rig).
     pub fn method(&self, camera: usize) -> Option<Method> {
         self.cameras.get(camera).map(|c| match c.model {
-            Model::Background(_) => Method::Background,
+            Model::Background(_, method) => method,
             Model::Mog2(_) => Method::Mog2,
         })
     }
@@ -238,10 +303,13 @@ impl Segmenter {
         self.cameras.get(camera).map(|c| c.last_gain)
     }
 
-    /// Replaces the colour classes (recompiles the lookup table).
-    pub fn set_classes(&mut self, classes: ColourClasses) -> Result<(), CaptureError> {
-        classes.validate()?;
-        self.lut = ClassLut::new(&classes, encode);
+    /// Replaces the colour classes (recompiles the lookup table); `None` labels every foreground
+    /// pixel unknown.
+    pub fn set_classes(&mut self, classes: Option<ColourClasses>) -> Result<(), CaptureError> {
+        if let Some(c) = &classes {
+            c.validate()?;
+        }
+        self.lut = ClassLut::new(classes.as_ref(), encode);
         self.params.classes = classes;
         Ok(())
     }
@@ -332,13 +400,16 @@ impl CameraSegmenter {
         let raw = image.as_raw();
         // 1. Foreground, labelled by colour class, into `labels`; `act0` marks rows with any.
         match &mut self.model {
-            Model::Background(model) => {
+            Model::Background(model, _) => {
                 let gain =
                     if params.exposure_compensation { model.exposure_gain(image, params, &mut s.ratios) } else { 1.0 };
                 self.last_gain = gain;
                 let t = Thresholds::new(params, gain);
                 for (y, (row, labels)) in raw.chunks_exact(3 * w).zip(s.labels.chunks_exact_mut(w)).enumerate() {
                     s.act0[y] = model.foreground_row(row, y, t, lut, labels);
+                }
+                if params.shadow_depth > params.shadow_tolerance {
+                    model.settle_shadows(image, &mut s.labels, &s.act0, lut);
                 }
             }
             Model::Mog2(m) => {
@@ -428,5 +499,6 @@ mod tests {
         for l in [label::BACKGROUND, label::HAND, label::SCALPEL, label::UNKNOWN] {
             assert_eq!(decode(encode(l)), l);
         }
+        assert_eq!(decode(ENC_SHADOW), SHADOW_LIKE);
     }
 }

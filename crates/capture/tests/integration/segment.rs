@@ -1,7 +1,7 @@
 //! Segmentation on procedural images with known masks.
 
 use anyhow::Result;
-use hullcut_capture::{ColourClasses, IouAccumulator, Method, SegmentParams, Segmenter, iou};
+use hullcut_capture::{ColourClass, ColourClasses, IouAccumulator, Method, SegmentParams, Segmenter, iou};
 use hullcut_dataset::{FrameSet, View, label};
 use image::{GrayImage, RgbImage};
 
@@ -27,6 +27,26 @@ fn frame_set(frame: u64) -> (FrameSet, Vec<GrayImage>) {
     (FrameSet { frame, timestamp_ns: frame as i64, views }, truth)
 }
 
+/// The procedural scene's palette as colour classes (the library writes no colour of its own): a
+/// blue glove (60,110,200) as hand and steel (150,150,155) handle / (205,205,210) blade as
+/// scalpel, shaded 0.3–1.0 with ±15 % exposure, chromaticity spread 0.03.
+fn palette() -> ColourClasses {
+    let shade = (0.3 * 0.85, 1.0 * 1.15);
+    ColourClasses {
+        classes: vec![
+            ColourClass::from_albedo(label::HAND, [60.0, 110.0, 200.0], shade, 0.03),
+            ColourClass::from_albedo(label::SCALPEL, [150.0, 150.0, 155.0], shade, 0.03),
+            ColourClass::from_albedo(label::SCALPEL, [205.0, 205.0, 210.0], shade, 0.03),
+        ],
+        reject_mahalanobis2: None,
+    }
+}
+
+/// Default settings with the palette's classes.
+fn with_palette() -> SegmentParams {
+    SegmentParams { classes: Some(palette()), ..SegmentParams::default() }
+}
+
 fn segmenter(params: SegmentParams) -> Result<Segmenter> {
     let bgs: Vec<Vec<RgbImage>> = (0..CAMERAS).map(|c| backgrounds(W, H, c, 3)).collect();
     Ok(Segmenter::new(params, &bgs)?)
@@ -47,7 +67,7 @@ fn false_foreground(pred: &GrayImage, truth: &GrayImage) -> (u64, u64) {
 
 #[test]
 fn background_model_segments_hand_and_scalpel() -> Result<()> {
-    let mut seg = segmenter(SegmentParams::default())?;
+    let mut seg = segmenter(with_palette())?;
     assert_eq!(seg.method(0), Some(Method::Background));
     let mut acc = IouAccumulator::new();
     let (mut fp, mut bg) = (0, 0);
@@ -90,8 +110,8 @@ fn exposure_change_is_not_foreground_with_compensation() -> Result<()> {
     // within 1 % (a median over ~1200 pixels, each with noise of about 1 %) and almost nothing is
     // foreground (measured: 0 pixels); without it 21 % of the image is foreground at either gain
     // (wherever 15 % of the brightness exceeds the 8 % tolerance plus the 3τ noise allowance).
-    let mut seg = segmenter(SegmentParams::default())?;
-    let mut raw = segmenter(SegmentParams { exposure_compensation: false, ..SegmentParams::default() })?;
+    let mut seg = segmenter(with_palette())?;
+    let mut raw = segmenter(SegmentParams { exposure_compensation: false, ..with_palette() })?;
     for (k, g) in [1.15, 0.85].into_iter().enumerate() {
         let (image, _) = render(W, H, 2, None, g, 0x5eed + k as u64);
         let fg = |m: &GrayImage| {
@@ -125,8 +145,8 @@ fn shadows_are_background_only_when_tolerated() -> Result<()> {
     }
     let disc = std::f64::consts::PI * r * r;
     let fg = |m: &GrayImage| m.as_raw().iter().filter(|&&v| v != label::BACKGROUND).count() as f64;
-    let mut strict = segmenter(SegmentParams::default())?;
-    let mut tolerant = segmenter(SegmentParams { shadow_tolerance: 0.5, ..SegmentParams::default() })?;
+    let mut strict = segmenter(with_palette())?;
+    let mut tolerant = segmenter(SegmentParams { shadow_tolerance: 0.5, ..with_palette() })?;
     let (strict_fg, tolerant_fg) = (fg(&strict.segment(0, &image)?), fg(&tolerant.segment(0, &image)?));
     println!("shadow disc {disc:.0} px: foreground {strict_fg} (default), {tolerant_fg} (shadow tolerance 0.5)");
     assert!(strict_fg > 0.9 * disc, "{strict_fg}");
@@ -144,8 +164,8 @@ fn opening_erases_the_thin_blade_which_is_why_it_is_off() -> Result<()> {
     // frame set: scalpel recall 0.9997 without, 0.957 with the opening (the lost 4 % are blade,
     // the part the pose needs most); hand IoU 0.992 either way.
     let (set, truth) = frame_set(4);
-    let mut plain = segmenter(SegmentParams::default())?;
-    let mut opened = segmenter(SegmentParams { open_radius: 1, ..SegmentParams::default() })?;
+    let mut plain = segmenter(with_palette())?;
+    let mut opened = segmenter(SegmentParams { open_radius: 1, ..with_palette() })?;
     let (mut a, mut b) = (IouAccumulator::new(), IouAccumulator::new());
     for (camera, (p, o)) in
         plain.segment_frame_set(&set)?.iter().zip(opened.segment_frame_set(&set)?.iter()).enumerate()
@@ -170,8 +190,8 @@ fn opening_erases_the_thin_blade_which_is_why_it_is_off() -> Result<()> {
 #[test]
 fn parallel_frame_set_equals_camera_by_camera() -> Result<()> {
     let (set, _) = frame_set(3);
-    let mut a = segmenter(SegmentParams::default())?;
-    let mut b = segmenter(SegmentParams::default())?;
+    let mut a = segmenter(with_palette())?;
+    let mut b = segmenter(with_palette())?;
     let parallel = a.segment_frame_set(&set)?;
     for (camera, view) in set.views.iter().enumerate() {
         let view = view.as_ref().expect("present");
@@ -200,18 +220,18 @@ fn colour_classes_are_learnt_from_truth_masks() -> Result<()> {
     assert!((scalpel.mean[0] - 0.33).abs() < 0.03 && (scalpel.mean[1] - 0.34).abs() < 0.03, "{scalpel:?}");
     assert_eq!(learnt.classify([60, 110, 200]), label::HAND);
     assert_eq!(learnt.classify([150, 150, 155]), label::SCALPEL);
-    assert_eq!(ColourClasses::default().classify([30, 55, 100]), label::HAND, "a shaded glove");
-    assert_eq!(ColourClasses::default().classify([62, 62, 64]), label::SCALPEL, "a shaded handle");
+    assert_eq!(palette().classify([30, 55, 100]), label::HAND, "a shaded glove");
+    assert_eq!(palette().classify([62, 62, 64]), label::SCALPEL, "a shaded handle");
 
-    // Segmenting with the learnt classes is as good as with the palette defaults (within 1 %).
-    let mut seg = segmenter(SegmentParams::default())?;
+    // Segmenting with the learnt classes is as good as with the palette (within 1 %).
+    let mut seg = segmenter(with_palette())?;
     let mut with_defaults = IouAccumulator::new();
     let mut with_learnt = IouAccumulator::new();
     let (set, truth) = frame_set(7);
     for (camera, m) in seg.segment_frame_set(&set)?.iter().enumerate() {
         with_defaults.add(camera, m.as_ref().expect("present"), &truth[camera])?;
     }
-    seg.set_classes(learnt)?;
+    seg.set_classes(Some(learnt))?;
     for (camera, m) in seg.segment_frame_set(&set)?.iter().enumerate() {
         with_learnt.add(camera, m.as_ref().expect("present"), &truth[camera])?;
     }
@@ -258,7 +278,7 @@ fn mog2_fallback_finds_objects_entering_a_learnt_scene() -> Result<()> {
     // coloured, slowly moving glove is absorbed within a few frames (measured: hand recall 0.64);
     // after 300 frames the rate is 1/500 and the objects stay foreground.
     let (w, h) = (320, 240);
-    let mut seg = Segmenter::new(SegmentParams::default(), &[Vec::new()])?;
+    let mut seg = Segmenter::new(with_palette(), &[Vec::new()])?;
     assert_eq!(seg.method(0), Some(Method::Mog2));
     let empty: Vec<RgbImage> = (0..8).map(|k| render(w, h, 0, None, 1.0, 0xe0 + k).0).collect();
     for k in 0..300 {

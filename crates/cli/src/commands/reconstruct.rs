@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
 use hullcut_hull::accuracy::{
     grid_iou, outer_surface_samples, sample_surface, silhouette_consistency, surface_distance, volumetric_iou,
@@ -18,6 +17,7 @@ use serde::Serialize;
 use self::checks::ViewDisagreement;
 use crate::backend::{Backend, Carver};
 use crate::frames::parse_frames;
+use crate::labelling::{Labelling, LabellingReport};
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, PoseWriter, log_blade, no_tool_estimate};
 use crate::progress::bar;
@@ -81,6 +81,10 @@ pub struct Args {
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
     masks: String,
+    /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
+    /// `segment --help`).
+    #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
+    label_frames: Vec<u64>,
     /// Views that must see a cell as background to carve it (k of N).
     #[arg(long, value_name = "K", default_value_t = 1)]
     carve_votes: usize,
@@ -189,6 +193,8 @@ struct Report<'a> {
     accuracy: Vec<LabelAccuracy>,
     silhouette_consistency: Vec<Consistency>,
     view_disagreement: ViewDisagreement,
+    /// How the segmented masks were labelled (null with mask files).
+    labelling: Option<LabellingReport>,
     pose: PoseReport,
     timings: Timings,
 }
@@ -211,8 +217,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         trim_slivers: args.trim_slivers,
         ..HullParams::new(volume.aabb, args.voxel)
     };
-    let mut segmenter = if use_files { None } else { Some(Segmenter::from_dataset(&ds, SegmentParams::default())?) };
     let tool = ds.tool()?;
+    let mut labelling =
+        if use_files { None } else { Some(Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames)?) };
     let poses = ds.truth_poses()?.unwrap_or_default();
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
@@ -253,20 +260,32 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         // Masks read with the images are the truth. Segmenting moves them aside (the segmented masks
         // take their place, nothing is copied); with mask files they are what is carved.
         let mut set_aside: Vec<Option<image::GrayImage>> = Vec::new();
-        if let Some(seg) = &mut segmenter {
+        // Segmenting carves the foreground's hull and fits the tool into it to label the views: the
+        // hull, its cells near the tool labelled scalpel, is this frame's.
+        let mut labelled_hull = None;
+        if let Some(labelling) = &mut labelling {
             let clock = Instant::now();
-            let masks = seg.segment_frame_set(&set).with_context(|| format!("segmenting frame {frame}"))?;
-            t.segment.push(clock.elapsed());
-            for (view, mask) in set.views.iter_mut().zip(masks) {
+            let labelled = labelling.label(&set, &mut carver)?;
+            let carve_ms = labelled.carve_ms;
+            t.segment.push(clock.elapsed().saturating_sub(Duration::from_secs_f64(carve_ms * 1e-3)));
+            t.carve.push(Duration::from_secs_f64(carve_ms * 1e-3));
+            for (view, mask) in set.views.iter_mut().zip(labelled.masks) {
                 set_aside.push(view.as_mut().and_then(|v| std::mem::replace(&mut v.mask, mask)));
             }
+            labelled_hull = labelled.occupancy;
         }
         let clock = Instant::now();
         let masks: Vec<Option<&image::GrayImage>> =
             set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
         let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-        let occ = carver.carve(&views, &params).with_context(|| format!("frame {frame}"))?;
-        t.carve.push(clock.elapsed());
+        let occ = match labelled_hull {
+            Some(occ) => occ,
+            None => {
+                let occ = carver.carve(&views, &params).with_context(|| format!("frame {frame}"))?;
+                t.carve.push(clock.elapsed());
+                occ
+            }
+        };
         resolution = occ.resolution;
         counters.frame_sets += 1;
         counters.views_missing += occ.stats.views_missing;
@@ -303,6 +322,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .zip(&masks)
             .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
             .collect();
+        // Fitted again to the labelled views, as to mask files: the colours have sharpened the
+        // tool's outline since the labelling fitted it.
         let estimate = match &mut tracker {
             Some(tracker) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
             None => no_tool_estimate(frame, set.timestamp_ns),
@@ -328,13 +349,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let clock = Instant::now();
             let pose = poses.iter().find(|p| p.frame == frame);
             let truth_masks: Vec<Option<&image::GrayImage>> =
-                if segmenter.is_some() { set_aside.iter().map(Option::as_ref).collect() } else { masks.clone() };
+                if labelling.is_some() { set_aside.iter().map(Option::as_ref).collect() } else { masks.clone() };
             // The exact visual hull: the truth masks carved at a quarter leaf, inside the cells that
             // carving the truth masks at this leaf keeps (carving is conservative), so it costs a
             // few times one carving instead of a whole octree four levels deeper.
             let exact = if truth_masks.iter().any(Option::is_some) {
                 let truth_views = silhouettes(ds.rig(), &truth_masks)?;
-                let coarse = if segmenter.is_some() { Some(carve(&truth_views, &params)?) } else { None };
+                let coarse = if labelling.is_some() { Some(carve(&truth_views, &params)?) } else { None };
                 let seeds = coarse.as_ref().unwrap_or(&occ);
                 let fine = HullParams { leaf_size: params.leaf_size / 4.0, ..params.clone() };
                 Some(carve_within(&truth_views, &fine, &seeds.cells)?)
@@ -457,6 +478,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             accuracy,
             silhouette_consistency: consistency,
             view_disagreement: disagreement,
+            labelling: labelling.as_ref().map(Labelling::report),
             pose: pose_report,
             timings: Timings {
                 read: StageTiming::from_durations(&t.read),

@@ -21,6 +21,7 @@ use self::stages::{Policy, StageTimes, Work};
 use crate::backend::{Backend, Carver};
 use crate::commands::reconstruct::checks;
 use crate::frames::parse_frames;
+use crate::labelling::Labelling;
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, log_blade};
 use crate::progress::bar;
@@ -99,6 +100,10 @@ pub struct Args {
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
     masks: String,
+    /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
+    /// `segment --help`).
+    #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
+    label_frames: Vec<u64>,
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
@@ -254,6 +259,8 @@ struct Report {
     tissue: TissueReport,
     /// Resident memory at every full minute of the run and at its end (Linux; empty elsewhere).
     memory: Vec<MemorySample>,
+    /// How the segmented masks were labelled (null with mask files).
+    labelling: Option<crate::labelling::LabellingReport>,
     pose: PoseReport,
     timings: Timings,
     /// Entities logged to the recording.
@@ -452,12 +459,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let policy = if args.realtime { Policy::DropOldest } else { Policy::Block };
     let dropped = Arc::new(AtomicU64::new(0));
     let t0 = Instant::now();
+    let labelling =
+        if use_files { None } else { Some(Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames)?) };
     let pipeline = stages::spawn(stages::Setup {
         ds: Arc::clone(&ds),
         frames: frames.clone(),
         repeat: args.repeat,
         pass_span_ns,
         use_files,
+        labelling,
         hull,
         carver,
         template: template.clone(),
@@ -658,6 +668,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 region_changes: sim.region_changes(),
                 gpu: sim.gpu_stats().cloned(),
             },
+            labelling: outcome.labelling.clone(),
             pose: pose_report,
             timings: Timings {
                 read: timing(&times.read),

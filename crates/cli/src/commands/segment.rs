@@ -4,26 +4,36 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use hullcut_capture::segment::{IouAccumulator, Method, SegmentParams, SegmentationReport, Segmenter};
+use hullcut_capture::segment::{IouAccumulator, SegmentationReport};
 use hullcut_dataset::Dataset;
 use serde::Serialize;
 
+use crate::backend::Carver;
 use crate::frames::parse_frames;
+use crate::labelling::{LabelSource, Labelling, LabellingReport};
 use crate::logging::CameraLogger;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
+use crate::volume::{MIN_VIEWS, WorkspaceArg};
 
 /// Segment a dataset's images into label masks (0 background, 1 hand, 2 scalpel) and score them.
 ///
-/// Foreground comes from a per-pixel background model of each camera's empty-scene images
-/// (CAM/background*.png), robust to shading and exposure change, or from OpenCV's MOG2 where a
-/// camera has none; foreground pixels are labelled by colour class (blue glove = hand, the rest =
-/// scalpel); isolated pixels are removed and small holes closed. Where the dataset has masks/, the
-/// masks are scored against them (IoU per label).
+/// Foreground comes from a per-pixel background model of each camera, robust to shading, cast
+/// shadows and exposure change: from its empty-scene images (CAM/background*.png) when it has
+/// them, else from the recording itself (the median of frames spread over it, the moving hand
+/// rejected); isolated pixels are removed and small holes closed. The labels: with the dataset's
+/// tool.json, the known tool is fitted into the hull of the foreground (carved at --voxel in the
+/// working volume) and drawn into every view, the hand's occlusion respected: its pixels are the
+/// scalpel, the rest of the foreground the hand, no colour model needed. Where the tool cannot be
+/// fitted, and without a tool.json, the colours learned from the recording label the foreground:
+/// from the trusted frames' geometric labels, and from the masks/ of the frames named by
+/// --label-frames. Nothing is tuned to one glove: no colour is written in the code. Where the
+/// dataset has masks/, the masks are scored against them (IoU per label).
 ///
-/// Writes: OUT/masks/CAM/NNNNNN.png with --out; REPORT (JSON: method per camera, IoU, precision
-/// and recall per label, timings per frame set) with --report; an .rrd (images and predicted masks
-/// under world/cams/NAME every --rrd-every frames) with --rrd.
+/// Writes: OUT/masks/CAM/NNNNNN.png with --out; REPORT (JSON: foreground method per camera, the
+/// frame sets labelled by geometry, by colour or left unknown, the learned colours, IoU,
+/// precision and recall per label, timings per frame set) with --report; an .rrd (images and
+/// predicted masks under world/cams/NAME every --rrd-every frames) with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -45,6 +55,15 @@ pub struct Args {
     /// Log every N-th frame to the .rrd.
     #[arg(long, value_name = "N", default_value_t = 3)]
     rrd_every: u64,
+    /// Frames whose masks/ seed the learned colours (comma-separated).
+    #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
+    label_frames: Vec<u64>,
+    /// Leaf of the foreground's hull that the tool is fitted into, metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
+    voxel: f64,
+    /// The working volume, world metres (default: dataset.toml's, else the rig's).
+    #[arg(long, value_name = "MINX,MINY,MINZ,MAXX,MAXY,MAXZ", allow_hyphen_values = true)]
+    workspace: Option<WorkspaceArg>,
 }
 
 #[derive(Debug, Serialize)]
@@ -58,7 +77,7 @@ struct Report<'a> {
     frame_sets: usize,
     views: usize,
     dropped_views: usize,
-    methods: Vec<Option<Method>>,
+    labelling: LabellingReport,
     accuracy: Option<SegmentationReport>,
     parameters: &'a str,
     timings: Timings,
@@ -66,8 +85,14 @@ struct Report<'a> {
 
 #[derive(Debug, Serialize)]
 struct Timings {
-    /// Segmentation of one frame set (all cameras, in parallel).
+    /// Labelling one frame set: foreground, hull, the tool's fit and drawing (all cameras).
     segment: StageTiming,
+    /// Its parts: the foreground (background model, clean-up) ...
+    foreground: StageTiming,
+    /// ... carving the foreground's hull ...
+    carve: StageTiming,
+    /// ... and the tool's fit and drawing its labels.
+    geometry: StageTiming,
     /// Reading and decoding one frame set's PNGs.
     read: StageTiming,
     total: StageTiming,
@@ -81,9 +106,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let ds = Dataset::open(&args.dataset)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
-    let params = SegmentParams::default();
-    let mut segmenter = Segmenter::from_dataset(&ds, params.clone())
-        .with_context(|| format!("building the background models of {}", args.dataset.display()))?;
+    let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
+    crate::commands::reconstruct::checks::voxel(args.voxel, volume.aabb.extent())?;
+    let hull =
+        hullcut_hull::HullParams { min_views: MIN_VIEWS, ..hullcut_hull::HullParams::new(volume.aabb, args.voxel) };
+    let tool = ds.tool()?;
+    let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames)?;
+    let mut carver = Carver::Cpu;
     let score = ds.has_masks();
     let rec = match &args.rrd {
         Some(path) => {
@@ -98,14 +127,28 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = bar(frames.len() as u64, "segmenting");
     let mut accuracy = IouAccumulator::new();
     let (mut read_times, mut segment_times) = (Vec::<Duration>::new(), Vec::<Duration>::new());
+    let (mut fg_times, mut carve_times, mut geometry_times) = (Vec::new(), Vec::new(), Vec::new());
+    let ms = |x: f64| Duration::from_secs_f64(x * 1e-3);
     let mut views = 0;
     for &frame in &frames {
         let t = Instant::now();
         let mut set = ds.read_frame_set(frame, score)?;
         read_times.push(t.elapsed());
         let t = Instant::now();
-        let masks = segmenter.segment_frame_set(&set).with_context(|| format!("frame {frame}"))?;
+        let labelled = labelling.label(&set, &mut carver)?;
         segment_times.push(t.elapsed());
+        fg_times.push(ms(labelled.foreground_ms));
+        carve_times.push(ms(labelled.carve_ms));
+        if let Some(s) = &labelled.stats {
+            geometry_times.push(ms(s.evidence_ms + s.fit_ms + s.draw_ms));
+        }
+        if let Some(e) = &labelled.estimate {
+            tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), "tool");
+        }
+        if labelled.source == LabelSource::Unknown {
+            tracing::debug!(frame, reason = ?labelled.estimate.as_ref().and_then(|e| e.reason.clone()), thin = ?labelled.stats.as_ref().map(|s| s.thin_leaves), "the tool could not be fitted: foreground left unknown");
+        }
+        let masks = labelled.masks;
         for (view, mask) in set.views.iter_mut().zip(masks) {
             let (Some(view), Some(mask)) = (view, mask) else { continue };
             views += 1;
@@ -138,7 +181,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let accuracy = score.then(|| accuracy.report());
     let seg = StageTiming::from_durations(&segment_times);
-    println!("segmented {} frame sets ({views} images): {:.2} ms per frame set (mean)", frames.len(), seg.mean_ms);
+    let labels = labelling.report();
+    println!(
+        "segmented {} frame sets ({views} images): {:.2} ms per frame set (mean; foreground {:.2} ms); labels from the \
+         tool's geometry in {}, from learned colours in {}, unknown in {}",
+        frames.len(),
+        seg.mean_ms,
+        StageTiming::from_durations(&fg_times).mean_ms,
+        labels.counters.geometry,
+        labels.counters.colour,
+        labels.counters.unknown
+    );
+    for c in &labels.appearance {
+        if let Some(rgb) = c.rgb {
+            println!("  learned {} colour ~ rgb{rgb:?} from {:.0} pixels", c.label, c.pixels);
+        }
+    }
     if let Some(acc) = &accuracy {
         for l in &acc.labels {
             println!(
@@ -152,7 +210,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     }
     if let Some(path) = &args.report {
-        let parameters = format!("{params:?}");
+        let parameters = format!("{:?}", hullcut_capture::segment::SegmentParams::default());
         let report = Report {
             schema_version: SCHEMA_VERSION,
             kind: "segmentation",
@@ -162,11 +220,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             frame_sets: frames.len(),
             views,
             dropped_views: ds.dropped().iter().filter(|d| range.contains(&d.frame)).count(),
-            methods: (0..ds.meta().cameras.len()).map(|c| segmenter.method(c)).collect(),
+            labelling: labels,
             accuracy,
             parameters: &parameters,
             timings: Timings {
                 segment: seg,
+                foreground: StageTiming::from_durations(&fg_times),
+                carve: StageTiming::from_durations(&carve_times),
+                geometry: StageTiming::from_durations(&geometry_times),
                 read: StageTiming::from_durations(&read_times),
                 total: StageTiming::from_durations(&[t0.elapsed()]),
             },

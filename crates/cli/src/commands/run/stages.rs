@@ -1,6 +1,6 @@
 //! The pipeline's stages as threads joined by bounded channels: read → hull → pose → tissue.
 //!
-//! Each stage owns its state (the segmenter, the tracker, the simulation) and hands a [`Work`] on;
+//! Each stage owns its state (the labelling, the tracker, the simulation) and hands a [`Work`] on;
 //! nothing is shared but the dataset. A stage that fails stops, drops its channel, and the stages
 //! after it finish what they hold; [`Pipeline::join`] reports the first failure. A diverged tissue
 //! simulation is not an error of the pipeline: the tissue stops and the frames go on.
@@ -12,7 +12,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, anyhow};
 use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
-use hullcut_capture::segment::{SegmentParams, Segmenter};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, silhouettes};
 use hullcut_pose::{PoseEstimate, Template, Tracker, TrackerParams, ViewInput};
@@ -21,6 +20,7 @@ use hullcut_sim::CutSim;
 use super::tissue::{Sweeper, Tissue, TissueStep};
 use crate::backend::Carver;
 use crate::commands::reconstruct::checks;
+use crate::labelling::{Labelling, LabellingReport};
 use crate::pose_out::no_tool_estimate;
 
 /// What a full queue does to the reader.
@@ -45,6 +45,8 @@ pub struct Setup {
     pub pass_span_ns: i64,
     /// Masks from files (else segmented from the images).
     pub use_files: bool,
+    /// Segmentation and labelling, when the masks are not files.
+    pub labelling: Option<Labelling>,
     /// Carving.
     pub hull: HullParams,
     /// Where carving runs.
@@ -157,6 +159,8 @@ pub struct Outcome {
     pub sim: CutSim,
     /// Why the tissue stopped early, if it diverged.
     pub failure: Option<String>,
+    /// How the segmented masks were labelled.
+    pub labelling: Option<LabellingReport>,
 }
 
 /// The running stages.
@@ -164,7 +168,7 @@ pub struct Pipeline {
     /// Finished frame sets, in order.
     pub output: Receiver<Work>,
     reader: JoinHandle<anyhow::Result<u64>>,
-    hull: JoinHandle<anyhow::Result<()>>,
+    hull: JoinHandle<anyhow::Result<Option<LabellingReport>>>,
     pose: JoinHandle<anyhow::Result<()>>,
     tissue: JoinHandle<anyhow::Result<(CutSim, Option<String>)>>,
 }
@@ -179,10 +183,10 @@ impl Pipeline {
         let pose = self.pose.join().map_err(join("pose"))?;
         let tissue = self.tissue.join().map_err(join("tissue"))?;
         let read = read?;
-        hull?;
+        let labelling = hull?;
         pose?;
         let (sim, failure) = tissue?;
-        Ok(Outcome { read, sim, failure })
+        Ok(Outcome { read, sim, failure, labelling })
     }
 }
 
@@ -194,6 +198,7 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         repeat,
         pass_span_ns,
         use_files,
+        labelling,
         hull,
         carver,
         template,
@@ -204,11 +209,6 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         realtime,
         stop,
     } = setup;
-    let segmenter = if use_files {
-        None
-    } else {
-        Some(Segmenter::from_dataset(&ds, SegmentParams::default()).context("setting up segmentation")?)
-    };
     let (read_tx, read_rx) = bounded::<Work>(queue);
     let (hull_tx, hull_rx) = bounded::<Work>(queue);
     let (pose_tx, pose_rx) = bounded::<Work>(queue);
@@ -227,7 +227,7 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         let ds = Arc::clone(&ds);
         std::thread::Builder::new()
             .name("hull".into())
-            .spawn(move || hull_stage(&ds, use_files, segmenter, (carver, &hull), &read_rx, &hull_tx))?
+            .spawn(move || hull_stage(&ds, use_files, labelling, (carver, &hull), &read_rx, &hull_tx))?
     };
     let pose = {
         let ds = Arc::clone(&ds);
@@ -311,36 +311,49 @@ fn read_stage(
     Ok(read)
 }
 
-/// Masks (files or segmented), silhouettes, carving, surfaces.
+/// Masks (files or segmented), silhouettes, carving, surfaces. Segmenting carves the foreground's
+/// hull and fits the known tool into it to label the views ([`Labelling`]): that hull, its cells
+/// near the tool labelled scalpel, is the frame's (nothing is carved twice); the pose stage fits
+/// the blade again to the labelled views, whose colours have sharpened the tool's outline.
 fn hull_stage(
     ds: &Dataset,
     use_files: bool,
-    mut segmenter: Option<Segmenter>,
+    mut labelling: Option<Labelling>,
     (mut carver, params): (Carver, &HullParams),
     rx: &Receiver<Work>,
     tx: &Sender<Work>,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Option<LabellingReport>> {
     for mut work in rx.iter() {
         let frame = work.frame;
         if use_files {
             checks::labels(ds, &work.set)?;
         }
-        if let Some(seg) = &mut segmenter {
+        let mut labelled_hull = None;
+        if let Some(labelling) = &mut labelling {
             let clock = Instant::now();
-            let masks = seg.segment_frame_set(&work.set).with_context(|| format!("segmenting frame {frame}"))?;
-            work.times.segment.push(clock.elapsed());
-            for (view, mask) in work.set.views.iter_mut().zip(masks) {
+            let labelled = labelling.label(&work.set, &mut carver)?;
+            let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
+            work.times.segment.push(clock.elapsed().saturating_sub(carve));
+            work.times.carve.push(carve);
+            for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
                 if let Some(view) = view {
                     view.mask = mask;
                 }
             }
+            labelled_hull = labelled.occupancy;
         }
-        let clock = Instant::now();
-        let masks: Vec<Option<&image::GrayImage>> =
-            work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
-        let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-        let occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
-        work.times.carve.push(clock.elapsed());
+        let occ = match labelled_hull {
+            Some(occ) => occ,
+            None => {
+                let clock = Instant::now();
+                let masks: Vec<Option<&image::GrayImage>> =
+                    work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
+                let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
+                let occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
+                work.times.carve.push(clock.elapsed());
+                occ
+            }
+        };
         let clock = Instant::now();
         work.grids = label::NAMED
             .iter()
@@ -356,7 +369,7 @@ fn hull_stage(
             break;
         }
     }
-    Ok(())
+    Ok(labelling.as_ref().map(Labelling::report))
 }
 
 /// The blade's pose from the scalpel silhouettes, tracked.

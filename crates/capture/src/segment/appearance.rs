@@ -1,0 +1,220 @@
+//! An appearance model learned from the recording: per label (hand, scalpel), the colour
+//! statistics of pixels whose label is known, from the geometric labels of frames whose tool was
+//! trusted or from masks a lab drew for a few frames, with old frames forgotten at a steady rate
+//! so that the model follows the light. No colour is written in the code.
+//!
+//! Each label is one Gaussian over (r/s, b/s, s/765) (s = r + g + b), the features of
+//! [`ColourClasses`]: chromaticity does not change when shading or exposure scales a colour.
+
+use hullcut_dataset::label;
+use image::{GrayImage, RgbImage};
+use serde::Serialize;
+
+use super::classes::{ColourClass, ColourClasses};
+
+/// Pixels darker than this channel sum carry no usable chromaticity and are not learned from.
+const MIN_SUM: u32 = 24;
+/// Variance added to each diagonal entry (keeps a covariance invertible on uniform samples).
+const COV_FLOOR: f64 = 1e-4;
+
+/// Running sums of one label's features, with forgetting.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+struct Sums {
+    weight: f64,
+    sum: [f64; 3],
+    outer: [[f64; 3]; 3],
+}
+
+impl Sums {
+    fn add(&mut self, f: [f64; 3]) {
+        self.weight += 1.0;
+        for i in 0..3 {
+            self.sum[i] += f[i];
+            for j in 0..3 {
+                self.outer[i][j] += f[i] * f[j];
+            }
+        }
+    }
+
+    fn scale(&mut self, k: f64) {
+        self.weight *= k;
+        self.sum = self.sum.map(|s| s * k);
+        self.outer = self.outer.map(|r| r.map(|v| v * k));
+    }
+
+    fn class(&self, lbl: u8) -> Option<ColourClass> {
+        if self.weight < 2.0 {
+            return None;
+        }
+        let n = self.weight;
+        let mean = self.sum.map(|s| s / n);
+        let mut cov = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                cov[i][j] = (self.outer[i][j] - n * mean[i] * mean[j]) / (n - 1.0);
+            }
+            cov[i][i] += COV_FLOOR;
+        }
+        Some(ColourClass { label: lbl, mean, cov })
+    }
+}
+
+/// Where the model's samples came from, for reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct AppearanceSources {
+    /// Frame sets whose geometric labels were learned from.
+    pub geometry_frames: u64,
+    /// Views whose drawn masks were learned from.
+    pub mask_views: u64,
+}
+
+/// The learned appearance of the hand and the tool (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AppearanceModel {
+    /// Per label of [`label::NAMED`]: hand, scalpel.
+    sums: [Sums; 2],
+    /// Kept per new frame set of samples: the weight of what was learned `n` frame sets ago is
+    /// `forget^n`.
+    pub forget: f64,
+    /// Learn from every `stride`-th pixel of every `stride`-th row.
+    pub stride: usize,
+    /// Pixels a label needs before it is used.
+    pub min_pixels: f64,
+    /// Where the samples came from.
+    pub sources: AppearanceSources,
+}
+
+impl Default for AppearanceModel {
+    fn default() -> Self {
+        AppearanceModel {
+            sums: [Sums::default(); 2],
+            forget: 0.97,
+            stride: 3,
+            min_pixels: 200.0,
+            sources: AppearanceSources::default(),
+        }
+    }
+}
+
+/// One label's learned colour, for reports.
+#[derive(Debug, Clone, Serialize)]
+pub struct LearnedColour {
+    /// `hand` or `scalpel`.
+    pub label: &'static str,
+    /// Weight of the samples (pixels, decayed).
+    pub pixels: f64,
+    /// Mean (r/s, b/s, s/765).
+    pub mean: Option<[f64; 3]>,
+    /// Standard deviations of the three features.
+    pub sd: Option<[f64; 3]>,
+    /// The mean as an 8-bit colour at mid brightness, for people.
+    pub rgb: Option<[u8; 3]>,
+}
+
+fn features(p: [u8; 3]) -> Option<[f64; 3]> {
+    let s = u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]);
+    (s >= MIN_SUM).then(|| {
+        let s = f64::from(s);
+        [f64::from(p[0]) / s, f64::from(p[2]) / s, s / 765.0]
+    })
+}
+
+impl AppearanceModel {
+    /// Learns from one image and its labels (hand and scalpel pixels; others ignored). With
+    /// `erode`, only pixels whose four neighbours share their label (away from edges, where colours
+    /// blend and labels are least sure).
+    pub fn learn(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool) {
+        if image.dimensions() != labels.dimensions() {
+            return;
+        }
+        let (w, h) = (labels.width() as usize, labels.height() as usize);
+        let (raw, px) = (labels.as_raw(), image.as_raw());
+        let stride = self.stride.max(1);
+        for j in (1..h.saturating_sub(1)).step_by(stride) {
+            for i in (1..w.saturating_sub(1)).step_by(stride) {
+                let k = j * w + i;
+                let l = raw[k];
+                let Some(slot) = label::NAMED.iter().position(|&(n, _)| n == l) else { continue };
+                if erode && (raw[k - 1] != l || raw[k + 1] != l || raw[k - w] != l || raw[k + w] != l) {
+                    continue;
+                }
+                if let Some(f) = features([px[3 * k], px[3 * k + 1], px[3 * k + 2]]) {
+                    self.sums[slot].add(f);
+                }
+            }
+        }
+    }
+
+    /// Forgets a little of what was learned (call once per frame set learned from).
+    pub fn age(&mut self) {
+        for s in &mut self.sums {
+            s.scale(self.forget);
+        }
+    }
+
+    /// Whether both labels have enough samples to classify with.
+    pub fn ready(&self) -> bool {
+        self.sums.iter().all(|s| s.weight >= self.min_pixels)
+    }
+
+    /// The colour classes to segment with, once both labels are learned.
+    pub fn classes(&self) -> Option<ColourClasses> {
+        if !self.ready() {
+            return None;
+        }
+        let classes: Vec<ColourClass> =
+            label::NAMED.iter().zip(&self.sums).filter_map(|(&(l, _), s)| s.class(l)).collect();
+        (classes.len() == 2).then_some(ColourClasses { classes, reject_mahalanobis2: None })
+    }
+
+    /// What was learned, per label.
+    pub fn summary(&self) -> Vec<LearnedColour> {
+        label::NAMED
+            .iter()
+            .zip(&self.sums)
+            .map(|(&(l, name), s)| {
+                let class = s.class(l);
+                LearnedColour {
+                    label: name,
+                    pixels: s.weight,
+                    mean: class.as_ref().map(|c| c.mean),
+                    sd: class.as_ref().map(|c| [0, 1, 2].map(|i| c.cov[i][i].sqrt())),
+                    rgb: class.as_ref().map(|c| {
+                        let (r, b) = (c.mean[0], c.mean[1]);
+                        let g = 1.0 - r - b;
+                        [r, g, b].map(|x| (x * 3.0 * 128.0).round().clamp(0.0, 255.0) as u8)
+                    }),
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn learns_the_colours_it_is_shown_and_forgets_the_old_ones() {
+        let (w, h) = (60, 40);
+        let mut image = RgbImage::new(w, h);
+        let mut labels = GrayImage::new(w, h);
+        for (i, j, p) in image.enumerate_pixels_mut() {
+            let hand = i < 30;
+            *p = image::Rgb(if hand { [200, 140, 110] } else { [90, 90, 95] });
+            labels.put_pixel(i, j, image::Luma([if hand { label::HAND } else { label::SCALPEL }]));
+        }
+        let mut model = AppearanceModel { min_pixels: 50.0, ..AppearanceModel::default() };
+        assert!(model.classes().is_none(), "nothing learned yet");
+        model.learn(&image, &labels, true);
+        let classes = model.classes().expect("both labels learned");
+        assert_eq!(classes.classify([190, 130, 100]), label::HAND, "a darker skin pixel");
+        assert_eq!(classes.classify([120, 120, 126]), label::SCALPEL, "a brighter steel pixel");
+        let hand = &model.summary()[0];
+        assert_eq!(hand.label, "hand");
+        assert!(hand.rgb.is_some_and(|c| c[0] > c[1] && c[1] > c[2]), "{hand:?}");
+        let before = model.summary()[0].pixels;
+        model.age();
+        assert!((model.summary()[0].pixels - before * 0.97).abs() < 1e-9);
+    }
+}

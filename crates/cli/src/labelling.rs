@@ -1,0 +1,373 @@
+//! Masks from a recording's images, for `segment`, `reconstruct` and `run`: the foreground from the
+//! background model (empty-scene images, else the recording's own median), its labels from the
+//! known tool's geometry ([`ToolLabeller`]: the tool fitted into the foreground's hull and drawn
+//! into every view, the hand's occlusion respected), and where the tool cannot be fitted, or there
+//! is no tool.json, from the colours learned from the recording ([`AppearanceModel`]: from the
+//! geometric labels of trusted frames and from frames a lab has masked, `--label-frames`).
+
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use hullcut_capture::segment::{
+    AppearanceModel, ColourLut, LearnedColour, Method, SHADOW_LIKE, SegmentParams, Segmenter,
+};
+use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
+use hullcut_hull::shadow::{cover, keep_supported};
+use hullcut_hull::{HullParams, Occupancy, Silhouette, silhouettes};
+use hullcut_pose::{LabelParams, LabelStats, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput};
+use image::GrayImage;
+use serde::Serialize;
+
+use crate::backend::Carver;
+
+/// A trusted frame set's geometric labels teach the appearance model when its confidence is at
+/// least this.
+const LEARN_CONFIDENCE: f64 = 0.8;
+/// The tool's fit to foreground evidence counts as agreeing from 82% (none) to 92% (full) of its
+/// samples explained: the band around the tool holds some of the hand's outline too.
+const GEOMETRY_AGREEMENT: (f64, f64) = (0.82, 0.92);
+/// The colour classes are recompiled after this many frame sets learned from.
+const REFRESH_EVERY: u64 = 15;
+/// Foreground this close (pixels, square neighbourhood) to the drawn tool takes the label of its
+/// colour where the colour is sure: the geometry puts the tool to a pixel or two, and where the
+/// hand crosses it the hull cannot say which is in front to the pixel.
+const SHARPEN_PX: usize = 4;
+/// A colour is sure when its class is at least e^(margin/2) (here 20) times as likely as the other.
+const SHARPEN_MARGIN: f64 = 6.0;
+/// Pixels down to this much darker than their background (relative) with their chromaticity
+/// unchanged may be cast shadows, resolved by the hull ([`hullcut_hull::shadow`]): a shadow in
+/// full (ambient light only) keeps a fifth of the light or more.
+const SHADOW_DEPTH: f64 = 0.8;
+
+/// Where a frame set's labels came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum LabelSource {
+    /// The fitted tool drawn into the views.
+    Geometry,
+    /// The colours learned from the recording.
+    Colour,
+    /// Neither: foreground of unknown label.
+    Unknown,
+}
+
+/// Counts per label source, and what was learned.
+#[derive(Debug, Clone, Default, Serialize)]
+pub(crate) struct LabelCounters {
+    /// Frame sets labelled by the tool's geometry.
+    pub geometry: u64,
+    /// Frame sets labelled by the learned colours.
+    pub colour: u64,
+    /// Frame sets whose foreground stayed unknown.
+    pub unknown: u64,
+    /// Frame sets whose geometric labels the appearance model learned from.
+    pub learned: u64,
+    /// Pixels that looked like cast shadows (darker, chromaticity unchanged), over all views.
+    pub shadow_pixels: u64,
+    /// Of those, pixels the hull showed to be foreground (a dark object, not a shadow).
+    pub shadow_foreground: u64,
+    /// Hull cells dropped because no view saw sure foreground in them (shadows on the table).
+    pub shadow_cells_dropped: u64,
+}
+
+/// What the labelling of a run did, for its report.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct LabellingReport {
+    /// How each camera found its foreground: `background` (empty-scene images), `median` (the
+    /// recording's median), `mog2`.
+    pub foreground: Vec<Option<Method>>,
+    /// Whether a tool.json was there to label by geometry.
+    pub tool: bool,
+    /// Frames whose masks/ seeded the colours (`--label-frames`).
+    pub label_frames: Vec<u64>,
+    /// Counts per label source.
+    pub counters: LabelCounters,
+    /// The learned colours.
+    pub appearance: Vec<LearnedColour>,
+    /// Frame sets and views it learned from.
+    pub appearance_sources: hullcut_capture::segment::AppearanceSources,
+}
+
+/// One frame set's labels.
+pub(crate) struct Labelled {
+    /// Per view: 0 background, 1 hand, 2 scalpel, 255 unknown.
+    pub masks: Vec<Option<GrayImage>>,
+    /// The foreground's hull with the tool's cells labelled, when the geometry ran (no need to
+    /// carve again).
+    pub occupancy: Option<Occupancy>,
+    /// The tool's pose, when there is a tool.json (the labelling's track is the pose's).
+    pub estimate: Option<PoseEstimate>,
+    /// Where the labels came from.
+    pub source: LabelSource,
+    /// Foreground extraction, ms.
+    pub foreground_ms: f64,
+    /// Carving the foreground's hull, ms.
+    pub carve_ms: f64,
+    /// The geometric labeller's counters and timings.
+    pub stats: Option<LabelStats>,
+}
+
+/// Labels frame sets (see the module docs).
+pub(crate) struct Labelling {
+    segmenter: Segmenter,
+    tool: Option<ToolLabeller>,
+    appearance: AppearanceModel,
+    colours: Option<ColourLut>,
+    /// The colours compiled to decide only where sure ([`SHARPEN_MARGIN`]).
+    sure: Option<ColourLut>,
+    hull: HullParams,
+    rig: hullcut_rig::Rig,
+    label_frames: Vec<u64>,
+    counters: LabelCounters,
+    masks: Vec<Option<GrayImage>>,
+}
+
+impl Labelling {
+    /// Sets up the foreground models, the tool's labeller and the colours of `label_frames`' masks.
+    /// Without a tool and without masked frames there is nothing to tell hand from tool: an error
+    /// that says what a lab must provide.
+    pub fn new(
+        ds: &Dataset,
+        tool: Option<&ToolGeometry>,
+        hull: HullParams,
+        label_frames: &[u64],
+    ) -> anyhow::Result<Self> {
+        let params = SegmentParams { shadow_depth: SHADOW_DEPTH, ..SegmentParams::default() };
+        let segmenter = Segmenter::from_dataset(ds, params).context("setting up segmentation")?;
+        let mut appearance = AppearanceModel::default();
+        for &frame in label_frames {
+            if !ds.has_masks() {
+                bail!("--label-frames: {} has no masks/ to learn the colours from", ds.root().display());
+            }
+            let set = ds.read_frame_set(frame, true).with_context(|| format!("--label-frames: frame {frame}"))?;
+            for view in set.views.iter().flatten() {
+                let Some(mask) = &view.mask else { continue };
+                appearance.learn(&view.image, mask, false);
+                appearance.sources.mask_views += 1;
+            }
+        }
+        let classes = appearance.classes();
+        let colours = classes.as_ref().map(ColourLut::new);
+        let sure = classes.as_ref().map(|c| ColourLut::confident(c, SHARPEN_MARGIN));
+        let tool = tool
+            .map(|t| {
+                ToolLabeller::new(
+                    t,
+                    TrackerParams { agreement: GEOMETRY_AGREEMENT, ..TrackerParams::default() },
+                    LabelParams::default(),
+                )
+            })
+            .transpose()
+            .context("tool.json cannot serve to label the tool")?;
+        if tool.is_none() && colours.is_none() {
+            bail!(
+                "{}: nothing tells the hand from the scalpel: add the scalpel's tool.json (its mesh, tip and cutting \
+                 edge; README, \"From your rig to hullcut run\"), or draw masks/ for a few frames and name them with \
+                 --label-frames (both labels must appear)",
+                ds.root().display()
+            );
+        }
+        Ok(Labelling {
+            segmenter,
+            tool,
+            appearance,
+            colours,
+            sure,
+            hull,
+            rig: ds.rig().clone(),
+            label_frames: label_frames.to_vec(),
+            counters: LabelCounters::default(),
+            masks: Vec::new(),
+        })
+    }
+
+    /// Labels one frame set.
+    pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> anyhow::Result<Labelled> {
+        let frame = set.frame;
+        let clock = Instant::now();
+        let mut fg = std::mem::take(&mut self.masks);
+        self.segmenter.segment_frame_set_into(set, &mut fg).with_context(|| format!("segmenting frame {frame}"))?;
+        let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
+        let shadow_pixels: u64 =
+            fg.iter().flatten().map(|m| m.iter().filter(|&&p| p == SHADOW_LIKE).count() as u64).sum();
+        self.counters.shadow_pixels += shadow_pixels;
+        if self.tool.is_none() && shadow_pixels == 0 {
+            // No tool: the colours learned from the masked frames.
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
+            self.counters.colour += 1;
+            self.masks = fg;
+            return Ok(Labelled {
+                masks,
+                occupancy: None,
+                estimate: None,
+                source: LabelSource::Colour,
+                foreground_ms,
+                carve_ms: 0.0,
+                stats: None,
+            });
+        }
+        let clock = Instant::now();
+        let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
+        let views = silhouettes(&self.rig, &refs).with_context(|| format!("frame {frame}"))?;
+        let mut occ = carver.carve(&views, &self.hull).with_context(|| format!("frame {frame}"))?;
+        if shadow_pixels > 0 {
+            occ = self.resolve_shadows(occ, &views, &mut fg).with_context(|| format!("frame {frame}"))?;
+        }
+        let carve_ms = clock.elapsed().as_secs_f64() * 1e3;
+        if self.tool.is_none() {
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
+            self.counters.colour += 1;
+            self.masks = fg;
+            return Ok(Labelled {
+                masks,
+                occupancy: None,
+                estimate: None,
+                source: LabelSource::Colour,
+                foreground_ms,
+                carve_ms,
+                stats: None,
+            });
+        }
+        let inputs: Vec<Option<ViewInput>> = self
+            .rig
+            .cameras
+            .iter()
+            .zip(&fg)
+            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
+            .collect();
+        let Some(labeller) = &mut self.tool else { bail!("no tool to label frame {frame} with") };
+        let labelled = labeller.label(frame, set.timestamp_ns, &occ, &inputs);
+        let estimate = labelled.estimate;
+        let (mut masks, source) = if estimate.fitted.is_some() {
+            let mut masks = labelled.masks;
+            if let Some(sure) = &self.sure {
+                for ((view, mask), region) in set.views.iter().zip(&mut masks).zip(&labelled.tool_regions) {
+                    if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
+                        sharpen(sure, &view.image, mask, region);
+                    }
+                }
+            }
+            (masks, LabelSource::Geometry)
+        } else if self.colours.is_some() {
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
+            (masks, LabelSource::Colour)
+        } else {
+            (labelled.masks, LabelSource::Unknown)
+        };
+        match source {
+            LabelSource::Geometry => self.counters.geometry += 1,
+            LabelSource::Colour => self.counters.colour += 1,
+            LabelSource::Unknown => self.counters.unknown += 1,
+        }
+        if source == LabelSource::Geometry && estimate.valid && estimate.confidence >= LEARN_CONFIDENCE {
+            self.learn(set, &masks);
+        }
+        // The colour-labelled masks need their own hull; the geometric ones come with theirs.
+        let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
+        masks.resize(set.views.len(), None);
+        self.masks = fg;
+        Ok(Labelled {
+            masks,
+            occupancy,
+            estimate: Some(estimate),
+            source,
+            foreground_ms,
+            carve_ms,
+            stats: Some(labelled.stats),
+        })
+    }
+
+    /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible
+    /// shadows foreground where those cells cover them, background elsewhere.
+    fn resolve_shadows(
+        &mut self,
+        occ: Occupancy,
+        views: &[Option<Silhouette>],
+        fg: &mut [Option<GrayImage>],
+    ) -> anyhow::Result<Occupancy> {
+        let sure: Vec<Option<GrayImage>> = fg
+            .iter()
+            .map(|m| {
+                m.as_ref().map(|m| {
+                    let mut m = m.clone();
+                    m.iter_mut().filter(|p| **p == SHADOW_LIKE).for_each(|p| *p = label::BACKGROUND);
+                    m
+                })
+            })
+            .collect();
+        let refs: Vec<Option<&GrayImage>> = sure.iter().map(Option::as_ref).collect();
+        let sure = silhouettes(&self.rig, &refs)?;
+        let (occ, dropped) = keep_supported(&occ, views, &sure, self.hull.margin_px);
+        self.counters.shadow_cells_dropped += dropped as u64;
+        for (view, mask) in views.iter().zip(fg.iter_mut()) {
+            if let (Some(view), Some(mask)) = (view, mask) {
+                self.counters.shadow_foreground +=
+                    cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, self.hull.margin_px);
+            }
+        }
+        Ok(occ)
+    }
+
+    /// Labels the foreground of `masks` by colour (unknown where no colours are learned yet).
+    fn colour(&self, set: &FrameSet, masks: &mut [Option<GrayImage>]) {
+        let Some(lut) = &self.colours else { return };
+        for (view, mask) in set.views.iter().zip(masks) {
+            if let (Some(view), Some(mask)) = (view, mask) {
+                lut.label_foreground(&view.image, mask);
+            }
+        }
+    }
+
+    /// Learns a trusted frame set's colours; recompiles the classes now and then.
+    fn learn(&mut self, set: &FrameSet, masks: &[Option<GrayImage>]) {
+        self.appearance.age();
+        for (view, mask) in set.views.iter().zip(masks) {
+            if let (Some(view), Some(mask)) = (view, mask) {
+                self.appearance.learn(&view.image, mask, true);
+            }
+        }
+        self.appearance.sources.geometry_frames += 1;
+        self.counters.learned += 1;
+        if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() {
+            let classes = self.appearance.classes();
+            self.colours = classes.as_ref().map(ColourLut::new);
+            self.sure = classes.as_ref().map(|c| ColourLut::confident(c, SHARPEN_MARGIN));
+        }
+    }
+
+    /// What the labelling did so far.
+    pub fn report(&self) -> LabellingReport {
+        LabellingReport {
+            foreground: (0..self.segmenter.cameras()).map(|c| self.segmenter.method(c)).collect(),
+            tool: self.tool.is_some(),
+            label_frames: self.label_frames.clone(),
+            counters: self.counters.clone(),
+            appearance: self.appearance.summary(),
+            appearance_sources: self.appearance.sources,
+        }
+    }
+}
+
+/// Gives the foreground near the drawn tool (`region`, grown by [`SHARPEN_PX`]) the label of its
+/// colour where `sure` decides; the geometry's label stays elsewhere.
+fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, region: &ToolRegion) {
+    if image.dimensions() != mask.dimensions() {
+        return;
+    }
+    let (w, h) = (mask.width() as usize, mask.height() as usize);
+    let near = region.dilated(SHARPEN_PX, w, h);
+    let (px, raw) = (image.as_raw(), mask.as_mut());
+    for (x, y) in near.pixels() {
+        let k = y * w + x;
+        if raw[k] == label::BACKGROUND {
+            continue;
+        }
+        let colour = sure.get([px[3 * k], px[3 * k + 1], px[3 * k + 2]]);
+        if colour != label::UNKNOWN {
+            raw[k] = colour;
+        }
+    }
+}

@@ -1,0 +1,1006 @@
+//! Labels from geometry: which foreground pixels are the known tool, with no colour model.
+//!
+//! The foreground of every view (hand and tool together) carves one hull. The tool's template is
+//! fitted into it by the [`Tracker`]: from the track's prediction when there is one, else from the
+//! hull's thin parts (what an opening of the hull by [`LabelParams::thin_radius_m`] removes: a
+//! handle and a blade, not a palm or a fist). The fit's evidence is the foreground's outline where
+//! the tool should be: foreground pixels within [`LabelParams::band_px`] of the predicted tool's
+//! silhouette are taken as scalpel for the fit, the rest as hand, so the outline of the tool
+//! against the background is what pulls the fit, and the hand's outline elsewhere does not.
+//!
+//! With the fitted pose, the tool's mesh is drawn into every view with a depth buffer; a
+//! foreground pixel it covers is scalpel unless a hull cell of the hand (farther than
+//! [`LabelParams::tool_margin_m`] from the tool) lies in front of it along that pixel's ray by more
+//! than [`LabelParams::occlusion_margin_m`]: then the hand hides the tool there. Every other
+//! foreground pixel is hand. The hull's cells are relabelled the same way: near the tool,
+//! scalpel; the rest, hand. A frame whose tool cannot be fitted leaves its foreground unknown.
+
+use std::time::Instant;
+
+use hullcut_dataset::{Mesh, ToolGeometry, label};
+use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, footprint_counts};
+use hullcut_rig::Camera;
+use image::GrayImage;
+use nalgebra::{Isometry3, Point2, Point3, Vector3};
+
+use crate::ToolError;
+use crate::evidence::project;
+use crate::geometry::{convex_hull, nearest_on_convex};
+use crate::template::Template;
+use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
+
+/// Thin components tried as the tool when there is no track (largest first).
+const INIT_COMPONENTS: usize = 3;
+
+/// Settings of geometric labelling.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelParams {
+    /// Radius of the opening that keeps the hand's bulk and removes thin parts, metres: parts of
+    /// the hull narrower than twice this are taken as the tool when there is no track.
+    pub thin_radius_m: f64,
+    /// Foreground within this many pixels of the predicted tool's silhouette is the fit's
+    /// evidence of the tool.
+    pub band_px: f64,
+    /// Hull cells whose centre lies this close to the tool's surface (plus half a cell's diagonal)
+    /// are the tool's, metres.
+    pub tool_margin_m: f64,
+    /// A hand cell hides the tool where it lies this much nearer the camera than the tool's
+    /// surface, metres (plus one cell).
+    pub occlusion_margin_m: f64,
+}
+
+impl Default for LabelParams {
+    fn default() -> Self {
+        LabelParams { thin_radius_m: 0.007, band_px: 3.0, tool_margin_m: 0.002, occlusion_margin_m: 0.003 }
+    }
+}
+
+/// What labelling one frame set found, and what it cost.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LabelStats {
+    /// The pose came from the hull's thin parts (no track to follow).
+    pub from_thin_parts: bool,
+    /// Hull leaves taken as thin parts (when starting from them).
+    pub thin_leaves: usize,
+    /// Foreground pixels labelled scalpel, over all views.
+    pub scalpel_pixels: u64,
+    /// Pixels the tool's mesh covers that the hand hides, over all views.
+    pub hidden_pixels: u64,
+    /// Foreground pixels left unknown (no fitted tool).
+    pub unknown_pixels: u64,
+    /// Time for the fit's evidence (thin parts, provisional labels, relabelled hull), ms.
+    pub evidence_ms: f64,
+    /// Time in the tracker (fit, confidence), ms.
+    pub fit_ms: f64,
+    /// Time drawing the final labels (tool mesh, hand depth), ms.
+    pub draw_ms: f64,
+}
+
+/// One frame set labelled: the pose estimate, a label mask per view, the hull relabelled.
+#[derive(Debug, Clone)]
+pub struct LabelledFrame {
+    /// The tracker's estimate for the frame.
+    pub estimate: PoseEstimate,
+    /// Per view (rig order): 0 background, 1 hand, 2 scalpel, 255 unknown; `None` for a missing
+    /// view.
+    pub masks: Vec<Option<GrayImage>>,
+    /// The foreground's hull with tool cells labelled scalpel and the others hand.
+    pub occupancy: Occupancy,
+    /// Per view: where the fitted tool's mesh is drawn, hidden or not (`None` without a fit, a
+    /// view, or the tool in it).
+    pub tool_regions: Vec<Option<ToolRegion>>,
+    /// Counters and timings.
+    pub stats: LabelStats,
+}
+
+/// The pixels a drawn tool covers in one view, in its bounding box.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ToolRegion {
+    /// Left column of the box.
+    pub x0: usize,
+    /// Top row of the box.
+    pub y0: usize,
+    /// Width of the box.
+    pub width: usize,
+    /// Height of the box.
+    pub height: usize,
+    /// Row-major over the box: whether the tool covers the pixel.
+    pub covered: Vec<bool>,
+}
+
+impl ToolRegion {
+    /// The region grown by `r` pixels (a square neighbourhood), clipped to a `width`×`height`
+    /// image.
+    pub fn dilated(&self, r: usize, width: usize, height: usize) -> ToolRegion {
+        let (x0, y0) = (self.x0.saturating_sub(r), self.y0.saturating_sub(r));
+        let x1 = (self.x0 + self.width + r).min(width);
+        let y1 = (self.y0 + self.height + r).min(height);
+        let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+        // Separable max: along rows into `rows`, then along columns.
+        let mut rows = vec![false; w * h];
+        for j in 0..self.height {
+            for i in 0..self.width {
+                if !self.covered[j * self.width + i] {
+                    continue;
+                }
+                let (x, y) = (self.x0 + i - x0, self.y0 + j - y0);
+                if y >= h || x >= w {
+                    continue;
+                }
+                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
+                    rows[y * w + xx] = true;
+                }
+            }
+        }
+        let mut covered = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                if rows[y * w + x] {
+                    for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                        covered[yy * w + x] = true;
+                    }
+                }
+            }
+        }
+        ToolRegion { x0, y0, width: w, height: h, covered }
+    }
+
+    /// The covered pixels, as image coordinates.
+    pub fn pixels(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.covered
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| **c)
+            .map(|(k, _)| (self.x0 + k % self.width.max(1), self.y0 + k / self.width.max(1)))
+    }
+}
+
+/// Labels foreground with the known tool, frame after frame (it keeps the tool's track).
+#[derive(Debug, Clone)]
+pub struct ToolLabeller {
+    tracker: Tracker,
+    mesh: Mesh,
+    /// Points filling the tool, 1 mm apart, tool frame (for the hull's tool cells).
+    points: Vec<Point3<f64>>,
+    params: LabelParams,
+}
+
+impl ToolLabeller {
+    /// A labeller for the tool of `tool.json`.
+    pub fn new(tool: &ToolGeometry, tracker: TrackerParams, params: LabelParams) -> Result<Self, ToolError> {
+        let template = Template::new(tool)?;
+        if tool.mesh.triangles.is_empty() {
+            return Err(ToolError::Template("the tool's mesh has no triangles to draw".to_owned()));
+        }
+        let points = tool_points(&tool.mesh, 0.001);
+        Ok(ToolLabeller { tracker: Tracker::new(template, tracker), mesh: tool.mesh.clone(), points, params })
+    }
+
+    /// The tracker (its template and settings).
+    pub fn tracker(&self) -> &Tracker {
+        &self.tracker
+    }
+
+    /// Labels one frame set: `occ` is the hull of the views' foreground, `views` their foreground
+    /// masks (any non-zero label is foreground), one entry per rig camera.
+    pub fn label(
+        &mut self,
+        frame: u64,
+        timestamp_ns: i64,
+        occ: &Occupancy,
+        views: &[Option<ViewInput>],
+    ) -> LabelledFrame {
+        let mut stats = LabelStats::default();
+        let clock = Instant::now();
+        let template = self.tracker.template().clone();
+        let provisional_for = |pose: &Isometry3<f64>| {
+            let hull = near_tool(occ, &self.points, pose, self.params.tool_margin_m);
+            let hand: Vec<hullcut_hull::Cell> = hull.cells.iter().filter(|c| c.hand).copied().collect();
+            let masks: Vec<Option<GrayImage>> =
+                views.iter().map(|v| v.map(|v| band_labels(v, &template, pose, self.params.band_px, &hand))).collect();
+            (masks, hull)
+        };
+        // Each way to start is tried on a copy of the tracker; the best copy becomes the tracker.
+        let score = |e: &PoseEstimate| {
+            (e.fitted.is_some(), e.valid, e.confidence, e.diagnostics.explained * e.diagnostics.covered)
+        };
+        let mut best: Option<(Tracker, PoseEstimate)> = None;
+        let consider = |probe: Tracker, e: PoseEstimate, best: &mut Option<(Tracker, PoseEstimate)>| {
+            if best.as_ref().is_none_or(|(_, b)| score(&e).partial_cmp(&score(b)).is_some_and(|o| o.is_gt())) {
+                *best = Some((probe, e));
+            }
+        };
+        let fit_with = |tracker: &Tracker, (masks, hull): &(Vec<Option<GrayImage>>, Occupancy)| {
+            let mut probe = tracker.clone();
+            let e = probe.update(frame, timestamp_ns, hull, &inputs(views, masks));
+            (probe, e)
+        };
+        let mut evidence_ms = 0.0;
+        let mut timed_evidence = |f: &dyn Fn() -> (Vec<Option<GrayImage>>, Occupancy)| {
+            let clock = Instant::now();
+            let out = f();
+            evidence_ms += clock.elapsed().as_secs_f64() * 1e3;
+            out
+        };
+        // From the track's prediction.
+        if let Some(pose) = self.tracker.predicted(timestamp_ns) {
+            let evidence = timed_evidence(&|| provisional_for(&pose));
+            let (probe, e) = fit_with(&self.tracker, &evidence);
+            consider(probe, e, &mut best);
+        }
+        // From the hull's thin parts, when the track gave nothing trusted: each of the largest thin
+        // components in turn as the tool, then the evidence around the best first fit.
+        if !best.as_ref().is_some_and(|(_, e)| e.valid) {
+            stats.from_thin_parts = true;
+            let (thin, components) = thin_parts(occ, self.params.thin_radius_m);
+            stats.thin_leaves = components.iter().map(Vec::len).sum();
+            let mut first: Option<PoseEstimate> = None;
+            for component in components.iter().take(INIT_COMPONENTS).filter(|c| c.len() >= 3) {
+                let evidence = timed_evidence(&|| {
+                    let hull = only(&thin, component);
+                    (views.iter().map(|v| v.map(|v| thin_labels(v, &hull))).collect(), hull)
+                });
+                let (_, e) = fit_with(&self.tracker, &evidence);
+                if first.as_ref().is_none_or(|b| score(&e).partial_cmp(&score(b)).is_some_and(|o| o.is_gt())) {
+                    first = Some(e);
+                }
+            }
+            if let Some(pose) = first.and_then(|e| e.fitted).map(|p| p.tool_to_world) {
+                let evidence = timed_evidence(&|| provisional_for(&pose));
+                let (probe, e) = fit_with(&self.tracker, &evidence);
+                consider(probe, e, &mut best);
+            }
+        }
+        stats.evidence_ms = evidence_ms;
+        stats.fit_ms = clock.elapsed().as_secs_f64() * 1e3 - evidence_ms;
+        let estimate = match best {
+            Some((tracker, e)) => {
+                self.tracker = tracker;
+                e
+            }
+            None => {
+                // Nothing to fit: the tracker's own refusal (and its held pose).
+                self.tracker.update(frame, timestamp_ns, occ, &inputs(views, &[]))
+            }
+        };
+        let clock = Instant::now();
+        let (masks, occupancy, tool_regions) = match &estimate.fitted {
+            Some(fitted) => {
+                let pose = fitted.tool_to_world;
+                let occupancy = near_tool(occ, &self.points, &pose, self.params.tool_margin_m);
+                // The tool drawn into every view, and the hull's cells labelled from those
+                // drawings: a cell is the hand's only where views see foreground the tool does not
+                // explain (the tool's own hull, fatter than the tool, hides nothing).
+                let drawn: Vec<Option<ToolDepth>> = views
+                    .iter()
+                    .map(|v| {
+                        v.and_then(|v| {
+                            ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), &self.mesh, &pose)
+                        })
+                    })
+                    .collect();
+                let unhidden: Vec<Option<GrayImage>> =
+                    views.iter().zip(&drawn).map(|(v, d)| v.map(|v| labels_without_occlusion(v, d.as_ref()))).collect();
+                // Occluders per view: the hull's hand cells (labelled from those drawings) whose
+                // footprint in that very view holds hand pixels, i.e. cells that view can see as
+                // hand. A cell of the hand's hull that the view sees only where the tool is drawn
+                // is the hull's fat (a phantom in front of the tool), not what hides it.
+                let sil: Vec<Option<Silhouette>> = views
+                    .iter()
+                    .zip(&unhidden)
+                    .map(|(v, m)| v.zip(m.as_ref()).map(|(v, m)| Silhouette::new(v.camera, m)))
+                    .collect();
+                let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
+                let labelled = hullcut_hull::relabel(&occupancy, &sil, &params);
+                let hand_cells: Vec<hullcut_hull::Cell> = labelled
+                    .cells
+                    .iter()
+                    .zip(&occupancy.cells)
+                    .filter(|(l, o)| l.hand && !l.scalpel && o.hand)
+                    .map(|(l, _)| *l)
+                    .collect();
+                let occluders: Vec<Vec<hullcut_hull::Cell>> = sil
+                    .iter()
+                    .map(|s| match s {
+                        Some(s) => hand_cells
+                            .iter()
+                            .filter(|c| footprint_counts(s, c, params.margin_px).is_some_and(|n| n.hand > 0))
+                            .copied()
+                            .collect(),
+                        None => Vec::new(),
+                    })
+                    .collect();
+                let masks = views
+                    .iter()
+                    .zip(&drawn)
+                    .zip(&occluders)
+                    .map(|((v, d), o)| v.map(|v| self.final_labels(v, d.as_ref(), o, occ.leaf_size, &mut stats)))
+                    .collect();
+                let regions = drawn.iter().map(|d| d.as_ref().map(ToolDepth::region)).collect();
+                (masks, occupancy, regions)
+            }
+            None => {
+                let masks = views
+                    .iter()
+                    .map(|v| {
+                        v.map(|v| {
+                            let mut m = v.mask.clone();
+                            for p in m.iter_mut().filter(|p| **p != label::BACKGROUND) {
+                                *p = label::UNKNOWN;
+                                stats.unknown_pixels += 1;
+                            }
+                            m
+                        })
+                    })
+                    .collect();
+                (masks, occ.clone(), vec![None; views.len()])
+            }
+        };
+        stats.draw_ms = clock.elapsed().as_secs_f64() * 1e3;
+        LabelledFrame { estimate, masks, occupancy, tool_regions, stats }
+    }
+
+    /// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
+    /// hand cell lies in front of it there; the rest of the foreground hand.
+    fn final_labels(
+        &self,
+        view: ViewInput,
+        tool: Option<&ToolDepth>,
+        hand_cells: &[hullcut_hull::Cell],
+        leaf: f64,
+        stats: &mut LabelStats,
+    ) -> GrayImage {
+        let cam = view.camera;
+        let radius = cam.distortion.monotonic_radius();
+        let mut out = view.mask.clone();
+        for p in out.iter_mut() {
+            if *p != label::BACKGROUND {
+                *p = label::HAND;
+            }
+        }
+        let Some(tool) = tool else { return out };
+        let mut hand = vec![f32::INFINITY; tool.depth.len()];
+        let margin = self.params.occlusion_margin_m + leaf;
+        for c in hand_cells {
+            let mut corners = [(Point2::origin(), 0.0); 8];
+            let mut all = true;
+            for (k, corner) in corners.iter_mut().enumerate() {
+                let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
+                match project(cam, radius, &p) {
+                    Some(uv) => *corner = (uv, cam.world_to_camera(&p).z),
+                    None => all = false,
+                }
+            }
+            if !all {
+                continue;
+            }
+            let (mut lo, mut hi, mut z) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN), f64::MAX);
+            for (uv, d) in &corners {
+                lo = lo.inf(uv);
+                hi = hi.sup(uv);
+                z = z.min(*d);
+            }
+            tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
+        }
+        let (w, raw) = (out.width() as usize, view.mask.as_raw());
+        // 0 outside the tool or on background, 1 visible tool, 2 hidden by the hand.
+        let state: Vec<u8> = tool
+            .depth
+            .iter()
+            .enumerate()
+            .map(|(k, &d)| {
+                let px = (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w;
+                if !d.is_finite() || raw[px] == label::BACKGROUND {
+                    0
+                } else if hand[k] < d {
+                    2
+                } else {
+                    1
+                }
+            })
+            .collect();
+        // The hand's hull is coarser than the pixels: where a finger crosses the tool, slivers of
+        // the tool's drawing slip past its cells. A visible pixel with more hidden than visible
+        // tool pixels around it (5x5) is hidden too.
+        let h = state.len() / tool.w.max(1);
+        for (k, &st) in state.iter().enumerate() {
+            if st == 0 {
+                continue;
+            }
+            let (i, j) = (k % tool.w, k / tool.w);
+            let mut hidden = st == 2;
+            if !hidden {
+                let (mut vis, mut hid) = (0, 0);
+                for y in j.saturating_sub(2)..(j + 3).min(h) {
+                    for x in i.saturating_sub(2)..(i + 3).min(tool.w) {
+                        match state[y * tool.w + x] {
+                            1 => vis += 1,
+                            2 => hid += 1,
+                            _ => {}
+                        }
+                    }
+                }
+                hidden = hid > vis;
+            }
+            let px = (tool.y0 + j) * w + tool.x0 + i;
+            if hidden {
+                stats.hidden_pixels += 1;
+            } else {
+                out.as_mut()[px] = label::SCALPEL;
+                stats.scalpel_pixels += 1;
+            }
+        }
+        out
+    }
+}
+
+/// Foreground covered by the drawn tool: scalpel, whatever may hide it; other foreground: hand.
+fn labels_without_occlusion(view: ViewInput, tool: Option<&ToolDepth>) -> GrayImage {
+    let mut out = view.mask.clone();
+    let w = out.width() as usize;
+    let raw = out.as_mut();
+    for p in raw.iter_mut() {
+        if *p != label::BACKGROUND {
+            *p = label::HAND;
+        }
+    }
+    if let Some(tool) = tool {
+        for (k, d) in tool.depth.iter().enumerate() {
+            let px = (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w;
+            if d.is_finite() && raw[px] == label::HAND {
+                raw[px] = label::SCALPEL;
+            }
+        }
+    }
+    out
+}
+
+fn inputs<'a>(views: &[Option<ViewInput<'a>>], masks: &'a [Option<GrayImage>]) -> Vec<Option<ViewInput<'a>>> {
+    views
+        .iter()
+        .zip(masks)
+        .map(|(v, m)| v.zip(m.as_ref()).map(|(v, mask)| ViewInput { camera: v.camera, mask }))
+        .collect()
+}
+
+/// The tool's silhouette in a view as the fit models it: the projected blade polygon and the
+/// convex hull of the projected body.
+fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f64>) -> Vec<Vec<Point2<f64>>> {
+    let part = |points: &[Point3<f64>]| {
+        let pixels: Vec<Point2<f64>> = points.iter().filter_map(|p| project(cam, radius, &(pose * p))).collect();
+        convex_hull(&pixels)
+    };
+    [part(&template.blade), part(&template.body)].into_iter().filter(|p| p.len() >= 3).collect()
+}
+
+/// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless a cell of the
+/// hand's hull (`hand`) projects onto it (a finger along the tool, or the hand in front of it:
+/// its outline is not the tool's); other foreground: hand.
+fn band_labels(
+    view: ViewInput,
+    template: &Template,
+    pose: &Isometry3<f64>,
+    band: f64,
+    hand: &[hullcut_hull::Cell],
+) -> GrayImage {
+    let cam = view.camera;
+    let radius = cam.distortion.monotonic_radius();
+    let polygons = silhouette(cam, radius, template, pose);
+    let mut out = view.mask.clone();
+    let (w, h) = (out.width() as usize, out.height() as usize);
+    for p in out.iter_mut() {
+        if *p != label::BACKGROUND {
+            *p = label::HAND;
+        }
+    }
+    for poly in &polygons {
+        let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
+        for q in poly {
+            lo = lo.inf(q);
+            hi = hi.sup(q);
+        }
+        let (i0, j0) = ((lo.x - band).floor().max(0.0) as usize, (lo.y - band).floor().max(0.0) as usize);
+        let (i1, j1) = ((hi.x + band).ceil().min(w as f64 - 1.0), (hi.y + band).ceil().min(h as f64 - 1.0));
+        if i1 < 0.0 || j1 < 0.0 {
+            continue;
+        }
+        let raw = out.as_mut();
+        for j in j0..=j1 as usize {
+            let Some((a, b)) = row_within(poly, band, j as f64, i0, i1 as usize) else { continue };
+            for p in &mut raw[j * w + a..=j * w + b] {
+                if *p == label::HAND {
+                    *p = label::SCALPEL;
+                }
+            }
+        }
+    }
+    clear_hand(&mut out, view.camera, radius, hand);
+    out
+}
+
+/// The columns in `[i0, i1]` of row `y` whose pixel centres lie within `band` of the convex
+/// `polygon`: an interval, since the signed distance to a convex set is a convex function; found by
+/// a ternary search for its minimum and two binary searches for its ends (about thirty distance
+/// evaluations instead of one per column).
+fn row_within(polygon: &[Point2<f64>], band: f64, y: f64, i0: usize, i1: usize) -> Option<(usize, usize)> {
+    let sd = |i: usize| nearest_on_convex(polygon, &Point2::new(i as f64, y)).map_or(f64::INFINITY, |n| n.sd);
+    let (mut lo, mut hi) = (i0, i1);
+    while hi - lo > 2 {
+        let (m1, m2) = (lo + (hi - lo) / 3, hi - (hi - lo) / 3);
+        if sd(m1) < sd(m2) {
+            hi = m2;
+        } else {
+            lo = m1;
+        }
+    }
+    let best = (lo..=hi).min_by(|&a, &b| sd(a).total_cmp(&sd(b)))?;
+    if sd(best) > band {
+        return None;
+    }
+    // First column from the left within the band (sd falls towards `best`).
+    let (mut a, mut b) = (i0, best);
+    while a < b {
+        let m = (a + b) / 2;
+        if sd(m) <= band { b = m } else { a = m + 1 }
+    }
+    let left = a;
+    // Last column within the band (sd rises after `best`).
+    let (mut a, mut b) = (best, i1);
+    while a < b {
+        let m = (a + b).div_ceil(2);
+        if sd(m) <= band { a = m } else { b = m - 1 }
+    }
+    Some((left, a))
+}
+
+/// Gives the scalpel pixels of `labels` that a cell of `hand` projects onto back to the hand: the
+/// cell is a disc around its centre's projection whose radius is its half-diagonal's (enough to
+/// cover its footprint, which is what matters along the tool's outline).
+fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &[hullcut_hull::Cell]) {
+    let (w, h) = (labels.width() as usize, labels.height() as usize);
+    // The scalpel pixels' box: cells projecting elsewhere are skipped after one projection.
+    let (mut lo, mut hi) = ((usize::MAX, usize::MAX), (0, 0));
+    for (k, &l) in labels.as_raw().iter().enumerate() {
+        if l == label::SCALPEL {
+            let (i, j) = (k % w, k / w);
+            lo = (lo.0.min(i), lo.1.min(j));
+            hi = (hi.0.max(i), hi.1.max(j));
+        }
+    }
+    if lo.0 > hi.0 {
+        return;
+    }
+    let f = cam.fx.max(cam.fy);
+    let raw = labels.as_mut();
+    for c in hand {
+        let centre = c.centre();
+        let z = cam.world_to_camera(&centre).z;
+        let Some(uv) = project(cam, radius, &centre).filter(|_| z > 0.0) else { continue };
+        let r = 0.87 * c.size * f / z;
+        let (i0, j0) = ((uv.x - r).ceil().max(lo.0 as f64), (uv.y - r).ceil().max(lo.1 as f64));
+        let (i1, j1) = ((uv.x + r).floor().min(hi.0 as f64), (uv.y + r).floor().min(hi.1 as f64));
+        if i0 > i1 || j0 > j1 {
+            continue;
+        }
+        for j in j0 as usize..=(j1 as usize).min(h - 1) {
+            for p in &mut raw[j * w + i0 as usize..=j * w + (i1 as usize).min(w - 1)] {
+                if *p == label::SCALPEL {
+                    *p = label::HAND;
+                }
+            }
+        }
+    }
+}
+
+/// Foreground covered by the projected scalpel cells of `hull` (the thin parts): scalpel; other
+/// foreground: hand.
+fn thin_labels(view: ViewInput, hull: &Occupancy) -> GrayImage {
+    let cam = view.camera;
+    let radius = cam.distortion.monotonic_radius();
+    let mut out = view.mask.clone();
+    let (w, h) = (out.width() as f64, out.height() as f64);
+    let stride = out.width() as usize;
+    for p in out.iter_mut() {
+        if *p != label::BACKGROUND {
+            *p = label::HAND;
+        }
+    }
+    let raw = out.as_mut();
+    for c in hull.cells.iter().filter(|c| c.scalpel) {
+        let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
+        let mut all = true;
+        for k in 0..8 {
+            let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
+            match project(cam, radius, &p) {
+                Some(uv) => {
+                    lo = lo.inf(&uv);
+                    hi = hi.sup(&uv);
+                }
+                None => all = false,
+            }
+        }
+        if !all {
+            continue;
+        }
+        let (i0, j0) = (lo.x.ceil().max(0.0), lo.y.ceil().max(0.0));
+        let (i1, j1) = (hi.x.floor().min(w - 1.0), hi.y.floor().min(h - 1.0));
+        if i0 > i1 || j0 > j1 {
+            continue;
+        }
+        for j in j0 as usize..=j1 as usize {
+            for px in &mut raw[j * stride + i0 as usize..=j * stride + i1 as usize] {
+                if *px == label::HAND {
+                    *px = label::SCALPEL;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Points filling the tool (its surface and its inside, about `spacing` apart), in the tool frame.
+fn tool_points(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
+    let mut points = hullcut_hull::accuracy::sample_surface(mesh, spacing);
+    points.extend_from_slice(&mesh.vertices);
+    let solid = hullcut_hull::accuracy::Solid::new(mesh);
+    let (mut lo, mut hi) = (Point3::from(Vector3::repeat(f64::MAX)), Point3::from(Vector3::repeat(f64::MIN)));
+    for v in &mesh.vertices {
+        lo = lo.inf(v);
+        hi = hi.sup(v);
+    }
+    let steps = ((hi - lo) / spacing).map(|d| (d.ceil() as usize).clamp(1, 2000));
+    for i in 0..steps.x {
+        for j in 0..steps.y {
+            for k in 0..steps.z {
+                let p = lo + Vector3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * spacing;
+                if solid.winding(&p) >= 1 {
+                    points.push(p);
+                }
+            }
+        }
+    }
+    points
+}
+
+/// The hull with the cells near the tool (`points` of it, tool frame) at `pose` labelled scalpel
+/// and every other cell hand: a leaf is near when a point lies within `margin` of it. The points
+/// mark the leaves around them on a hash set, so a cell costs one lookup.
+fn near_tool(occ: &Occupancy, points: &[Point3<f64>], pose: &Isometry3<f64>, margin: f64) -> Occupancy {
+    let leaf = occ.leaf_size;
+    let key = |p: &Point3<f64>| [0, 1, 2].map(|a| ((p[a] - occ.origin[a]) / leaf).floor() as i64);
+    let r = (margin / leaf).ceil() as i64;
+    let mut near: std::collections::HashSet<[i64; 3]> = std::collections::HashSet::with_capacity(points.len() * 4);
+    for p in points {
+        let k = key(&(pose * p));
+        for dz in -r..=r {
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    near.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
+                }
+            }
+        }
+    }
+    let mut out = occ.clone();
+    for c in &mut out.cells {
+        let n = (c.size / leaf).round().max(1.0) as i64;
+        let k = key(&(c.min + Vector3::repeat(leaf / 2.0)));
+        // A cell larger than a leaf is near when any of its leaves is (checked on its corners'
+        // leaves and centre: the tool never hides wholly inside a uniform cell's interior).
+        let is_near = if n == 1 {
+            near.contains(&k)
+        } else {
+            (0..9).any(|m| {
+                let o = if m == 8 {
+                    [n / 2; 3]
+                } else {
+                    [(m & 1) as i64 * (n - 1), ((m >> 1) & 1) as i64 * (n - 1), ((m >> 2) & 1) as i64 * (n - 1)]
+                };
+                near.contains(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]])
+            })
+        };
+        c.scalpel = is_near;
+        c.hand = !is_near;
+    }
+    out
+}
+
+/// The hull's thin parts: leaves an opening of the occupied leaves by a ball of `radius` removes,
+/// labelled scalpel (every other cell hand), and their 26-connected components as lists of cell
+/// indices, largest first.
+pub fn thin_parts(occ: &Occupancy, radius: f64) -> (Occupancy, Vec<Vec<usize>>) {
+    let mut out = occ.clone();
+    let Some(grid) = DenseGrid::from_occupancy(occ, None) else { return (out, Vec::new()) };
+    let opened = open_ball(&grid.occupied, grid.dims, (radius / occ.leaf_size).max(1.0));
+    let index = |c: &hullcut_hull::Cell| {
+        let centre = c.centre();
+        [0, 1, 2].map(|a| ((centre[a] - grid.origin[a]) / grid.leaf).round() as usize)
+    };
+    let slot = |idx: [usize; 3]| (idx[2] * grid.dims[1] + idx[1]) * grid.dims[0] + idx[0];
+    // Thin leaves by grid slot, for the components.
+    let mut at_slot = vec![u32::MAX; grid.occupied.len()];
+    let mut thin = Vec::new();
+    for (n, c) in out.cells.iter_mut().enumerate() {
+        // Cells larger than a leaf are uniform interior: never thin.
+        let k = slot(index(c));
+        let is_thin = c.size <= occ.leaf_size * 1.5
+            && grid.occupied.get(k).copied().unwrap_or(false)
+            && !opened.get(k).copied().unwrap_or(true);
+        c.scalpel = is_thin;
+        c.hand = !is_thin;
+        if is_thin {
+            at_slot[k] = thin.len() as u32;
+            thin.push(n);
+        }
+    }
+    // Union-find over the thin leaves' 26-neighbourhoods.
+    let mut parent: Vec<usize> = (0..thin.len()).collect();
+    fn find(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for (t, &n) in thin.iter().enumerate() {
+        let idx = index(&out.cells[n]);
+        for d in 0..27usize {
+            let q = [idx[0] + d % 3, idx[1] + (d / 3) % 3, idx[2] + d / 9];
+            if q.contains(&0) || (0..3).any(|a| q[a] > grid.dims[a]) {
+                continue;
+            }
+            let k = slot([q[0] - 1, q[1] - 1, q[2] - 1]);
+            let other = at_slot[k];
+            if other != u32::MAX {
+                let (a, b) = (find(&mut parent, t), find(&mut parent, other as usize));
+                if a != b {
+                    parent[a] = b;
+                }
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = std::collections::BTreeMap::new();
+    for (t, &n) in thin.iter().enumerate() {
+        groups.entry(find(&mut parent, t)).or_default().push(n);
+    }
+    let mut components: Vec<Vec<usize>> = groups.into_values().collect();
+    components.sort_by_key(|c| std::cmp::Reverse(c.len()));
+    (out, components)
+}
+
+/// The hull with only the cells of one thin component labelled scalpel.
+fn only(occ: &Occupancy, component: &[usize]) -> Occupancy {
+    let mut out = occ.clone();
+    for c in &mut out.cells {
+        c.scalpel = false;
+        c.hand = true;
+    }
+    for &n in component {
+        out.cells[n].scalpel = true;
+        out.cells[n].hand = false;
+    }
+    out
+}
+
+/// Opening by a ball of radius `r` leaves: the union of the balls that fit inside the occupied
+/// leaves (erosion: leaves farther than `r` from any empty one; dilation: leaves within `r` of
+/// those), from two Euclidean distance transforms. A ball, not a cube: a cube that fits a palm
+/// does not fit a finger's round section, a ball of the same radius does.
+fn open_ball(occupied: &[bool], dims: [usize; 3], r: f64) -> Vec<bool> {
+    let r2 = r * r;
+    // Squared distance to the nearest empty leaf (outside the grid counts as empty: the grid is
+    // padded by one empty leaf on every side).
+    let empty: Vec<bool> = occupied.iter().map(|&o| !o).collect();
+    let to_empty = squared_distance(&empty, dims);
+    let eroded: Vec<bool> = to_empty.iter().map(|&d| d > r2).collect();
+    let to_core = squared_distance(&eroded, dims);
+    to_core.iter().zip(occupied).map(|(&d, &o)| o && d <= r2).collect()
+}
+
+/// Squared Euclidean distance (in leaves) from every leaf to the nearest `feature` leaf, by
+/// Felzenszwalb and Huttenlocher's separable lower-envelope transform; infinite without any.
+fn squared_distance(feature: &[bool], dims: [usize; 3]) -> Vec<f64> {
+    let mut d: Vec<f64> = feature.iter().map(|&f| if f { 0.0 } else { f64::INFINITY }).collect();
+    let strides = [1, dims[0], dims[0] * dims[1]];
+    let (mut line, mut out, mut v, mut z) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for axis in 0..3 {
+        let n = dims[axis];
+        for start in 0..d.len() {
+            if !(start / strides[axis]).is_multiple_of(n) {
+                continue;
+            }
+            line.clear();
+            line.extend((0..n).map(|i| d[start + i * strides[axis]]));
+            transform_1d(&line, &mut out, &mut v, &mut z);
+            for (i, &x) in out.iter().enumerate() {
+                d[start + i * strides[axis]] = x;
+            }
+        }
+    }
+    d
+}
+
+/// One dimension of [`squared_distance`]: `out[q] = min_p (q − p)² + f[p]`.
+fn transform_1d(f: &[f64], out: &mut Vec<f64>, v: &mut Vec<usize>, z: &mut Vec<f64>) {
+    let n = f.len();
+    out.clear();
+    out.resize(n, f64::INFINITY);
+    v.clear();
+    z.clear();
+    for q in 0..n {
+        if !f[q].is_finite() {
+            continue;
+        }
+        loop {
+            let Some(&p) = v.last() else {
+                v.push(q);
+                z.push(f64::NEG_INFINITY);
+                break;
+            };
+            // Where the parabolas of p and q cross.
+            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+            if s <= *z.last().unwrap_or(&f64::NEG_INFINITY) {
+                v.pop();
+                z.pop();
+                continue;
+            }
+            v.push(q);
+            z.push(s);
+            break;
+        }
+    }
+    if v.is_empty() {
+        return;
+    }
+    let mut k = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while k + 1 < v.len() && z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        *o = (q as f64 - p as f64).powi(2) + f[p];
+    }
+}
+
+/// The tool's mesh drawn into a region of a view: the depth (along the optical axis) of its
+/// nearest surface per pixel, infinity where it is absent.
+struct ToolDepth {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    depth: Vec<f32>,
+}
+
+impl ToolDepth {
+    fn draw(cam: &Camera, radius: f64, mesh: &Mesh, pose: &Isometry3<f64>) -> Option<Self> {
+        let projected: Vec<Option<(Point2<f64>, f64)>> = mesh
+            .vertices
+            .iter()
+            .map(|p| {
+                let world = pose * p;
+                project(cam, radius, &world).map(|uv| (uv, cam.world_to_camera(&world).z))
+            })
+            .collect();
+        let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
+        for (uv, _) in projected.iter().flatten() {
+            lo = lo.inf(uv);
+            hi = hi.sup(uv);
+        }
+        let (iw, ih) = (f64::from(cam.width), f64::from(cam.height));
+        let (x0, y0) = (lo.x.floor().max(0.0), lo.y.floor().max(0.0));
+        let (x1, y1) = (hi.x.ceil().min(iw - 1.0), hi.y.ceil().min(ih - 1.0));
+        if !(x0 <= x1 && y0 <= y1) {
+            return None;
+        }
+        let (x0, y0, w, h) = (x0 as usize, y0 as usize, (x1 - x0) as usize + 1, (y1 - y0) as usize + 1);
+        let mut depth = vec![f32::INFINITY; w * h];
+        for t in &mesh.triangles {
+            let [Some(a), Some(b), Some(c)] = t.map(|i| projected[i as usize]) else { continue };
+            let area = (b.0 - a.0).perp(&(c.0 - a.0));
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            let (tlo, thi) = (a.0.inf(&b.0).inf(&c.0), a.0.sup(&b.0).sup(&c.0));
+            let (i0, j0) = (tlo.x.ceil().max(x0 as f64) as usize, tlo.y.ceil().max(y0 as f64) as usize);
+            let (i1, j1) = (thi.x.floor().min((x0 + w - 1) as f64), thi.y.floor().min((y0 + h - 1) as f64));
+            if i1 < i0 as f64 || j1 < j0 as f64 {
+                continue;
+            }
+            for j in j0..=j1 as usize {
+                for i in i0..=i1 as usize {
+                    let q = Point2::new(i as f64, j as f64);
+                    let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
+                    let wc = 1.0 - wa - wb;
+                    if wa < 0.0 || wb < 0.0 || wc < 0.0 {
+                        continue;
+                    }
+                    let z = (wa * a.1 + wb * b.1 + wc * c.1) as f32;
+                    let k = (j - y0) * w + (i - x0);
+                    if z < depth[k] {
+                        depth[k] = z;
+                    }
+                }
+            }
+        }
+        Some(ToolDepth { x0, y0, w, depth })
+    }
+
+    /// The pixels it covers.
+    fn region(&self) -> ToolRegion {
+        let height = self.depth.len() / self.w.max(1);
+        ToolRegion {
+            x0: self.x0,
+            y0: self.y0,
+            width: self.w,
+            height,
+            covered: self.depth.iter().map(|d| d.is_finite()).collect(),
+        }
+    }
+
+    /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
+    fn splat_min(&self, buffer: &mut [f32], lo: Point2<f64>, hi: Point2<f64>, z: f32) {
+        let h = self.depth.len() / self.w.max(1);
+        let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
+        let (i1, j1) = (
+            (hi.x.floor() - self.x0 as f64).min(self.w as f64 - 1.0),
+            (hi.y.floor() - self.y0 as f64).min(h as f64 - 1.0),
+        );
+        if i0 > i1 || j0 > j1 {
+            return;
+        }
+        for j in j0 as usize..=j1 as usize {
+            for v in &mut buffer[j * self.w + i0 as usize..=j * self.w + i1 as usize] {
+                if z < *v {
+                    *v = z;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances_are_euclidean() {
+        let dims = [7, 5, 3];
+        let mut f = vec![false; 105];
+        // The leaf (3, 2, 1).
+        f[(5 + 2) * 7 + 3] = true;
+        let d = squared_distance(&f, dims);
+        for z in 0..3 {
+            for y in 0..5 {
+                for x in 0..7 {
+                    let expected = (x as f64 - 3.0).powi(2) + (y as f64 - 2.0).powi(2) + (z as f64 - 1.0).powi(2);
+                    assert_eq!(d[(z * 5 + y) * 7 + x], expected);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn opening_removes_what_is_thinner_than_the_ball() {
+        // A 9x9x9 block with a 1x1x6 rod sticking out along x.
+        let dims = [16, 11, 11];
+        let mut grid = vec![false; dims[0] * dims[1] * dims[2]];
+        let at = |x: usize, y: usize, z: usize| (z * dims[1] + y) * dims[0] + x;
+        for z in 1..10 {
+            for y in 1..10 {
+                for x in 1..10 {
+                    grid[at(x, y, z)] = true;
+                }
+            }
+        }
+        for x in 10..16 {
+            grid[at(x, 5, 5)] = true;
+        }
+        let opened = open_ball(&grid, dims, 2.0);
+        assert!(opened[at(5, 5, 5)] && opened[at(3, 3, 3)], "the block stays");
+        assert!(
+            (11..16).all(|x| !opened[at(x, 5, 5)]),
+            "the rod goes (past the first leaf a ball at the block reaches)"
+        );
+        // A ball does not reach into the block's corners.
+        assert!(!opened[at(1, 1, 1)]);
+    }
+}
