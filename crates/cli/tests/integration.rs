@@ -304,24 +304,41 @@ fn bench_hull_quick_compares_octree_and_dense_grid() {
     let o = hullcut(&["bench", "hull", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = std::fs::read_to_string(dir.path().join("hull.csv")).expect("csv");
-    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let rows: Vec<Vec<String>> = csv::Reader::from_reader(csv.as_bytes())
+        .records()
+        .map(|r| r.expect("a CSV row").iter().map(str::to_owned).collect())
+        .collect();
+    // rig, method, volume, leaf_mm, carve_ms, cells_kept, hand IoU, scalpel IoU: two rigs (the
+    // default and lab8) at two leaves.
+    let octree = |rig: &str, leaf: &str| {
+        rows.iter().find(|r| r[0] == rig && r[1] == "octree" && r[2] == "tight" && r[3] == leaf).expect("octree row")
+    };
+    assert_eq!(rows.iter().filter(|r| r[1] == "octree" && r[2] == "tight").count(), 4, "{csv}");
     // Where both ran, the octree gives the dense grid's occupancy (the same IoU with the exact
-    // hull; it may keep a uniform block as one cell) with fewer footprint tests.
-    for dense in rows.iter().filter(|r| r[0] == "dense") {
-        let octree = rows.iter().find(|r| r[0] == "octree" && r[1] == dense[1]).expect("octree row");
-        assert_eq!(octree[6..], dense[6..], "resolution {}", dense[1]);
-        let tests = |r: &Vec<&str>| r[4].parse::<u64>().expect("tests");
-        assert!(tests(octree) < tests(dense), "{octree:?} vs {dense:?}");
+    // hull; it keeps a uniform block as one cell, so it keeps fewer cells).
+    let dense: Vec<_> = rows.iter().filter(|r| r[1] == "dense grid").collect();
+    assert!(!dense.is_empty(), "{csv}");
+    for d in dense {
+        let o = octree(&d[0], &d[3]);
+        assert_eq!(o[6..], d[6..], "{o:?} vs {d:?}");
+        let cells = |r: &Vec<String>| r[5].parse::<u64>().expect("cells");
+        assert!(cells(o) <= cells(d), "{o:?} vs {d:?}");
     }
     // The GPU's octree (where there is an adapter; always in CI) keeps the same cells, hence the
-    // same IoU, at the quick sizes.
-    let gpu_rows: Vec<_> = rows.iter().filter(|r| r[0] == "gpu").collect();
+    // same IoU.
+    let gpu_rows: Vec<_> = rows.iter().filter(|r| r[1] == "octree on the GPU").collect();
     if std::env::var_os("CI").is_some() || !gpu_rows.is_empty() {
-        assert_eq!(gpu_rows.len(), 3, "{csv}");
+        assert_eq!(gpu_rows.len(), 4, "{csv}");
     }
     for gpu in gpu_rows {
-        let octree = rows.iter().find(|r| r[0] == "octree" && r[1] == gpu[1]).expect("octree row");
-        assert_eq!((octree[5], &octree[6..]), (gpu[5], &gpu[6..]), "resolution {}", gpu[1]);
+        let o = octree(&gpu[0], &gpu[3]);
+        assert_eq!((&o[5], &o[6..]), (&gpu[5], &gpu[6..]), "{gpu:?}");
+    }
+    // Trimming the slivers brings the hand closer to the exact hull.
+    for t in rows.iter().filter(|r| r[1] == "octree, slivers trimmed") {
+        let o = octree(&t[0], &t[3]);
+        let iou = |r: &Vec<String>| r[6].parse::<f64>().expect("hand IoU");
+        assert!(iou(t) > iou(o), "{t:?} vs {o:?}");
     }
     for name in ["hull_speed.png", "hull_accuracy.png", "hull_robustness_noise.png", "hull_robustness_cameras.png"] {
         assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");

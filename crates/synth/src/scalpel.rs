@@ -99,7 +99,9 @@ impl Scalpel {
         const RADIUS: f64 = 0.0042;
         let heel = Point2::new(0.003, -HALF_W);
         let tip = Point2::new(0.031, HALF_W - 0.0005);
-        let edge: Vec<Point2<f64>> = (0..9).map(|k| heel + (tip - heel) * (k as f64 / 8.0)).collect();
+        // From the heel to exactly the tip (the interpolation's last point rounds off it).
+        let edge: Vec<Point2<f64>> =
+            (0..9).map(|k| if k == 8 { tip } else { heel + (tip - heel) * (k as f64 / 8.0) }).collect();
         let outline = vec![Point2::new(0.0, -HALF_W), heel, tip, Point2::new(0.030, HALF_W), Point2::new(0.0, HALF_W)];
         let blade = TriMesh::convex_prism(&outline, -THICKNESS / 2.0, THICKNESS / 2.0);
         // The round handle's cap ends where the blade begins.
