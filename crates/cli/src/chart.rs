@@ -86,6 +86,28 @@ pub fn line_chart(
     scales: (Scale, Scale),
     series: &[Series],
 ) -> anyhow::Result<()> {
+    chart(path, [title, x_label, y_label], scales, series, true)
+}
+
+/// Draws `series` as markers alone (points that no order joins) into a 1000x650 PNG.
+pub fn scatter_chart(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    scales: (Scale, Scale),
+    series: &[Series],
+) -> anyhow::Result<()> {
+    chart(path, [title, x_label, y_label], scales, series, false)
+}
+
+fn chart(
+    path: &Path,
+    [title, x_label, y_label]: [&str; 3],
+    scales: (Scale, Scale),
+    series: &[Series],
+    lines: bool,
+) -> anyhow::Result<()> {
     register_font()?;
     if series.iter().all(|s| s.points.is_empty()) {
         bail!("{}: nothing to plot", path.display());
@@ -109,13 +131,18 @@ pub fn line_chart(
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
             for (i, s) in series.iter().enumerate() {
                 let color = COLORS[i % COLORS.len()];
-                chart
-                    .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
+                let line: &[(f64, f64)] = if lines { &s.points } else { &[] };
+                let drawn = chart
+                    .draw_series(LineSeries::new(line.iter().copied(), color.stroke_width(2)))
                     .map_err(|e| anyhow::anyhow!("{e}"))?
-                    .label(s.label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                    .label(s.label.clone());
+                if lines {
+                    drawn.legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                } else {
+                    drawn.legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+                }
                 chart
-                    .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                    .draw_series(s.points.iter().map(|&p| Circle::new(p, if lines { 4 } else { 6 }, color.filled())))
                     .map_err(|e| anyhow::anyhow!("{e}"))?;
             }
             chart

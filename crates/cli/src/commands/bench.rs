@@ -13,7 +13,7 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim`, `hull`, `pose` and `pipeline`.
+/// Targets: `sim`, `hull`, `pose`, `segment` and `pipeline`.
 /// `pipeline` measures (the `resect` scene, the built-in scene of `hullcut run`: 150 frame sets of
 /// 6 x 640x480 truth masks held in memory, the built-in organ at 6 mm, the paper's size, and 5 mm)
 ///   pipeline_stages.csv per configuration (hull leaf 6.25 / 3.1 mm x tissue cell 6 / 5 mm) and
@@ -41,6 +41,16 @@ use crate::progress::bar;
 ///                     where carving breaks (default rig, 3.1 mm): IoU with the clean hull
 ///                     against salt-and-pepper noise in every view (0-5% of the pixels flipped)
 ///                     and against the number of cameras (the first 2-6), for carve_votes 1 and 2.
+/// `segment` measures (24 frame sets of the `cut` scene at 10 fps on four recordings: the default
+/// rig classic and in purple gloves with the pointed tool, lab8 with a dark bare hand and the
+/// pointed tool, random:13 in the look random:23; 5 frame sets of the first two with --quick)
+///   segment.csv, segment_hand.png, segment_scalpel.png
+///                     per recording and labelling method (colour: the colours of two masked
+///                     frames alone; geometry: the fitted tool alone; both: the default), pooled
+///                     IoU per label and of the foreground against the truth (the two masked
+///                     frames not scored), scalpel precision and recall, ms per frame set (all
+///                     cameras; its foreground part apart), frame sets labelled by geometry, by
+///                     colour, or left unknown; the charts: IoU against ms, one point per recording.
 /// `pose` measures (rendered static, cut and hard scenes, 6 x 640x480 truth masks)
 ///   pose.csv, pose_leaf.png, pose_time.png
 ///                     the blade pose's error (normal, tip; trusted frames) against leaf size
@@ -97,6 +107,8 @@ enum Target {
     Pose,
     /// The whole loop of `hullcut run` on frame sets in memory.
     Pipeline,
+    /// Segmentation: the labelling methods on several rigs and looks.
+    Segment,
 }
 
 /// Runs the command.
@@ -124,11 +136,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
         Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,
+        Target::Segment => super::bench_segment::run(&args.out, quick)?,
     }
     Ok(())
 }
 
-fn write(path: &Path, text: &str) -> anyhow::Result<()> {
+pub(super) fn write(path: &Path, text: &str) -> anyhow::Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     println!("wrote {}", path.display());
     Ok(())

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod bench_hull;
 pub mod bench_pipeline;
 pub mod bench_pose;
+pub mod bench_segment;
 pub mod calibrate;
 pub mod gpu_info;
 pub mod import;
