@@ -3,7 +3,7 @@
 //!
 //! Each video's frames are stamped with its media time (`CAP_PROP_POS_MSEC`) plus the camera's
 //! offset (a camera started late by 12 ms has offset −0.012 s against the others) plus the
-//! recording's start time; the [`Synchronizer`] pairs them into frame sets within half a frame
+//! recording's start time; the [`Synchronizer`](crate::Synchronizer) pairs them into frame sets within half a frame
 //! period, waiting for every camera (a lossless replay). What it could not pair is counted per
 //! camera: frames no set took (late, a second frame in one period, out of order) and sets that lack
 //! a camera (its video ended early, or it dropped a frame). Frame sets are numbered from 0 and

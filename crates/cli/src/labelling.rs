@@ -31,13 +31,39 @@ const REFRESH_EVERY: u64 = 15;
 /// Foreground this close (pixels, square neighbourhood) to the drawn tool takes the label of its
 /// colour where the colour is sure: the geometry puts the tool to a pixel or two, and where the
 /// hand crosses it the hull cannot say which is in front to the pixel.
-const SHARPEN_PX: usize = 4;
-/// A colour is sure when its class is at least e^(margin/2) (here 20) times as likely as the other.
-const SHARPEN_MARGIN: f64 = 6.0;
+const SHARPEN_PX: usize = 12;
+/// A colour is sure when it is at least e^3 (20) times as likely under its label as under the other.
+const SHARPEN_LOG_RATIO: f64 = 3.0;
 /// Pixels down to this much darker than their background (relative) with their chromaticity
 /// unchanged may be cast shadows, resolved by the hull ([`hullcut_hull::shadow`]): a shadow in
 /// full (ambient light only) keeps a fifth of the light or more.
 const SHADOW_DEPTH: f64 = 0.8;
+
+/// Which evidence labels the foreground (`--labels`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum LabelMethod {
+    /// The fitted tool's geometry, sharpened by the learned colours near the tool, and the colours
+    /// alone where the tool cannot be fitted.
+    #[default]
+    Both,
+    /// The fitted tool's geometry alone: nothing learned, the foreground left unknown where the
+    /// tool cannot be fitted.
+    Geometry,
+    /// The colours learned from `--label-frames`' masks alone (tool.json ignored).
+    Colour,
+}
+
+impl LabelMethod {
+    /// Its name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            LabelMethod::Both => "both",
+            LabelMethod::Geometry => "geometry",
+            LabelMethod::Colour => "colour",
+        }
+    }
+}
 
 /// Where a frame set's labels came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -47,6 +73,9 @@ pub(crate) enum LabelSource {
     Geometry,
     /// The colours learned from the recording.
     Colour,
+    /// The fitted tool drawn into the views although the tracker did not trust the fit (no
+    /// colours learned yet to do better).
+    UntrustedGeometry,
     /// Neither: foreground of unknown label.
     Unknown,
 }
@@ -58,8 +87,14 @@ pub(crate) struct LabelCounters {
     pub geometry: u64,
     /// Frame sets labelled by the learned colours.
     pub colour: u64,
+    /// Frame sets labelled by a fit the tracker did not trust (drawn all the same: no colours
+    /// were learned yet).
+    pub untrusted: u64,
     /// Frame sets whose foreground stayed unknown.
     pub unknown: u64,
+    /// Of the untrusted and unknown ones, frame sets labelled again by the colours learned from
+    /// the whole recording (`segment`, which sees all of it before it writes).
+    pub relabelled: u64,
     /// Frame sets whose geometric labels the appearance model learned from.
     pub learned: u64,
     /// Pixels that looked like cast shadows (darker, chromaticity unchanged), over all views.
@@ -76,6 +111,8 @@ pub(crate) struct LabellingReport {
     /// How each camera found its foreground: `background` (empty-scene images), `median` (the
     /// recording's median), `mog2`.
     pub foreground: Vec<Option<Method>>,
+    /// Which evidence was asked for (`--labels`).
+    pub method: LabelMethod,
     /// Whether a tool.json was there to label by geometry.
     pub tool: bool,
     /// Frames whose masks/ seeded the colours (`--label-frames`).
@@ -109,11 +146,12 @@ pub(crate) struct Labelled {
 
 /// Labels frame sets (see the module docs).
 pub(crate) struct Labelling {
+    method: LabelMethod,
     segmenter: Segmenter,
     tool: Option<ToolLabeller>,
     appearance: AppearanceModel,
     colours: Option<ColourLut>,
-    /// The colours compiled to decide only where sure ([`SHARPEN_MARGIN`]).
+    /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]).
     sure: Option<ColourLut>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
@@ -123,15 +161,26 @@ pub(crate) struct Labelling {
 }
 
 impl Labelling {
-    /// Sets up the foreground models, the tool's labeller and the colours of `label_frames`' masks.
-    /// Without a tool and without masked frames there is nothing to tell hand from tool: an error
-    /// that says what a lab must provide.
+    /// Sets up the foreground models, the tool's labeller and the colours of `label_frames`' masks,
+    /// for `method`. Without a tool and without masked frames there is nothing to tell hand from
+    /// tool: an error that says what a lab must provide.
     pub fn new(
         ds: &Dataset,
         tool: Option<&ToolGeometry>,
         hull: HullParams,
         label_frames: &[u64],
+        method: LabelMethod,
     ) -> anyhow::Result<Self> {
+        let tool = if method == LabelMethod::Colour { None } else { tool };
+        if method == LabelMethod::Geometry && tool.is_none() {
+            bail!("{}: --labels geometry needs the scalpel's tool.json", ds.root().display());
+        }
+        if method == LabelMethod::Colour && label_frames.is_empty() {
+            bail!(
+                "{}: --labels colour learns the colours from masks/: name a few frames with --label-frames",
+                ds.root().display()
+            );
+        }
         let params = SegmentParams { shadow_depth: SHADOW_DEPTH, ..SegmentParams::default() };
         let segmenter = Segmenter::from_dataset(ds, params).context("setting up segmentation")?;
         let mut appearance = AppearanceModel::default();
@@ -148,7 +197,7 @@ impl Labelling {
         }
         let classes = appearance.classes();
         let colours = classes.as_ref().map(ColourLut::new);
-        let sure = classes.as_ref().map(|c| ColourLut::confident(c, SHARPEN_MARGIN));
+        let sure = classes.as_ref().map(|c| ColourLut::confident(c, 2.0 * SHARPEN_LOG_RATIO));
         let tool = tool
             .map(|t| {
                 ToolLabeller::new(
@@ -168,6 +217,7 @@ impl Labelling {
             );
         }
         Ok(Labelling {
+            method,
             segmenter,
             tool,
             appearance,
@@ -179,6 +229,11 @@ impl Labelling {
             counters: LabelCounters::default(),
             masks: Vec::new(),
         })
+    }
+
+    /// The foreground settings in use.
+    pub fn params(&self) -> &SegmentParams {
+        self.segmenter.params()
     }
 
     /// Labels one frame set.
@@ -240,9 +295,11 @@ impl Labelling {
         let Some(labeller) = &mut self.tool else { bail!("no tool to label frame {frame} with") };
         let labelled = labeller.label(frame, set.timestamp_ns, &occ, &inputs);
         let estimate = labelled.estimate;
-        let (mut masks, source) = if estimate.fitted.is_some() {
+        let colours = self.method == LabelMethod::Both;
+        let trusted = estimate.valid && estimate.fitted.is_some();
+        let (mut masks, source) = if trusted {
             let mut masks = labelled.masks;
-            if let Some(sure) = &self.sure {
+            if let Some(sure) = self.sure.as_ref().filter(|_| colours) {
                 for ((view, mask), region) in set.views.iter().zip(&mut masks).zip(&labelled.tool_regions) {
                     if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
                         sharpen(sure, &view.image, mask, region);
@@ -250,19 +307,22 @@ impl Labelling {
                 }
             }
             (masks, LabelSource::Geometry)
-        } else if self.colours.is_some() {
+        } else if colours && self.colours.is_some() {
             let mut masks = fg.clone();
             self.colour(set, &mut masks);
             (masks, LabelSource::Colour)
+        } else if estimate.fitted.is_some() {
+            (labelled.masks, LabelSource::UntrustedGeometry)
         } else {
             (labelled.masks, LabelSource::Unknown)
         };
         match source {
             LabelSource::Geometry => self.counters.geometry += 1,
             LabelSource::Colour => self.counters.colour += 1,
+            LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if source == LabelSource::Geometry && estimate.valid && estimate.confidence >= LEARN_CONFIDENCE {
+        if colours && source == LabelSource::Geometry && estimate.valid && estimate.confidence >= LEARN_CONFIDENCE {
             self.learn(set, &masks);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
@@ -278,6 +338,20 @@ impl Labelling {
             carve_ms,
             stats: Some(labelled.stats),
         })
+    }
+
+    /// Labels `set` again by the learned colours alone (`None` while none are learned), for a
+    /// frame set that the tool could not label with trust before later frames taught the colours.
+    /// The counters count it as `relabelled`, nothing else.
+    pub fn relabel_by_colour(&mut self, set: &FrameSet, carver: &mut Carver) -> anyhow::Result<Option<Labelled>> {
+        if self.colours.is_none() {
+            return Ok(None);
+        }
+        let (tool, counters) = (self.tool.take(), self.counters.clone());
+        let labelled = self.label(set, carver);
+        self.tool = tool;
+        self.counters = LabelCounters { relabelled: counters.relabelled + 1, ..counters };
+        labelled.map(Some)
     }
 
     /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible
@@ -300,7 +374,7 @@ impl Labelling {
             .collect();
         let refs: Vec<Option<&GrayImage>> = sure.iter().map(Option::as_ref).collect();
         let sure = silhouettes(&self.rig, &refs)?;
-        let (occ, dropped) = keep_supported(&occ, views, &sure, self.hull.margin_px);
+        let (occ, dropped) = keep_supported(&occ, views, &sure, self.hull.margin_px, self.rig.world_frame.is_table());
         self.counters.shadow_cells_dropped += dropped as u64;
         for (view, mask) in views.iter().zip(fg.iter_mut()) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -334,7 +408,7 @@ impl Labelling {
         if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() {
             let classes = self.appearance.classes();
             self.colours = classes.as_ref().map(ColourLut::new);
-            self.sure = classes.as_ref().map(|c| ColourLut::confident(c, SHARPEN_MARGIN));
+            self.sure = classes.as_ref().map(|c| ColourLut::confident(c, 2.0 * SHARPEN_LOG_RATIO));
         }
     }
 
@@ -342,6 +416,7 @@ impl Labelling {
     pub fn report(&self) -> LabellingReport {
         LabellingReport {
             foreground: (0..self.segmenter.cameras()).map(|c| self.segmenter.method(c)).collect(),
+            method: self.method,
             tool: self.tool.is_some(),
             label_frames: self.label_frames.clone(),
             counters: self.counters.clone(),

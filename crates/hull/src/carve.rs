@@ -96,7 +96,7 @@ pub struct HullParams {
     pub exclusive_labels: bool,
     /// Drop the outer shell of slivers over solid leaves: a leaf whose centre lies outside the hull
     /// (`carve_votes` views see background there) is dropped where it is the outermost layer over
-    /// a solid leaf ([`trim_slivers`]); a structure thinner than a leaf (a blade) keeps its
+    /// a solid leaf; a structure thinner than a leaf (a blade) keeps its
     /// slivers. Without it every leaf touching the hull is kept, which fattens it by half a leaf
     /// on average.
     pub trim_slivers: bool,
@@ -277,7 +277,7 @@ enum Verdict {
 
 /// A point projected into a view.
 #[derive(Debug, Clone, Copy)]
-enum Projected {
+pub(crate) enum Projected {
     /// Its pixel (outside the image, maybe far, for a point beyond the field's radius, which is
     /// clamped to it).
     Pixel([f64; 2]),
@@ -288,7 +288,7 @@ enum Projected {
 }
 
 #[inline(always)]
-fn project(view: &Silhouette, p: &Point3<f64>) -> Projected {
+pub(crate) fn project(view: &Silhouette, p: &Point3<f64>) -> Projected {
     let cam = view.camera();
     let pc = cam.world_to_camera(p);
     if pc.z <= 1e-3 {

@@ -4,25 +4,40 @@
 //! object is seen as sure foreground by most views (the object against other backgrounds, or in
 //! front of the hand), while a cell of a shadow on the table is seen as shadow by most views, and
 //! as sure foreground only by those where the hand that casts it stands in front of it.
-//! [`keep_supported`] keeps the cells that at least as many views see as sure foreground as see
-//! only shadow there; [`cover`] then turns a view's shadow pixels that the kept cells cover into
+//! [`keep_supported`] keeps the cells that two views see as sure foreground, or at least as many
+//! as see only shadow there (a dark tool over a table of its colour is seen as shadow from above,
+//! as sure foreground from the side); [`cover`] then turns a view's shadow pixels that the kept cells cover into
 //! foreground (the rest go back to background).
 
 use image::GrayImage;
 use rayon::prelude::*;
 
-use crate::carve::{Footprint, footprint, footprint_counts};
+use crate::carve::{Footprint, Projected, footprint, project};
+
+/// A cell that this many views see as sure foreground is kept whatever the others see: the hand
+/// stands between a shadow and a camera near the light's direction, seldom two.
+pub const SURE_VIEWS: usize = 2;
 use crate::{Occupancy, Silhouette};
 
+/// Cast shadows lie on the table: a cell wholly this high above the table top (z = 0 in a table's
+/// frame) is an object, whatever its shading says. The hull of a shadow rises above the table
+/// where the views' cones over it overlap, by about half the shadow's width times the tangent of
+/// the lowest camera's elevation: some 2-3 cm for a hand's shadow seen from 20-40° up.
+pub const SHADOW_HULL_HEIGHT: f64 = 0.04;
+
 /// The cells of `occ` (carved from `all`, the views' silhouettes with the possible shadows as
-/// foreground) that at least as many views see as sure foreground (foreground in their footprint
-/// in `sure`, the silhouettes with the possible shadows left out) as see only shadow (foreground
-/// in `all` but none in `sure`), with one view at least; and how many cells went.
+/// foreground) that [`SURE_VIEWS`] views see as sure foreground (foreground in their footprint in
+/// `sure`, the silhouettes with the possible shadows left out), or at least as many views as see
+/// only shadow there (foreground in `all` but none in `sure`), one at least; with `table`, the
+/// world frame's z = 0 being the table top, also every cell wholly above [`SHADOW_HULL_HEIGHT`]
+/// (a skin-toned hand over a wooden table looks like a shadow of it where it is shaded); and how
+/// many cells went.
 pub fn keep_supported(
     occ: &Occupancy,
     all: &[Option<Silhouette>],
     sure: &[Option<Silhouette>],
     margin_px: f64,
+    table: bool,
 ) -> (Occupancy, usize) {
     let pairs: Vec<(&Silhouette, &Silhouette)> =
         all.iter().zip(sure).filter_map(|(a, s)| a.as_ref().zip(s.as_ref())).collect();
@@ -30,11 +45,19 @@ pub fn keep_supported(
         .cells
         .par_iter()
         .map(|c| {
+            if table && c.min.z > SHADOW_HULL_HEIGHT {
+                return true;
+            }
             let (mut sure_views, mut shadow_views) = (0, 0);
             for (a, s) in &pairs {
-                if footprint_counts(s, c, margin_px).is_some_and(|n| n.foreground() > 0) {
+                // One footprint per view, both tables read on it.
+                let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(a, c, margin_px) else { continue };
+                if s.counts(i0, j0, i1, j1).foreground() > 0 {
                     sure_views += 1;
-                } else if footprint_counts(a, c, margin_px).is_some_and(|n| n.foreground() > 0) {
+                    if sure_views >= SURE_VIEWS {
+                        return true;
+                    }
+                } else if a.counts(i0, j0, i1, j1).foreground() > 0 {
                     shadow_views += 1;
                 }
             }
@@ -53,11 +76,30 @@ pub fn keep_supported(
 pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8, to: u8, margin_px: f64) -> u64 {
     let w = mask.width() as usize;
     let raw: &mut [u8] = mask;
-    if !raw.contains(&from) {
+    // The box of the `from` pixels: a cell whose footprint misses it is skipped after projecting
+    // its centre.
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for (k, _) in raw.iter().enumerate().filter(|(_, p)| **p == from) {
+        let (i, j) = ((k % w) as f64, (k / w) as f64);
+        lo = [lo[0].min(i), lo[1].min(j)];
+        hi = [hi[0].max(i), hi[1].max(j)];
+    }
+    if lo[0] > hi[0] {
         return 0;
     }
+    let cam = view.camera();
+    let focal = cam.fx.max(cam.fy);
     let mut covered = 0;
     for c in &occ.cells {
+        let centre = c.centre();
+        if let Projected::Pixel([u, v]) = project(view, &centre) {
+            // A bound on the footprint's half-side: the cell's half-diagonal at its centre's
+            // depth, twice over for the lens and the margin.
+            let r = 2.0 * (0.87 * c.size * focal / cam.world_to_camera(&centre).z + margin_px) + 1.0;
+            if u + r < lo[0] || u - r > hi[0] || v + r < lo[1] || v - r > hi[1] {
+                continue;
+            }
+        }
         let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, c, margin_px) else { continue };
         for j in j0..=j1 {
             for p in raw.get_mut(j * w + i0..=j * w + i1).into_iter().flatten() {

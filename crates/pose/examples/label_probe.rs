@@ -19,11 +19,17 @@ fn main() {
     .expect("labeller");
     for f in 0..frames {
         let set = ds.read_frame_set(f, true).expect("frame");
+        // Masks from OUT/masks/camK/NNNNNN.png (a `segment --out`) when a third argument names OUT.
         let masks: Vec<Option<image::GrayImage>> = set
             .views
             .iter()
-            .map(|v| {
-                v.as_ref().and_then(|v| v.mask.clone()).map(|mut m| {
+            .enumerate()
+            .map(|(c, v)| match args.get(3) {
+                Some(dir) => image::open(format!("{dir}/masks/cam{c}/{f:06}.png")).ok().map(|i| i.to_luma8()),
+                None => v.as_ref().and_then(|v| v.mask.clone()),
+            })
+            .map(|m| {
+                m.map(|mut m| {
                     m.iter_mut().filter(|p| **p != 0).for_each(|p| *p = label::UNKNOWN);
                     m
                 })

@@ -160,8 +160,8 @@ impl ToolRegion {
 pub struct ToolLabeller {
     tracker: Tracker,
     mesh: Mesh,
-    /// Points filling the tool, 1 mm apart, tool frame (for the hull's tool cells).
-    points: Vec<Point3<f64>>,
+    /// Distance to the tool, tool frame (for the hull's tool cells).
+    field: ToolField,
     params: LabelParams,
 }
 
@@ -172,8 +172,10 @@ impl ToolLabeller {
         if tool.mesh.triangles.is_empty() {
             return Err(ToolError::Template("the tool's mesh has no triangles to draw".to_owned()));
         }
-        let points = tool_points(&tool.mesh, 0.001);
-        Ok(ToolLabeller { tracker: Tracker::new(template, tracker), mesh: tool.mesh.clone(), points, params })
+        // Padded by 2 cm over the margin: a cell farther than that from the tool is not near it
+        // unless it is over 2 cm large, and those are told by the grid's distance.
+        let field = ToolField::new(&tool_points(&tool.mesh, 0.001), 0.001, params.tool_margin_m + 0.02);
+        Ok(ToolLabeller { tracker: Tracker::new(template, tracker), mesh: tool.mesh.clone(), field, params })
     }
 
     /// The tracker (its template and settings).
@@ -194,7 +196,7 @@ impl ToolLabeller {
         let clock = Instant::now();
         let template = self.tracker.template().clone();
         let provisional_for = |pose: &Isometry3<f64>| {
-            let hull = near_tool(occ, &self.points, pose, self.params.tool_margin_m);
+            let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m);
             let hand: Vec<hullcut_hull::Cell> = hull.cells.iter().filter(|c| c.hand).copied().collect();
             let masks: Vec<Option<GrayImage>> =
                 views.iter().map(|v| v.map(|v| band_labels(v, &template, pose, self.params.band_px, &hand))).collect();
@@ -267,7 +269,7 @@ impl ToolLabeller {
         let (masks, occupancy, tool_regions) = match &estimate.fitted {
             Some(fitted) => {
                 let pose = fitted.tool_to_world;
-                let occupancy = near_tool(occ, &self.points, &pose, self.params.tool_margin_m);
+                let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m);
                 // The tool drawn into every view, and the hull's cells labelled from those
                 // drawings: a cell is the hand's only where views see foreground the tool does not
                 // explain (the tool's own hull, fatter than the tool, hides nothing).
@@ -662,42 +664,68 @@ fn tool_points(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
     points
 }
 
-/// The hull with the cells near the tool (`points` of it, tool frame) at `pose` labelled scalpel
-/// and every other cell hand: a leaf is near when a point lies within `margin` of it. The points
-/// mark the leaves around them on a hash set, so a cell costs one lookup.
-fn near_tool(occ: &Occupancy, points: &[Point3<f64>], pose: &Isometry3<f64>, margin: f64) -> Occupancy {
-    let leaf = occ.leaf_size;
-    let key = |p: &Point3<f64>| [0, 1, 2].map(|a| ((p[a] - occ.origin[a]) / leaf).floor() as i64);
-    let r = (margin / leaf).ceil() as i64;
-    let mut near: std::collections::HashSet<[i64; 3]> = std::collections::HashSet::with_capacity(points.len() * 4);
-    for p in points {
-        let k = key(&(pose * p));
-        for dz in -r..=r {
-            for dy in -r..=r {
-                for dx in -r..=r {
-                    near.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
-                }
+/// Distance to the tool, tool frame: a grid of `spacing` around the tool (padded by `pad`) holding
+/// each node's distance to the nearest point filling the tool; beyond the grid, farther than `pad`.
+#[derive(Debug, Clone)]
+struct ToolField {
+    origin: Point3<f64>,
+    dims: [usize; 3],
+    spacing: f64,
+    pad: f64,
+    distance: Vec<f32>,
+}
+
+impl ToolField {
+    /// The field of `points` (filling the tool, tool frame).
+    fn new(points: &[Point3<f64>], spacing: f64, pad: f64) -> Self {
+        let (mut lo, mut hi) = (Point3::from(Vector3::repeat(f64::MAX)), Point3::from(Vector3::repeat(f64::MIN)));
+        for p in points {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        if points.is_empty() {
+            (lo, hi) = (Point3::origin(), Point3::origin());
+        }
+        let origin = lo - Vector3::repeat(pad);
+        let dims = ((hi - lo + Vector3::repeat(2.0 * pad)) / spacing).map(|d| (d.ceil() as usize + 1).clamp(1, 4096));
+        let dims = [dims.x, dims.y, dims.z];
+        let mut feature = vec![false; dims[0] * dims[1] * dims[2]];
+        for p in points {
+            let k = (p - origin) / spacing;
+            let [x, y, z] = [k.x, k.y, k.z].map(|v| v.round().max(0.0) as usize);
+            if x < dims[0] && y < dims[1] && z < dims[2] {
+                feature[(z * dims[1] + y) * dims[0] + x] = true;
             }
         }
+        let distance = squared_distance(&feature, dims).iter().map(|d| (d.sqrt() * spacing) as f32).collect();
+        ToolField { origin, dims, spacing, pad, distance }
     }
+
+    /// Distance from `p` (tool frame) to the tool, to within the grid's spacing; beyond the grid,
+    /// a lower bound (`pad` plus the distance to the grid).
+    fn at(&self, p: &Point3<f64>) -> f64 {
+        let k = (p - self.origin) / self.spacing;
+        let [x, y, z] = [k.x, k.y, k.z].map(|v| v.round());
+        let inside = |v: f64, n: usize| v >= 0.0 && v < n as f64;
+        if !(inside(x, self.dims[0]) && inside(y, self.dims[1]) && inside(z, self.dims[2])) {
+            let outside = |v: f64, n: usize| (-v).max(v - (n as f64 - 1.0)).max(0.0);
+            let d = Vector3::new(outside(k.x, self.dims[0]), outside(k.y, self.dims[1]), outside(k.z, self.dims[2]));
+            return self.pad + d.norm() * self.spacing;
+        }
+        let [x, y, z] = [x, y, z].map(|v| v as usize);
+        f64::from(self.distance[(z * self.dims[1] + y) * self.dims[0] + x])
+    }
+}
+
+/// The hull with the cells near the tool at `pose` labelled scalpel and every other cell hand: a
+/// cell is near when the tool comes within `margin` of it (its centre within `margin` plus its
+/// half-diagonal, plus the field's rounding). One transform and one lookup per cell.
+fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64) -> Occupancy {
+    let to_tool = pose.inverse();
     let mut out = occ.clone();
     for c in &mut out.cells {
-        let n = (c.size / leaf).round().max(1.0) as i64;
-        let k = key(&(c.min + Vector3::repeat(leaf / 2.0)));
-        // A cell larger than a leaf is near when any of its leaves is (checked on its corners'
-        // leaves and centre: the tool never hides wholly inside a uniform cell's interior).
-        let is_near = if n == 1 {
-            near.contains(&k)
-        } else {
-            (0..9).any(|m| {
-                let o = if m == 8 {
-                    [n / 2; 3]
-                } else {
-                    [(m & 1) as i64 * (n - 1), ((m >> 1) & 1) as i64 * (n - 1), ((m >> 2) & 1) as i64 * (n - 1)]
-                };
-                near.contains(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]])
-            })
-        };
+        let reach = margin + 0.87 * c.size + field.spacing;
+        let is_near = field.at(&(to_tool * c.centre())) <= reach;
         c.scalpel = is_near;
         c.hand = !is_near;
     }

@@ -10,12 +10,15 @@ use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
 use serde::Serialize;
 
-use super::classes::{ColourClass, ColourClasses};
+use super::classes::{ColourClass, ColourClasses, ColourLut};
 
 /// Pixels darker than this channel sum carry no usable chromaticity and are not learned from.
 const MIN_SUM: u32 = 24;
 /// Variance added to each diagonal entry (keeps a covariance invertible on uniform samples).
 const COV_FLOOR: f64 = 1e-4;
+/// Once both labels are learned, a pixel whose colour is e^3 (20) times likelier under the other
+/// label is taken as wrongly labelled and not learned.
+const GATE_LOG_RATIO: f64 = 3.0;
 
 /// Running sums of one label's features, with forgetting.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
@@ -69,19 +72,24 @@ pub struct AppearanceSources {
 }
 
 /// The learned appearance of the hand and the tool (see the module docs).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct AppearanceModel {
     /// Per label of [`label::NAMED`]: hand, scalpel.
     sums: [Sums; 2],
     /// Kept per new frame set of samples: the weight of what was learned `n` frame sets ago is
     /// `forget^n`.
     pub forget: f64,
-    /// Learn from every `stride`-th pixel of every `stride`-th row.
+    /// Learn from every `stride`-th pixel of every `stride`-th row of the hand (the tool, a small
+    /// part of the image, from every pixel).
     pub stride: usize,
     /// Pixels a label needs before it is used.
     pub min_pixels: f64,
     /// Where the samples came from.
     pub sources: AppearanceSources,
+    /// The classes as they were at the last [`AppearanceModel::age`], compiled to judge new
+    /// samples.
+    #[serde(skip)]
+    gate: Option<ColourLut>,
 }
 
 impl Default for AppearanceModel {
@@ -92,6 +100,7 @@ impl Default for AppearanceModel {
             stride: 3,
             min_pixels: 200.0,
             sources: AppearanceSources::default(),
+            gate: None,
         }
     }
 }
@@ -122,7 +131,9 @@ fn features(p: [u8; 3]) -> Option<[f64; 3]> {
 impl AppearanceModel {
     /// Learns from one image and its labels (hand and scalpel pixels; others ignored). With
     /// `erode`, only pixels whose four neighbours share their label (away from edges, where colours
-    /// blend and labels are least sure).
+    /// blend and labels are least sure). Labels from geometry are wrong here and there (a hidden
+    /// part of the tool drawn as seen): once both labels are learned, a pixel whose colour the
+    /// other label explains far better (e³ times) is not learned.
     pub fn learn(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool) {
         if image.dimensions() != labels.dimensions() {
             return;
@@ -130,23 +141,33 @@ impl AppearanceModel {
         let (w, h) = (labels.width() as usize, labels.height() as usize);
         let (raw, px) = (labels.as_raw(), image.as_raw());
         let stride = self.stride.max(1);
-        for j in (1..h.saturating_sub(1)).step_by(stride) {
-            for i in (1..w.saturating_sub(1)).step_by(stride) {
+        let gate = self.gate.as_ref();
+        for j in 1..h.saturating_sub(1) {
+            for i in 1..w.saturating_sub(1) {
                 let k = j * w + i;
                 let l = raw[k];
                 let Some(slot) = label::NAMED.iter().position(|&(n, _)| n == l) else { continue };
+                if l == label::HAND && !(i.is_multiple_of(stride) && j.is_multiple_of(stride)) {
+                    continue;
+                }
                 if erode && (raw[k - 1] != l || raw[k + 1] != l || raw[k - w] != l || raw[k + w] != l) {
                     continue;
                 }
-                if let Some(f) = features([px[3 * k], px[3 * k + 1], px[3 * k + 2]]) {
+                let rgb = [px[3 * k], px[3 * k + 1], px[3 * k + 2]];
+                if gate.is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
+                    continue;
+                }
+                if let Some(f) = features(rgb) {
                     self.sums[slot].add(f);
                 }
             }
         }
     }
 
-    /// Forgets a little of what was learned (call once per frame set learned from).
+    /// Forgets a little of what was learned (call once per frame set learned from, before
+    /// learning it), and compiles what is known so far to judge the new samples.
     pub fn age(&mut self) {
+        self.gate = self.classes().map(|c| ColourLut::confident(&c, 2.0 * GATE_LOG_RATIO));
         for s in &mut self.sums {
             s.scale(self.forget);
         }

@@ -38,16 +38,6 @@ const GAIN_RANGE: (f64, f64) = (0.5, 1.99);
 /// Pixels per step of the vectorized test.
 const LANES: usize = 16;
 
-/// Half-side of the window the shadow texture test compares (5×5 pixels).
-const TEXTURE_RADIUS: usize = 2;
-/// A possible shadow whose window correlates at least this well with the background's (normalized
-/// cross-correlation of channel sums) is the background's texture, darkened: a shadow.
-const SHADOW_NCC: f64 = 0.6;
-/// The background's texture decides only where its standard deviation over the window, once
-/// darkened as much as the pixel is, reaches this fraction of the pixel's 3τ (a few noise
-/// deviations of a channel sum).
-const TEXTURE_OVER_NOISE: f64 = 0.6;
-
 /// Background colour and noise allowance per pixel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BackgroundModel {
@@ -180,41 +170,15 @@ impl BackgroundModel {
                 found_h: im.height(),
             });
         }
-        let len = w as usize * h as usize;
-        let floor = u16::from(params.noise_floor);
-        let rows: Vec<(Vec<u8>, Vec<u16>)> = (0..h as usize)
-            .into_par_iter()
-            .map(|y| {
-                let (mut median, mut tol) = (vec![0u8; 3 * w as usize], vec![floor; w as usize]);
-                let mut values = Vec::with_capacity(frames.len());
-                let mut deviations = Vec::with_capacity(frames.len());
-                for x in 0..w as usize {
-                    let mut mad_sum = 0.0;
-                    for c in 0..3 {
-                        values.clear();
-                        values.extend(frames.iter().map(|im| im.as_raw()[3 * (y * w as usize + x) + c]));
-                        let mid = values.len() / 2;
-                        let (_, m, _) = values.select_nth_unstable(mid);
-                        let m = *m;
-                        median[3 * x + c] = m;
-                        deviations.clear();
-                        deviations.extend(values.iter().map(|&v| v.abs_diff(m)));
-                        let (_, d, _) = deviations.select_nth_unstable(mid);
-                        mad_sum += f64::from(*d);
-                    }
-                    let sd = 1.4826 * mad_sum / 3.0;
-                    tol[x] = (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
-                }
-                (median, tol)
-            })
-            .collect();
-        let mut median_raw = Vec::with_capacity(3 * len);
-        let mut tol = Vec::with_capacity(len);
-        for (m, t) in rows {
-            median_raw.extend(m);
-            tol.extend(t);
-        }
-        Ok(Self::from_mean(w, h, median_raw, &tol))
+        // The frames' exposures differ (auto-exposure, lighting drift): a first median gives each
+        // frame's gain against it, and the second takes the median of the frames brought to one
+        // exposure, so drift widens no pixel's noise allowance.
+        let (median, tol) = temporal_median(frames, &vec![1.0; frames.len()], params);
+        let first = Self::from_mean(w, h, median, &tol);
+        let mut ratios = Vec::new();
+        let gains: Vec<f32> = frames.iter().map(|im| first.exposure_gain(im, params, &mut ratios) as f32).collect();
+        let (median, tol) = temporal_median(frames, &gains, params);
+        Ok(Self::from_mean(w, h, median, &tol))
     }
 
     /// The model of an expected image and per-pixel noise allowances τ.
@@ -255,52 +219,6 @@ impl BackgroundModel {
     /// The mean empty-scene image (the model's expected image).
     pub fn mean_image(&self) -> &RgbImage {
         &self.mean
-    }
-
-    /// Settles the possible shadows ([`ENC_SHADOW`] in `labels`, rows flagged in `active`) by
-    /// texture: a cast shadow darkens the background and keeps its texture, an object of the
-    /// background's colour hides it. Where the background is textured enough in a 5×5 window, a
-    /// pixel whose window correlates with the background's ([`SHADOW_NCC`]) becomes background, any
-    /// other becomes foreground (its colour class from `lut`); on a textureless background it stays
-    /// a possible shadow for the caller.
-    pub(crate) fn settle_shadows(&self, image: &RgbImage, labels: &mut [u8], active: &[bool], lut: &ClassLut) {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let (raw, mean) = (image.as_raw(), self.mean.as_raw());
-        let sum =
-            |px: &[u8], k: usize| f64::from(u16::from(px[3 * k]) + u16::from(px[3 * k + 1]) + u16::from(px[3 * k + 2]));
-        let r = TEXTURE_RADIUS;
-        for y in (0..h).filter(|&y| active.get(y).copied().unwrap_or(false)) {
-            for x in 0..w {
-                let k = y * w + x;
-                if labels[k] != ENC_SHADOW {
-                    continue;
-                }
-                let (x0, x1, y0, y1) =
-                    (x.saturating_sub(r), (x + r).min(w - 1), y.saturating_sub(r), (y + r).min(h - 1));
-                let (mut n, mut sb, mut si, mut sbb, mut sii, mut sbi) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-                for yy in y0..=y1 {
-                    for xx in x0..=x1 {
-                        let q = yy * w + xx;
-                        let (b, i) = (sum(mean, q), sum(raw, q));
-                        n += 1.0;
-                        sb += b;
-                        si += i;
-                        sbb += b * b;
-                        sii += i * i;
-                        sbi += b * i;
-                    }
-                }
-                let var_b = (sbb / n - (sb / n).powi(2)).max(0.0);
-                let var_i = (sii / n - (si / n).powi(2)).max(0.0);
-                let darkening = if sb > 0.0 { (si / sb).clamp(0.0, 1.0) } else { 0.0 };
-                let texture = var_b.sqrt() * darkening;
-                if texture < TEXTURE_OVER_NOISE * f64::from(self.tol3[k]) {
-                    continue;
-                }
-                let ncc = (sbi / n - sb * si / (n * n)) / (var_b * var_i).sqrt().max(1e-9);
-                labels[k] = if ncc >= SHADOW_NCC { 0 } else { lut.get(raw[3 * k], raw[3 * k + 1], raw[3 * k + 2]) };
-            }
-        }
     }
 
     /// Exposure gain of `image` against the model, clamped to 0.5..1.99: the median brightness
@@ -445,4 +363,48 @@ fn classify(p: &[u8; 3 * LANES], lut: &ClassLut, out: &mut [u8; LANES]) {
             *o = lut.get(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
         }
     }
+}
+
+/// Per pixel and channel the median of `frames` (each divided by its exposure gain), and the noise
+/// allowance τ from the median absolute deviation around it (1.4826 MAD estimates a standard
+/// deviation without the frames where the hand passed), in the model's layout.
+fn temporal_median(frames: &[RgbImage], gains: &[f32], params: &SegmentParams) -> (Vec<u8>, Vec<u16>) {
+    let (w, h) = frames.first().map_or((0, 0), |f| (f.width() as usize, f.height() as usize));
+    let floor = u16::from(params.noise_floor);
+    let inverse: Vec<f32> = gains.iter().map(|g| 1.0 / g.max(1e-3)).collect();
+    let rows: Vec<(Vec<u8>, Vec<u16>)> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let (mut median, mut tol) = (vec![0u8; 3 * w], vec![floor; w]);
+            let mut values = Vec::with_capacity(frames.len());
+            let mut deviations = Vec::with_capacity(frames.len());
+            for x in 0..w {
+                let mut mad_sum = 0.0;
+                for c in 0..3 {
+                    values.clear();
+                    values.extend(frames.iter().zip(&inverse).map(|(im, g)| {
+                        (f32::from(im.as_raw()[3 * (y * w + x) + c]) * g).round().clamp(0.0, 255.0) as u8
+                    }));
+                    let mid = values.len() / 2;
+                    let (_, m, _) = values.select_nth_unstable(mid);
+                    let m = *m;
+                    median[3 * x + c] = m;
+                    deviations.clear();
+                    deviations.extend(values.iter().map(|&v| v.abs_diff(m)));
+                    let (_, d, _) = deviations.select_nth_unstable(mid);
+                    mad_sum += f64::from(*d);
+                }
+                let sd = 1.4826 * mad_sum / 3.0;
+                tol[x] = (params.noise_sigmas * sd).ceil().clamp(f64::from(floor), 255.0) as u16;
+            }
+            (median, tol)
+        })
+        .collect();
+    let mut median_raw = Vec::with_capacity(3 * w * h);
+    let mut tol = Vec::with_capacity(w * h);
+    for (m, t) in rows {
+        median_raw.extend(m);
+        tol.extend(t);
+    }
+    (median_raw, tol)
 }

@@ -44,6 +44,14 @@ impl ColourClass {
         Self { label, mean: [r, b, 0.5 * (lo + hi)], cov: [[c2, 0.0, 0.0], [0.0, c2, 0.0], [0.0, 0.0, y_sd * y_sd]] }
     }
 
+    /// Squared Mahalanobis distance of a feature vector from the class (`None` for a singular
+    /// covariance).
+    pub fn mahalanobis2(&self, f: &[f64; 3]) -> Option<f64> {
+        let (inv, _) = self.inverse()?;
+        let d = [f[0] - self.mean[0], f[1] - self.mean[1], f[2] - self.mean[2]];
+        Some((0..3).map(|i| (0..3).map(|j| d[i] * inv[i][j] * d[j]).sum::<f64>()).sum())
+    }
+
     fn inverse(&self) -> Option<([[f64; 3]; 3], f64)> {
         let m = &self.cov;
         let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
@@ -235,17 +243,29 @@ impl ClassLut {
     /// As [`ClassLut::new`], leaving unknown the colours whose best class wins by less than
     /// `margin` (see [`classify_compiled`]).
     pub(crate) fn with_margin(classes: Option<&ColourClasses>, margin: f64, encode: impl Fn(u8) -> u8 + Sync) -> Self {
-        let n = 1usize << LUT_BITS;
-        let Some(classes) = classes else { return Self { table: vec![encode(label::UNKNOWN); n * n * n] } };
+        let Some(classes) = classes else { return Self::from_fn(|_| label::UNKNOWN, encode) };
         let compiled = classes.compile();
-        let step = f64::from(1u32 << (8 - LUT_BITS));
+        let reject = classes.reject_mahalanobis2;
+        Self::from_fn(
+            |[r, g, b]| {
+                classify_compiled(&compiled, reject, margin, features(f64::from(r), f64::from(g), f64::from(b)))
+            },
+            encode,
+        )
+    }
+
+    /// The table of `label_of` evaluated at every bin's centre colour; `encode` maps a label to
+    /// the working encoding.
+    pub(crate) fn from_fn(label_of: impl Fn([u8; 3]) -> u8 + Sync, encode: impl Fn(u8) -> u8 + Sync) -> Self {
+        let n = 1usize << LUT_BITS;
+        let step = 1usize << (8 - LUT_BITS);
+        // Centre of the bin.
+        let c = |v: usize| (v * step + step / 2) as u8;
         let table = (0..n * n * n)
             .into_par_iter()
             .map(|i| {
                 let (r, g, b) = (i >> (2 * LUT_BITS), (i >> LUT_BITS) & (n - 1), i & (n - 1));
-                // Centre of the bin.
-                let c = |v: usize| v as f64 * step + 0.5 * (step - 1.0);
-                encode(classify_compiled(&compiled, classes.reject_mahalanobis2, margin, features(c(r), c(g), c(b))))
+                encode(label_of([c(r), c(g), c(b)]))
             })
             .collect();
         Self { table }

@@ -38,7 +38,7 @@ use classes::ClassLut;
 use mog2::Mog2;
 
 /// Settings of segmentation.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SegmentParams {
     /// β: how much brighter than expected (relative, after exposure compensation) a pixel may
     /// be and still be background. Small, because a static scene's shading does not change;
@@ -407,9 +407,6 @@ impl CameraSegmenter {
                 let t = Thresholds::new(params, gain);
                 for (y, (row, labels)) in raw.chunks_exact(3 * w).zip(s.labels.chunks_exact_mut(w)).enumerate() {
                     s.act0[y] = model.foreground_row(row, y, t, lut, labels);
-                }
-                if params.shadow_depth > params.shadow_tolerance {
-                    model.settle_shadows(image, &mut s.labels, &s.act0, lut);
                 }
             }
             Model::Mog2(m) => {

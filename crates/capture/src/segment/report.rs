@@ -23,6 +23,11 @@ struct Counts {
 
 impl Counts {
     fn of(pred: &GrayImage, truth: &GrayImage, l: u8) -> Option<Self> {
+        Self::matching(pred, truth, |v| v == l)
+    }
+
+    /// Counts of the pixels `is` holds for, in the prediction against the truth.
+    fn matching(pred: &GrayImage, truth: &GrayImage, is: impl Fn(u8) -> bool) -> Option<Self> {
         if pred.dimensions() != truth.dimensions() {
             return None;
         }
@@ -31,7 +36,7 @@ impl Counts {
             if t == label::UNKNOWN {
                 continue;
             }
-            let (p, t) = (p == l, t == l);
+            let (p, t) = (is(p), is(t));
             c.tp += u64::from(p & t);
             c.fp += u64::from(p & !t);
             c.fn_ += u64::from(!p & t);
@@ -79,14 +84,19 @@ pub struct SegmentationReport {
     pub views: u64,
     /// One entry per foreground label ([`label::NAMED`]).
     pub labels: Vec<LabelScore>,
+    /// The foreground whatever its label (a pixel predicted unknown counts as foreground): how
+    /// well the background model and the shadows were settled, apart from the labelling. Its
+    /// `label` is [`label::BACKGROUND`] (scored as its complement) and its name `foreground`.
+    pub foreground: LabelScore,
 }
 
 /// Collects per-label counts and per-view IoU over many (prediction, truth) pairs.
 #[derive(Debug, Clone, Default)]
 pub struct IouAccumulator {
     views: u64,
-    counts: [Counts; 2],
-    ious: [Vec<f64>; 2],
+    /// Hand, scalpel, then the foreground whatever its label.
+    counts: [Counts; 3],
+    ious: [Vec<f64>; 3],
 }
 
 impl IouAccumulator {
@@ -108,8 +118,10 @@ impl IouAccumulator {
             });
         }
         self.views += 1;
-        for (k, &(l, _)) in label::NAMED.iter().enumerate() {
-            if let Some(c) = Counts::of(pred, truth, l) {
+        let foreground = Counts::matching(pred, truth, |v| v != label::BACKGROUND);
+        let named = label::NAMED.iter().map(|&(l, _)| Counts::of(pred, truth, l));
+        for (k, c) in named.chain([foreground]).enumerate() {
+            if let Some(c) = c {
                 self.counts[k].tp += c.tp;
                 self.counts[k].fp += c.fp;
                 self.counts[k].fn_ += c.fn_;
@@ -124,27 +136,25 @@ impl IouAccumulator {
     /// The report so far.
     pub fn report(&self) -> SegmentationReport {
         let ratio = |a: u64, b: u64| (b > 0).then(|| a as f64 / b as f64);
-        let labels = label::NAMED
-            .iter()
-            .enumerate()
-            .map(|(k, &(l, name))| {
-                let c = self.counts[k];
-                let ious = &self.ious[k];
-                LabelScore {
-                    label: l,
-                    name: name.to_owned(),
-                    views: ious.len() as u64,
-                    iou_mean: (!ious.is_empty()).then(|| ious.iter().sum::<f64>() / ious.len() as f64),
-                    iou_min: ious.iter().copied().reduce(f64::min),
-                    iou_pooled: c.iou(),
-                    precision: ratio(c.tp, c.tp + c.fp),
-                    recall: ratio(c.tp, c.tp + c.fn_),
-                    true_positive: c.tp,
-                    false_positive: c.fp,
-                    false_negative: c.fn_,
-                }
-            })
-            .collect();
-        SegmentationReport { views: self.views, labels }
+        let score = |k: usize, l: u8, name: &str| {
+            let c = self.counts[k];
+            let ious = &self.ious[k];
+            LabelScore {
+                label: l,
+                name: name.to_owned(),
+                views: ious.len() as u64,
+                iou_mean: (!ious.is_empty()).then(|| ious.iter().sum::<f64>() / ious.len() as f64),
+                iou_min: ious.iter().copied().reduce(f64::min),
+                iou_pooled: c.iou(),
+                precision: ratio(c.tp, c.tp + c.fp),
+                recall: ratio(c.tp, c.tp + c.fn_),
+                true_positive: c.tp,
+                false_positive: c.fp,
+                false_negative: c.fn_,
+            }
+        };
+        let labels = label::NAMED.iter().enumerate().map(|(k, &(l, name))| score(k, l, name)).collect();
+        let foreground = score(label::NAMED.len(), label::BACKGROUND, "foreground");
+        SegmentationReport { views: self.views, labels, foreground }
     }
 }

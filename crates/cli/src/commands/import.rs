@@ -65,7 +65,7 @@ pub fn calibration(args: &CalibrationArgs) -> anyhow::Result<()> {
 /// Make a dataset from one video per camera.
 ///
 /// Each video (any container and codec OpenCV decodes: .mp4, .avi, .mkv, ...) belongs to the rig
-/// camera of its --video NAME=FILE, or, with --videos DIR, to the camera its file is named after
+/// camera of its --video NAME=FILE, or, with --videos-dir DIR, to the camera its file is named after
 /// (cam0.mp4). Frames are stamped with their media time plus the camera's --offset (a camera that
 /// started 12 ms late: --offset cam3=-0.012) plus --start-ns, and paired into frame sets within
 /// half a frame period; frames that pair with nothing and sets that lack a camera (a video that

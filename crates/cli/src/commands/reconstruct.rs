@@ -17,7 +17,7 @@ use serde::Serialize;
 use self::checks::ViewDisagreement;
 use crate::backend::{Backend, Carver};
 use crate::frames::parse_frames;
-use crate::labelling::{Labelling, LabellingReport};
+use crate::labelling::{LabelMethod, Labelling, LabellingReport};
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, PoseWriter, log_blade, no_tool_estimate};
 use crate::progress::bar;
@@ -85,6 +85,11 @@ pub struct Args {
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
     label_frames: Vec<u64>,
+    /// With segmented masks: what labels the foreground: both (the tool's geometry, sharpened by
+    /// learned colours), geometry (the fitted tool alone), colour (the colours of --label-frames
+    /// alone).
+    #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
+    labels: LabelMethod,
     /// Views that must see a cell as background to carve it (k of N).
     #[arg(long, value_name = "K", default_value_t = 1)]
     carve_votes: usize,
@@ -218,8 +223,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ..HullParams::new(volume.aabb, args.voxel)
     };
     let tool = ds.tool()?;
-    let mut labelling =
-        if use_files { None } else { Some(Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames)?) };
+    let mut labelling = if use_files {
+        None
+    } else {
+        Some(Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames, args.labels)?)
+    };
     let poses = ds.truth_poses()?.unwrap_or_default();
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;

@@ -21,7 +21,7 @@ use self::stages::{Policy, StageTimes, Work};
 use crate::backend::{Backend, Carver};
 use crate::commands::reconstruct::checks;
 use crate::frames::parse_frames;
-use crate::labelling::Labelling;
+use crate::labelling::{LabelMethod, Labelling};
 use crate::logging::{CameraLogger, log_tool};
 use crate::pose_out::{PoseReport, log_blade};
 use crate::progress::bar;
@@ -104,6 +104,11 @@ pub struct Args {
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
     label_frames: Vec<u64>,
+    /// With segmented masks: what labels the foreground: both (the tool's geometry, sharpened by
+    /// learned colours), geometry (the fitted tool alone), colour (the colours of --label-frames
+    /// alone).
+    #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
+    labels: LabelMethod,
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
@@ -459,8 +464,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let policy = if args.realtime { Policy::DropOldest } else { Policy::Block };
     let dropped = Arc::new(AtomicU64::new(0));
     let t0 = Instant::now();
-    let labelling =
-        if use_files { None } else { Some(Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames)?) };
+    let labelling = if use_files {
+        None
+    } else {
+        Some(Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?)
+    };
     let pipeline = stages::spawn(stages::Setup {
         ds: Arc::clone(&ds),
         frames: frames.clone(),

@@ -5,12 +5,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use hullcut_capture::segment::{IouAccumulator, SegmentationReport};
-use hullcut_dataset::Dataset;
+use hullcut_dataset::{Dataset, FrameSet};
+use image::GrayImage;
 use serde::Serialize;
 
 use crate::backend::Carver;
 use crate::frames::parse_frames;
-use crate::labelling::{LabelSource, Labelling, LabellingReport};
+use crate::labelling::{LabelMethod, LabelSource, Labelling, LabellingReport};
 use crate::logging::CameraLogger;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
@@ -58,6 +59,11 @@ pub struct Args {
     /// Frames whose masks/ seed the learned colours (comma-separated).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
     label_frames: Vec<u64>,
+    /// What labels the foreground: both (the tool's geometry, sharpened by the learned colours,
+    /// and the colours alone where the tool cannot be fitted), geometry (the fitted tool alone),
+    /// colour (the colours of --label-frames alone; tool.json ignored).
+    #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
+    labels: LabelMethod,
     /// Leaf of the foreground's hull that the tool is fitted into, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
@@ -66,8 +72,11 @@ pub struct Args {
     workspace: Option<WorkspaceArg>,
 }
 
+/// Frame sets at most that wait for learned colours (their masks held in memory).
+const MAX_DEFERRED: usize = 64;
+
 #[derive(Debug, Serialize)]
-struct Report<'a> {
+struct Report {
     schema_version: u32,
     kind: &'static str,
     #[serde(flatten)]
@@ -79,7 +88,7 @@ struct Report<'a> {
     dropped_views: usize,
     labelling: LabellingReport,
     accuracy: Option<SegmentationReport>,
-    parameters: &'a str,
+    parameters: hullcut_capture::segment::SegmentParams,
     timings: Timings,
 }
 
@@ -93,6 +102,12 @@ struct Timings {
     carve: StageTiming,
     /// ... and the tool's fit and drawing its labels.
     geometry: StageTiming,
+    /// ... which splits into the fit's evidence (thin parts, provisional labels) ...
+    evidence: StageTiming,
+    /// ... the tracker's fit and confidence ...
+    fit: StageTiming,
+    /// ... and drawing the tool and the hand's depth into the views.
+    draw: StageTiming,
     /// Reading and decoding one frame set's PNGs.
     read: StageTiming,
     total: StageTiming,
@@ -111,7 +126,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let hull =
         hullcut_hull::HullParams { min_views: MIN_VIEWS, ..hullcut_hull::HullParams::new(volume.aabb, args.voxel) };
     let tool = ds.tool()?;
-    let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames)?;
+    let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?;
     let mut carver = Carver::Cpu;
     let score = ds.has_masks();
     let rec = match &args.rrd {
@@ -128,27 +143,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut accuracy = IouAccumulator::new();
     let (mut read_times, mut segment_times) = (Vec::<Duration>::new(), Vec::<Duration>::new());
     let (mut fg_times, mut carve_times, mut geometry_times) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut evidence_times, mut fit_times, mut draw_times) = (Vec::new(), Vec::new(), Vec::new());
     let ms = |x: f64| Duration::from_secs_f64(x * 1e-3);
     let mut views = 0;
-    for &frame in &frames {
-        let t = Instant::now();
-        let mut set = ds.read_frame_set(frame, score)?;
-        read_times.push(t.elapsed());
-        let t = Instant::now();
-        let labelled = labelling.label(&set, &mut carver)?;
-        segment_times.push(t.elapsed());
-        fg_times.push(ms(labelled.foreground_ms));
-        carve_times.push(ms(labelled.carve_ms));
-        if let Some(s) = &labelled.stats {
-            geometry_times.push(ms(s.evidence_ms + s.fit_ms + s.draw_ms));
-        }
-        if let Some(e) = &labelled.estimate {
-            tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), "tool");
-        }
-        if labelled.source == LabelSource::Unknown {
-            tracing::debug!(frame, reason = ?labelled.estimate.as_ref().and_then(|e| e.reason.clone()), thin = ?labelled.stats.as_ref().map(|s| s.thin_leaves), "the tool could not be fitted: foreground left unknown");
-        }
-        let masks = labelled.masks;
+    // Scores, writes and logs one frame set's masks.
+    let mut emit = |set: &mut FrameSet, masks: Vec<Option<GrayImage>>, segment_ms: f64| -> anyhow::Result<()> {
+        let frame = set.frame;
         for (view, mask) in set.views.iter_mut().zip(masks) {
             let (Some(view), Some(mask)) = (view, mask) else { continue };
             views += 1;
@@ -165,15 +165,53 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             view.mask = Some(mask);
         }
         if let Some((rec, cams)) = &rec
-            && frame % args.rrd_every == 0
+            && frame.is_multiple_of(args.rrd_every)
         {
             hullcut_viz::set_frame(rec, frame as i64);
             hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
-            cams.log_frame_set(rec, &set)?;
-            let ms = segment_times.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
-            hullcut_viz::log_scalar(rec, "metrics/time/segment", ms)?;
+            cams.log_frame_set(rec, set)?;
+            hullcut_viz::log_scalar(rec, "metrics/time/segment", segment_ms)?;
+        }
+        Ok(())
+    };
+    // Frame sets the tool could not label with trust wait (up to MAX_DEFERRED of them) for the
+    // colours that later frames teach.
+    let mut deferred: Vec<(u64, Vec<Option<GrayImage>>, f64)> = Vec::new();
+    for &frame in &frames {
+        let t = Instant::now();
+        let mut set = ds.read_frame_set(frame, score)?;
+        read_times.push(t.elapsed());
+        let t = Instant::now();
+        let labelled = labelling.label(&set, &mut carver)?;
+        segment_times.push(t.elapsed());
+        fg_times.push(ms(labelled.foreground_ms));
+        carve_times.push(ms(labelled.carve_ms));
+        if let Some(s) = &labelled.stats {
+            geometry_times.push(ms(s.evidence_ms + s.fit_ms + s.draw_ms));
+            evidence_times.push(ms(s.evidence_ms));
+            fit_times.push(ms(s.fit_ms));
+            draw_times.push(ms(s.draw_ms));
+        }
+        if let Some(e) = &labelled.estimate {
+            tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), "tool");
+        }
+        let segment_ms = t.elapsed().as_secs_f64() * 1e3;
+        match labelled.source {
+            LabelSource::Unknown | LabelSource::UntrustedGeometry if deferred.len() < MAX_DEFERRED => {
+                tracing::debug!(frame, source = ?labelled.source, "the tool's fit is not trusted: the frame set waits for learned colours");
+                deferred.push((frame, labelled.masks, segment_ms));
+            }
+            _ => emit(&mut set, labelled.masks, segment_ms)?,
         }
         pb.inc(1);
+    }
+    for (frame, masks, segment_ms) in deferred {
+        let mut set = ds.read_frame_set(frame, score)?;
+        let masks = match labelling.relabel_by_colour(&set, &mut carver)? {
+            Some(relabelled) => relabelled.masks,
+            None => masks,
+        };
+        emit(&mut set, masks, segment_ms)?;
     }
     pb.finish_and_clear();
     if let Some((rec, _)) = &rec {
@@ -184,13 +222,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let labels = labelling.report();
     println!(
         "segmented {} frame sets ({views} images): {:.2} ms per frame set (mean; foreground {:.2} ms); labels from the \
-         tool's geometry in {}, from learned colours in {}, unknown in {}",
+         tool's geometry in {}, from learned colours in {}, from an untrusted fit in {}, unknown in {} ({} of \
+         these two relabelled by the colours learned)",
         frames.len(),
         seg.mean_ms,
         StageTiming::from_durations(&fg_times).mean_ms,
         labels.counters.geometry,
         labels.counters.colour,
-        labels.counters.unknown
+        labels.counters.untrusted,
+        labels.counters.unknown,
+        labels.counters.relabelled
     );
     for c in &labels.appearance {
         if let Some(rgb) = c.rgb {
@@ -198,7 +239,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     }
     if let Some(acc) = &accuracy {
-        for l in &acc.labels {
+        for l in acc.labels.iter().chain([&acc.foreground]) {
             println!(
                 "  {:8} IoU pooled {:.4}, mean {:.4}, min {:.4} over {} views",
                 l.name,
@@ -210,7 +251,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     }
     if let Some(path) = &args.report {
-        let parameters = format!("{:?}", hullcut_capture::segment::SegmentParams::default());
+        let parameters = labelling.params().clone();
         let report = Report {
             schema_version: SCHEMA_VERSION,
             kind: "segmentation",
@@ -222,12 +263,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             dropped_views: ds.dropped().iter().filter(|d| range.contains(&d.frame)).count(),
             labelling: labels,
             accuracy,
-            parameters: &parameters,
+            parameters,
             timings: Timings {
                 segment: seg,
                 foreground: StageTiming::from_durations(&fg_times),
                 carve: StageTiming::from_durations(&carve_times),
                 geometry: StageTiming::from_durations(&geometry_times),
+                evidence: StageTiming::from_durations(&evidence_times),
+                fit: StageTiming::from_durations(&fit_times),
+                draw: StageTiming::from_durations(&draw_times),
                 read: StageTiming::from_durations(&read_times),
                 total: StageTiming::from_durations(&[t0.elapsed()]),
             },

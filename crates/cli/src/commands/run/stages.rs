@@ -313,8 +313,8 @@ fn read_stage(
 
 /// Masks (files or segmented), silhouettes, carving, surfaces. Segmenting carves the foreground's
 /// hull and fits the known tool into it to label the views ([`Labelling`]): that hull, its cells
-/// near the tool labelled scalpel, is the frame's (nothing is carved twice); the pose stage fits
-/// the blade again to the labelled views, whose colours have sharpened the tool's outline.
+/// near the tool labelled scalpel, is the frame's (nothing is carved twice), and the labelling's
+/// fit of the tool, tracked, is the frame's pose (nothing is fitted twice).
 fn hull_stage(
     ds: &Dataset,
     use_files: bool,
@@ -341,6 +341,8 @@ fn hull_stage(
                 }
             }
             labelled_hull = labelled.occupancy;
+            // The tool's track is the labelling's: the pose stage takes its estimate.
+            work.estimate = labelled.estimate;
         }
         let occ = match labelled_hull {
             Some(occ) => occ,
@@ -379,6 +381,11 @@ fn pose_stage(ds: &Dataset, template: Option<Template>, rx: &Receiver<Work>, tx:
         let clock = Instant::now();
         let set = &work.set;
         let estimate = match (&mut tracker, &work.occ) {
+            // Segmented with the tool's geometry: its fit into the foreground's hull, tracked, is
+            // the pose (fitting again to the masks drawn from it adds nothing but time).
+            _ if work.estimate.is_some() => {
+                work.estimate.take().unwrap_or_else(|| no_tool_estimate(work.frame, set.timestamp_ns))
+            }
             (Some(tracker), Some(occ)) => {
                 let inputs: Vec<Option<ViewInput>> = ds
                     .rig()
