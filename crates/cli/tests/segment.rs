@@ -162,3 +162,51 @@ fn without_a_tool_the_colours_of_masked_frames_label_the_rest() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("99"), "{}", stderr(&o));
 }
+
+#[test]
+fn bench_segment_quick_compares_the_methods_per_recording() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "segment", "--quick", "--out", &path(dir.path())]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.path().join("segment.csv")).expect("csv");
+    let mut reader = csv::Reader::from_reader(csv.as_bytes());
+    let header: Vec<String> = reader.headers().expect("header").iter().map(str::to_owned).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}"));
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("row")).collect();
+    // Two recordings at --quick, three methods each.
+    assert_eq!(rows.len(), 6, "{csv}");
+    let f = |r: &csv::StringRecord, name: &str| r[col(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name}: {csv}"));
+    for recording in rows.iter().map(|r| r[col("recording")].to_owned()).collect::<std::collections::BTreeSet<_>>() {
+        let row = |m: &str| {
+            rows.iter().find(|r| r[col("recording")] == recording && &r[col("method")] == m).expect("a row per method")
+        };
+        let (colour, geometry, both) = (row("colour"), row("geometry"), row("both"));
+        // Colour alone never fits the tool; geometry alone never labels by colour.
+        assert_eq!(f(colour, "by_geometry"), 0.0, "{csv}");
+        assert_eq!(f(geometry, "by_colour"), 0.0, "{csv}");
+        // The same foreground for all three: the labels differ, not the background model.
+        assert_eq!(colour[col("foreground_iou")], both[col("foreground_iou")], "{csv}");
+        // The colours learned from the trusted fits sharpen the tool's outline.
+        assert!(f(both, "scalpel_iou") > f(geometry, "scalpel_iou"), "{recording}: {csv}");
+        assert!(f(both, "ms_mean") > 0.0 && f(both, "ms_mean") >= f(both, "foreground_ms_mean"), "{csv}");
+    }
+    for name in ["segment_hand.png", "segment_scalpel.png"] {
+        assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
+    }
+}
+
+#[test]
+fn one_kind_of_evidence_alone_needs_what_it_learns_from() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = synth(dir.path(), "default", "classic", "standard", 3, 10);
+    let o = hullcut(&["segment", "--dataset", &path(&ds), "--labels", "colour"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--label-frames"), "{}", stderr(&o));
+    std::fs::remove_file(ds.join("tool.json")).expect("rm tool.json");
+    let o = hullcut(&["segment", "--dataset", &path(&ds), "--labels", "geometry"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("tool.json"), "{}", stderr(&o));
+    let r = segment(&ds, &["--labels", "colour", "--label-frames", "0"]);
+    assert_eq!(r["labelling"]["method"], "colour");
+    assert_eq!(r["labelling"]["counters"]["colour"], 3, "{}", r["labelling"]);
+}

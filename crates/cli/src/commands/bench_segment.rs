@@ -63,7 +63,7 @@ struct Row {
     timing: StageTiming,
     foreground_ms: f64,
     scores: [LabelScore; 3],
-    counts: [u64; 3],
+    counts: [u64; 4],
 }
 
 /// Runs the segmentation benchmark into `out`.
@@ -129,7 +129,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 timing: StageTiming::from_durations(&times),
                 foreground_ms: StageTiming::from_durations(&fg).mean_ms,
                 scores: [hand, scalpel, report.foreground],
-                counts: [c.geometry, c.colour, c.unknown],
+                counts: [c.geometry, c.colour, c.untrusted, c.unknown],
             };
             println!(
                 "{name}, {}: hand IoU {:.3}, scalpel {:.3}, foreground {:.3}; {:.1} ms per frame set (foreground {:.1})",
@@ -149,14 +149,14 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
 fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
     let mut csv = String::from(
         "recording,cameras,width,height,method,frame_sets_scored,ms_mean,ms_p50,ms_p95,foreground_ms_mean,\
-         hand_iou,scalpel_iou,foreground_iou,scalpel_precision,scalpel_recall,by_geometry,by_colour,unknown\n",
+         hand_iou,scalpel_iou,foreground_iou,scalpel_precision,scalpel_recall,by_geometry,by_colour,untrusted_fit,unknown\n",
     );
     let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for r in rows {
         let [hand, scalpel, fg] = &r.scores;
         writeln!(
             csv,
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{}",
             r.setup,
             r.cameras,
             r.width,
@@ -174,7 +174,8 @@ fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
             f(scalpel.recall),
             r.counts[0],
             r.counts[1],
-            r.counts[2]
+            r.counts[2],
+            r.counts[3]
         )?;
     }
     super::bench::write(&out.join("segment.csv"), &csv)?;
