@@ -270,7 +270,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let mut set_aside: Vec<Option<image::GrayImage>> = Vec::new();
         // Segmenting carves the foreground's hull and fits the tool into it to label the views: the
         // hull, its cells near the tool labelled scalpel, is this frame's.
-        let mut labelled_hull = None;
+        let (mut labelled_hull, mut labelled_estimate) = (None, None);
         if let Some(labelling) = &mut labelling {
             let clock = Instant::now();
             let labelled = labelling.label(&set, &mut carver)?;
@@ -281,6 +281,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 set_aside.push(view.as_mut().and_then(|v| std::mem::replace(&mut v.mask, mask)));
             }
             labelled_hull = labelled.occupancy;
+            labelled_estimate = labelled.estimate;
         }
         let clock = Instant::now();
         let masks: Vec<Option<&image::GrayImage>> =
@@ -330,11 +331,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .zip(&masks)
             .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
             .collect();
-        // Fitted again to the labelled views, as to mask files: the colours have sharpened the
-        // tool's outline since the labelling fitted it.
-        let estimate = match &mut tracker {
-            Some(tracker) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
-            None => no_tool_estimate(frame, set.timestamp_ns),
+        // Segmented with the tool's geometry: the labelling's tracked fit is the pose, as in
+        // `hullcut run`; with mask files, the blade is fitted to them.
+        let estimate = match (labelled_estimate, &mut tracker) {
+            (Some(estimate), _) => estimate,
+            (None, Some(tracker)) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
+            (None, None) => no_tool_estimate(frame, set.timestamp_ns),
         };
         t.pose.push(clock.elapsed());
         t.pose_evidence.push(Duration::from_secs_f64(estimate.diagnostics.evidence_ms * 1e-3));

@@ -193,7 +193,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             draw_times.push(ms(s.draw_ms));
         }
         if let Some(e) = &labelled.estimate {
-            tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), "tool");
+            tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), ms = ?labelled.stats.as_ref().map(|s| [s.evidence_ms, s.fit_ms, s.draw_ms]), carve_ms = labelled.carve_ms, "tool");
         }
         let segment_ms = t.elapsed().as_secs_f64() * 1e3;
         match labelled.source {
