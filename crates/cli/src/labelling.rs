@@ -34,6 +34,16 @@ const REFRESH_EVERY: u64 = 15;
 const SHARPEN_PX: usize = 12;
 /// A colour is sure when it is at least e^3 (20) times as likely under its label as under the other.
 const SHARPEN_LOG_RATIO: f64 = 3.0;
+/// A view's foreground is degraded when it is this many times its usual (the median over its
+/// last [`DEGRADED_HISTORY`] frame sets)...
+const DEGRADED_JUMP: f64 = 3.0;
+/// ... and covers more than this fraction of the image (a jump of a small foreground is a hand
+/// coming closer to the camera, not a change of the scene).
+const DEGRADED_MIN_FRACTION: f64 = 0.02;
+/// Frame sets of each camera's usual foreground.
+const DEGRADED_HISTORY: usize = 16;
+/// Marks the foreground the hull explains while a degraded view is cut back (no label uses it).
+const EXPLAINED: u8 = 254;
 /// Pixels down to this much darker than their background (relative) with their chromaticity
 /// unchanged may be cast shadows, resolved by the hull ([`hullcut_hull::shadow`]): a shadow in
 /// full (ambient light only) keeps a fifth of the light or more.
@@ -103,6 +113,9 @@ pub(crate) struct LabelCounters {
     pub shadow_foreground: u64,
     /// Hull cells dropped because no view saw sure foreground in them (shadows on the table).
     pub shadow_cells_dropped: u64,
+    /// Views whose foreground jumped far above their usual (someone behind the table, a light
+    /// switched on): their foreground was cut to what the hull explains, the frame set kept.
+    pub degraded_views: u64,
 }
 
 /// What the labelling of a run did, for its report.
@@ -158,6 +171,8 @@ pub(crate) struct Labelling {
     label_frames: Vec<u64>,
     counters: LabelCounters,
     masks: Vec<Option<GrayImage>>,
+    /// Per camera, its foreground pixel counts of the last frame sets that were not degraded.
+    history: Vec<std::collections::VecDeque<usize>>,
 }
 
 impl Labelling {
@@ -228,6 +243,7 @@ impl Labelling {
             label_frames: label_frames.to_vec(),
             counters: LabelCounters::default(),
             masks: Vec::new(),
+            history: Vec::new(),
         })
     }
 
@@ -246,7 +262,9 @@ impl Labelling {
         let shadow_pixels: u64 =
             fg.iter().flatten().map(|m| m.iter().filter(|&&p| p == SHADOW_LIKE).count() as u64).sum();
         self.counters.shadow_pixels += shadow_pixels;
-        if self.tool.is_none() && shadow_pixels == 0 {
+        let degraded = self.degraded_views(&fg);
+        self.counters.degraded_views += degraded.iter().filter(|&&d| d).count() as u64;
+        if self.tool.is_none() && shadow_pixels == 0 && !degraded.contains(&true) {
             // No tool: the colours learned from the masked frames.
             let mut masks = fg.clone();
             self.colour(set, &mut masks);
@@ -268,6 +286,13 @@ impl Labelling {
         let mut occ = carver.carve(&views, &self.hull).with_context(|| format!("frame {frame}"))?;
         if shadow_pixels > 0 {
             occ = self.resolve_shadows(occ, &views, &mut fg).with_context(|| format!("frame {frame}"))?;
+        }
+        for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
+            if let (Some(view), Some(mask)) = (view, mask) {
+                // What the hull does not explain in this view is not in the working volume.
+                cover(&occ, view, mask, label::UNKNOWN, EXPLAINED, self.hull.margin_px);
+                mask.iter_mut().filter(|p| **p == EXPLAINED).for_each(|p| *p = label::UNKNOWN);
+            }
         }
         let carve_ms = clock.elapsed().as_secs_f64() * 1e3;
         if self.tool.is_none() {
@@ -352,6 +377,34 @@ impl Labelling {
         self.tool = tool;
         self.counters = LabelCounters { relabelled: counters.relabelled + 1, ..counters };
         labelled.map(Some)
+    }
+
+    /// Which views' foreground jumped far above its usual ([`DEGRADED_JUMP`] times the median of
+    /// the view's last [`DEGRADED_HISTORY`] frame sets, and more than [`DEGRADED_MIN_FRACTION`]
+    /// of the image): someone walking behind the table, a light switched on. Their usual grows
+    /// only from frame sets that were not degraded.
+    fn degraded_views(&mut self, fg: &[Option<GrayImage>]) -> Vec<bool> {
+        self.history.resize_with(fg.len(), std::collections::VecDeque::new);
+        fg.iter()
+            .zip(&mut self.history)
+            .map(|(mask, history)| {
+                let Some(mask) = mask else { return false };
+                let count = mask.iter().filter(|&&p| p != label::BACKGROUND).count();
+                let mut usual: Vec<usize> = history.iter().copied().collect();
+                usual.sort_unstable();
+                let pixels = mask.width() as usize * mask.height() as usize;
+                let degraded = usual.len() >= DEGRADED_HISTORY / 2
+                    && count as f64 > DEGRADED_JUMP * usual[usual.len() / 2] as f64
+                    && count as f64 > DEGRADED_MIN_FRACTION * pixels as f64;
+                if !degraded {
+                    if history.len() == DEGRADED_HISTORY {
+                        history.pop_front();
+                    }
+                    history.push_back(count);
+                }
+                degraded
+            })
+            .collect()
     }
 
     /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible

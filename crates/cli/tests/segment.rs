@@ -210,3 +210,30 @@ fn one_kind_of_evidence_alone_needs_what_it_learns_from() {
     assert_eq!(r["labelling"]["method"], "colour");
     assert_eq!(r["labelling"]["counters"]["colour"], 3, "{}", r["labelling"]);
 }
+
+/// Someone walks behind the table in one camera's view for six frame sets: that view is counted
+/// as degraded, its foreground cut back to what the hull explains, and no frame set is lost.
+#[test]
+fn a_camera_whose_background_changes_is_degraded_and_counted_not_lost() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = synth(dir.path(), "default", "classic", "standard", 16, 10);
+    for frame in 10..16 {
+        let file = ds.join("cam2").join(format!("{frame:06}.png"));
+        let mut image = image::open(&file).expect("frame").to_rgb8();
+        // A red shirt across the top of the view, far behind the working volume.
+        for y in 10..130 {
+            for x in 20..200 {
+                image.put_pixel(x, y, image::Rgb([190, 50, 45]));
+            }
+        }
+        image.save(&file).expect("painted frame");
+    }
+    let r = segment(&ds, &[]);
+    let c = &r["labelling"]["counters"];
+    assert_eq!(r["frame_sets"], 16, "{r}");
+    assert_eq!(c["degraded_views"], 6, "{c}");
+    // The shirt (21,600 pixels a frame set) would be a third of all foreground; cut back, the
+    // foreground stays close to the truth.
+    let fg = iou(&r, "foreground");
+    assert!(fg >= 0.97, "foreground IoU {fg:.4}: {}", r["accuracy"]);
+}
