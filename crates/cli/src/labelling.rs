@@ -196,7 +196,10 @@ impl Labelling {
                 ds.root().display()
             );
         }
-        let params = SegmentParams { shadow_depth: SHADOW_DEPTH, ..SegmentParams::default() };
+        // A pixel with one foreground neighbour stays: a blade a pixel or two wide, partly of its
+        // background's colour, breaks into short runs that two neighbours would erase, and the
+        // tool's fit needs them (the hull and the fit ignore lone noise).
+        let params = SegmentParams { shadow_depth: SHADOW_DEPTH, min_neighbors: 1, ..SegmentParams::default() };
         let segmenter = Segmenter::from_dataset(ds, params).context("setting up segmentation")?;
         let mut appearance = AppearanceModel::default();
         for &frame in label_frames {

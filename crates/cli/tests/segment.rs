@@ -1,7 +1,8 @@
 //! `hullcut segment` on recordings a lab would bring: two rigs, several looks (one seeded random),
 //! with and without empty-scene images, with the tool's geometry or only a few masked frames.
-//! The floors are set below what was measured (README, "Segmentation"), so a regression of a few
-//! percent fails while run-to-run noise does not.
+//! The floors are set a few percent below what was measured (scalpel IoU 0.809, 0.855, 0.900,
+//! 0.801 for the four looks below; hand 0.991-0.996), so a regression fails while run-to-run
+//! noise does not.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -94,22 +95,22 @@ fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) {
 
 #[test]
 fn segments_the_built_in_rig_with_the_classic_look() {
-    labels_from_the_scene("default", "classic", "standard", [0.98, 0.97, 0.80]);
+    labels_from_the_scene("default", "classic", "standard", [0.98, 0.97, 0.78]);
 }
 
 #[test]
 fn segments_the_built_in_rig_with_purple_gloves_and_the_pointed_tool() {
-    labels_from_the_scene("default", "purple-nitrile", "pointed", [0.98, 0.97, 0.75]);
+    labels_from_the_scene("default", "purple-nitrile", "pointed", [0.98, 0.97, 0.82]);
 }
 
 #[test]
 fn segments_the_built_in_rig_with_a_seeded_random_look() {
-    labels_from_the_scene("default", "random:11", "standard", [0.97, 0.95, 0.65]);
+    labels_from_the_scene("default", "random:11", "standard", [0.97, 0.97, 0.86]);
 }
 
 #[test]
 fn segments_the_lab8_rig_with_a_bare_hand_and_the_pointed_tool() {
-    labels_from_the_scene("lab8", "skin-medium", "pointed", [0.97, 0.95, 0.72]);
+    labels_from_the_scene("lab8", "skin-medium", "pointed", [0.97, 0.97, 0.77]);
 }
 
 #[test]
