@@ -37,9 +37,9 @@ const SHARPEN_LOG_RATIO: f64 = 3.0;
 /// A view's foreground is degraded when it is this many times its usual (the median over its
 /// last [`DEGRADED_HISTORY`] frame sets)...
 const DEGRADED_JUMP: f64 = 3.0;
-/// ... and covers more than this fraction of the image (a jump of a small foreground is a hand
-/// coming closer to the camera, not a change of the scene).
-const DEGRADED_MIN_FRACTION: f64 = 0.02;
+/// ... where the usual is taken as at least this fraction of the image (a jump of a small
+/// foreground is a hand coming closer to the camera or into view, not a change of the scene).
+const DEGRADED_MIN_FRACTION: f64 = 0.01;
 /// Frame sets of each camera's usual foreground.
 const DEGRADED_HISTORY: usize = 16;
 /// Marks the foreground the hull explains while a degraded view is cut back (no label uses it).
@@ -84,7 +84,7 @@ pub(crate) enum LabelSource {
     /// The colours learned from the recording.
     Colour,
     /// The fitted tool drawn into the views although the tracker did not trust the fit (no
-    /// colours learned yet to do better).
+    /// colours learned yet to do better, or `--labels geometry`).
     UntrustedGeometry,
     /// Neither: foreground of unknown label.
     Unknown,
@@ -98,7 +98,7 @@ pub(crate) struct LabelCounters {
     /// Frame sets labelled by the learned colours.
     pub colour: u64,
     /// Frame sets labelled by a fit the tracker did not trust (drawn all the same: no colours
-    /// were learned yet).
+    /// were learned yet, or `--labels geometry`).
     pub untrusted: u64,
     /// Frame sets whose foreground stayed unknown.
     pub unknown: u64,
@@ -126,7 +126,8 @@ pub(crate) struct LabellingReport {
     pub foreground: Vec<Option<Method>>,
     /// Which evidence was asked for (`--labels`).
     pub method: LabelMethod,
-    /// Whether a tool.json was there to label by geometry.
+    /// Whether the tool's geometry labelled (a tool.json was there and `--labels` is not
+    /// `colour`).
     pub tool: bool,
     /// Frames whose masks/ seeded the colours (`--label-frames`).
     pub label_frames: Vec<u64>,
@@ -171,8 +172,10 @@ pub(crate) struct Labelling {
     label_frames: Vec<u64>,
     counters: LabelCounters,
     masks: Vec<Option<GrayImage>>,
-    /// Per camera, its foreground pixel counts of the last frame sets that were not degraded.
-    history: Vec<std::collections::VecDeque<usize>>,
+    /// Per camera, its usual foreground pixel count over the last frame sets (a degraded frame
+    /// set repeats the last usual count), each with how many degraded frame sets in a row led to
+    /// it.
+    history: Vec<std::collections::VecDeque<(usize, usize)>>,
 }
 
 impl Labelling {
@@ -368,11 +371,12 @@ impl Labelling {
         })
     }
 
-    /// Labels `set` again by the learned colours alone (`None` while none are learned), for a
-    /// frame set that the tool could not label with trust before later frames taught the colours.
+    /// Labels `set` again by the learned colours alone (`None` while none are learned, and with
+    /// any method but [`LabelMethod::Both`]), for a frame set that the tool could not label with
+    /// trust before later frames taught the colours.
     /// The counters count it as `relabelled`, nothing else.
     pub fn relabel_by_colour(&mut self, set: &FrameSet, carver: &mut Carver) -> anyhow::Result<Option<Labelled>> {
-        if self.colours.is_none() {
+        if self.method != LabelMethod::Both || self.colours.is_none() {
             return Ok(None);
         }
         let (tool, counters) = (self.tool.take(), self.counters.clone());
@@ -383,9 +387,10 @@ impl Labelling {
     }
 
     /// Which views' foreground jumped far above its usual ([`DEGRADED_JUMP`] times the median of
-    /// the view's last [`DEGRADED_HISTORY`] frame sets, and more than [`DEGRADED_MIN_FRACTION`]
-    /// of the image): someone walking behind the table, a light switched on. Their usual grows
-    /// only from frame sets that were not degraded.
+    /// the view's last [`DEGRADED_HISTORY`] frame sets, that median taken as at least
+    /// [`DEGRADED_MIN_FRACTION`] of the image): someone walking behind the table, a light switched
+    /// on. A degraded frame set does not count towards the usual, until the change has lasted
+    /// half the history: then it is the scene's new usual (a person who stays, a light left on).
     fn degraded_views(&mut self, fg: &[Option<GrayImage>]) -> Vec<bool> {
         self.history.resize_with(fg.len(), std::collections::VecDeque::new);
         fg.iter()
@@ -393,18 +398,25 @@ impl Labelling {
             .map(|(mask, history)| {
                 let Some(mask) = mask else { return false };
                 let count = mask.iter().filter(|&&p| p != label::BACKGROUND).count();
-                let mut usual: Vec<usize> = history.iter().copied().collect();
+                let mut usual: Vec<usize> = history.iter().map(|&(c, _)| c).collect();
                 usual.sort_unstable();
                 let pixels = mask.width() as usize * mask.height() as usize;
+                let floor = DEGRADED_MIN_FRACTION * pixels as f64;
                 let degraded = usual.len() >= DEGRADED_HISTORY / 2
-                    && count as f64 > DEGRADED_JUMP * usual[usual.len() / 2] as f64
-                    && count as f64 > DEGRADED_MIN_FRACTION * pixels as f64;
-                if !degraded {
-                    if history.len() == DEGRADED_HISTORY {
-                        history.pop_front();
-                    }
-                    history.push_back(count);
+                    && count as f64 > DEGRADED_JUMP * (usual[usual.len() / 2] as f64).max(floor);
+                // A change that lasts half the history is the scene's new usual.
+                let run = history.back().map_or(0, |&(_, r)| r);
+                if degraded && run + 1 >= DEGRADED_HISTORY / 2 {
+                    history.clear();
+                    history.push_back((count, 0));
+                    return false;
                 }
+                if history.len() == DEGRADED_HISTORY {
+                    history.pop_front();
+                }
+                // Degraded counts stay out of the usual (kept with the run they extend).
+                let usual_count = if degraded { history.back().map_or(count, |&(c, _)| c) } else { count };
+                history.push_back((usual_count, if degraded { run + 1 } else { 0 }));
                 degraded
             })
             .collect()

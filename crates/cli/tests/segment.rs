@@ -68,8 +68,9 @@ fn iou(report: &serde_json::Value, name: &str) -> f64 {
 }
 
 /// Segments one synthetic recording from its empty-scene images and the tool's geometry and checks
-/// the floors: the whole foreground, the hand and the scalpel (pooled IoU against the truth).
-fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) {
+/// the floors: the whole foreground, the hand and the scalpel (pooled IoU against the truth);
+/// returns the report.
+fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) -> serde_json::Value {
     let dir = tempfile::tempdir().expect("tempdir");
     let frames = 8;
     let ds = synth(dir.path(), rig, look, tool, frames, 10);
@@ -91,26 +92,31 @@ fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) {
     for ((name, g), floor) in ["foreground", "hand", "scalpel"].iter().zip(got).zip(floors) {
         assert!(g >= floor, "{rig} {look} {tool}: {name} IoU {g:.4} < {floor} (all: {got:?})");
     }
+    r
 }
 
 #[test]
 fn segments_the_built_in_rig_with_the_classic_look() {
-    labels_from_the_scene("default", "classic", "standard", [0.98, 0.97, 0.78]);
+    let r = labels_from_the_scene("default", "classic", "standard", [0.98, 0.97, 0.78]);
+    // Its first frame set refuses the fit (measured): labelled again by the colours the later
+    // ones taught.
+    let c = &r["labelling"]["counters"];
+    assert!(c["relabelled"].as_u64().expect("relabelled") >= 1, "{c}");
 }
 
 #[test]
 fn segments_the_built_in_rig_with_purple_gloves_and_the_pointed_tool() {
-    labels_from_the_scene("default", "purple-nitrile", "pointed", [0.98, 0.97, 0.82]);
+    let _ = labels_from_the_scene("default", "purple-nitrile", "pointed", [0.98, 0.97, 0.82]);
 }
 
 #[test]
 fn segments_the_built_in_rig_with_a_seeded_random_look() {
-    labels_from_the_scene("default", "random:11", "standard", [0.97, 0.97, 0.86]);
+    let _ = labels_from_the_scene("default", "random:11", "standard", [0.97, 0.97, 0.86]);
 }
 
 #[test]
 fn segments_the_lab8_rig_with_a_bare_hand_and_the_pointed_tool() {
-    labels_from_the_scene("lab8", "skin-medium", "pointed", [0.97, 0.97, 0.77]);
+    let _ = labels_from_the_scene("lab8", "skin-medium", "pointed", [0.97, 0.97, 0.77]);
 }
 
 #[test]
@@ -130,10 +136,13 @@ fn without_empty_scene_images_the_background_is_the_recordings_median_and_shadow
     let without = segment(&ds, &[]);
     let methods = without["labelling"]["foreground"].as_array().expect("methods");
     assert!(!methods.is_empty() && methods.iter().all(|m| m == "median"), "{methods:?}");
-    // The synthetic scene casts the hand's and the tool's shadows on the table: settled as
-    // background (by shading and by the hull), the foreground stays close to the truth.
-    let shadows = &with["labelling"]["counters"];
-    assert!(shadows["shadow_pixels"].as_u64().expect("shadow pixels") > 0, "{shadows}");
+    // The synthetic scene casts the hand's and the tool's shadows on the table: darker pixels of
+    // unchanged chromaticity, settled by the hull (a shadow has no hull above the table), so the
+    // foreground stays close to the truth with either background.
+    for r in [&with, &without] {
+        let c = &r["labelling"]["counters"];
+        assert!(c["shadow_pixels"].as_u64().expect("shadow pixels") > 0, "{c}");
+    }
     let (a, b) = (iou(&with, "foreground"), iou(&without, "foreground"));
     assert!(a >= 0.98, "foreground from empty-scene images: IoU {a:.4}");
     assert!(b >= 0.95, "foreground from the median: IoU {b:.4}");
@@ -212,29 +221,36 @@ fn one_kind_of_evidence_alone_needs_what_it_learns_from() {
     assert_eq!(r["labelling"]["counters"]["colour"], 3, "{}", r["labelling"]);
 }
 
-/// Someone walks behind the table in one camera's view for six frame sets: that view is counted
-/// as degraded, its foreground cut back to what the hull explains, and no frame set is lost.
+/// Someone walks behind the table in one camera's view for five frame sets and leaves: those views
+/// are counted as degraded, their foreground cut back to what the hull explains, no frame set is
+/// lost, and the view is no longer degraded once the person has gone; a change that stays becomes
+/// the view's usual.
 #[test]
 fn a_camera_whose_background_changes_is_degraded_and_counted_not_lost() {
     let dir = tempfile::tempdir().expect("tempdir");
     let ds = synth(dir.path(), "default", "classic", "standard", 16, 10);
-    for frame in 10..16 {
-        let file = ds.join("cam2").join(format!("{frame:06}.png"));
-        let mut image = image::open(&file).expect("frame").to_rgb8();
-        // A red shirt across the top of the view, far behind the working volume.
-        for y in 10..130 {
-            for x in 20..200 {
-                image.put_pixel(x, y, image::Rgb([190, 50, 45]));
+    // A red shirt across the top of the view, far behind the working volume: in cam2 for frames
+    // 9-13; in cam4 from frame 8 to the end, where it stays long enough (half of the 16 frame
+    // sets a view's usual is taken over) to become the new usual at frame 15.
+    for (cam, frames) in [("cam2", 9..14), ("cam4", 8..16)] {
+        for frame in frames {
+            let file = ds.join(cam).join(format!("{frame:06}.png"));
+            let mut image = image::open(&file).expect("frame").to_rgb8();
+            for y in 10..130 {
+                for x in 20..200 {
+                    image.put_pixel(x, y, image::Rgb([190, 50, 45]));
+                }
             }
+            image.save(&file).expect("painted frame");
         }
-        image.save(&file).expect("painted frame");
     }
     let r = segment(&ds, &[]);
     let c = &r["labelling"]["counters"];
     assert_eq!(r["frame_sets"], 16, "{r}");
-    assert_eq!(c["degraded_views"], 6, "{c}");
-    // The shirt (21,600 pixels a frame set) would be a third of all foreground; cut back, the
-    // foreground stays close to the truth.
+    assert_eq!(c["degraded_views"], 5 + 7, "{c}");
+    // The shirt (21,600 pixels a view, 13 views) would bring the foreground's IoU down to about
+    // 0.57; cut back where it was new, it stays close to the truth (measured 0.939: the last frame
+    // set of cam4, where the shirt became the usual, counts against it).
     let fg = iou(&r, "foreground");
-    assert!(fg >= 0.97, "foreground IoU {fg:.4}: {}", r["accuracy"]);
+    assert!(fg >= 0.93, "foreground IoU {fg:.4}: {}", r["accuracy"]);
 }

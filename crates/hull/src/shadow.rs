@@ -22,7 +22,9 @@ use crate::{Occupancy, Silhouette};
 /// Cast shadows lie on the table: a cell wholly this high above the table top (z = 0 in a table's
 /// frame) is an object, whatever its shading says. The hull of a shadow rises above the table
 /// where the views' cones over it overlap, by about half the shadow's width times the tangent of
-/// the lowest camera's elevation: some 2-3 cm for a hand's shadow seen from 20-40° up.
+/// the lowest camera's elevation: some 2-3 cm for a hand's shadow seen from 20-40° up. Where a
+/// real object stands on the table (a phantom organ, a tray), shadows fall on it too, higher than
+/// this: the rule then keeps them as objects; hullcut's organ is virtual and casts no shadow.
 pub const SHADOW_HULL_HEIGHT: f64 = 0.04;
 
 /// The cells of `occ` (carved from `all`, the views' silhouettes with the possible shadows as

@@ -43,8 +43,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// pixel outside the labels 0, 1, 2, 255 is an error naming the mask file.
 ///
 /// The blade's pose: the dataset's tool.json (the instrument's known shape) is fitted to the
-/// scalpel silhouettes, starting from the scalpel hull or from the track, tracked with a One Euro
-/// filter; a frame whose confidence is too low (fit disagrees with the silhouettes, blade seen by
+/// scalpel silhouettes (with segmented masks: the segmentation's own fit of the tool into the
+/// foreground's hull, whose agreement bounds are looser), starting from the scalpel hull or from
+/// the track, tracked with a One Euro filter; a frame whose confidence is too low (fit disagrees with the silhouettes, blade seen by
 /// too few views, too few scalpel leaves, implausible jump) is refused with a reason and the last
 /// trusted pose is held for up to 0.5 s. Without a tool.json every frame is refused. Where the
 /// dataset has true poses, the report gives normal, edge and tip errors per frame and aggregated.
@@ -333,14 +334,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .collect();
         // Segmented with the tool's geometry: the labelling's tracked fit is the pose, as in
         // `hullcut run`; with mask files, the blade is fitted to them.
+        let from_labelling = labelled_estimate.is_some();
         let estimate = match (labelled_estimate, &mut tracker) {
             (Some(estimate), _) => estimate,
             (None, Some(tracker)) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
             (None, None) => no_tool_estimate(frame, set.timestamp_ns),
         };
         t.pose.push(clock.elapsed());
-        t.pose_evidence.push(Duration::from_secs_f64(estimate.diagnostics.evidence_ms * 1e-3));
-        t.pose_fit.push(Duration::from_secs_f64(estimate.diagnostics.fit_ms * 1e-3));
+        // The labelling's fit is timed in `segment`; its parts are not the pose stage's.
+        let part = |ms: f64| Duration::from_secs_f64(if from_labelling { 0.0 } else { ms * 1e-3 });
+        t.pose_evidence.push(part(estimate.diagnostics.evidence_ms));
+        t.pose_fit.push(part(estimate.diagnostics.fit_ms));
         pose_writer.write(&estimate)?;
         let truth_iso = poses.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
         if let Some(template) = &template {

@@ -36,7 +36,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// ending at about 4 s, then cut strokes 5 to 25 mm deep), rendered once at start-up into a
 /// temporary folder (with a progress bar) and replayed. The stages run as threads joined by bounded channels (--queue frame sets each):
 /// reading, hull (segmentation when the masks are not files, octree carving, surfaces), pose (the
-/// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted),
+/// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted;
+/// with segmented masks, the segmentation's own tracked fit of the tool, whose agreement bounds
+/// are looser),
 /// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
 /// virtual node algorithm; TLED moves it under gravity, its base held by the table; the hand's
 /// hull pushes it aside where it presses on it). Untrusted

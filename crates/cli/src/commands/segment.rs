@@ -108,6 +108,10 @@ struct Timings {
     fit: StageTiming,
     /// ... and drawing the tool and the hand's depth into the views.
     draw: StageTiming,
+    /// Labelling a frame set again by the learned colours, once they were learned (frame sets
+    /// the tool's fit did not label with trust; not in `segment`, and their second reading not
+    /// in `read`).
+    relabel: StageTiming,
     /// Reading and decoding one frame set's PNGs.
     read: StageTiming,
     total: StageTiming,
@@ -197,7 +201,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         let segment_ms = t.elapsed().as_secs_f64() * 1e3;
         match labelled.source {
-            LabelSource::Unknown | LabelSource::UntrustedGeometry if deferred.len() < MAX_DEFERRED => {
+            LabelSource::Unknown | LabelSource::UntrustedGeometry
+                if args.labels == LabelMethod::Both && deferred.len() < MAX_DEFERRED =>
+            {
                 tracing::debug!(frame, source = ?labelled.source, "the tool's fit is not trusted: the frame set waits for learned colours");
                 deferred.push((frame, labelled.masks, segment_ms));
             }
@@ -205,12 +211,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         pb.inc(1);
     }
+    let mut relabel_times = Vec::new();
     for (frame, masks, segment_ms) in deferred {
         let mut set = ds.read_frame_set(frame, score)?;
+        let t = Instant::now();
         let masks = match labelling.relabel_by_colour(&set, &mut carver)? {
             Some(relabelled) => relabelled.masks,
             None => masks,
         };
+        relabel_times.push(t.elapsed());
         emit(&mut set, masks, segment_ms)?;
     }
     pb.finish_and_clear();
@@ -272,6 +281,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 evidence: StageTiming::from_durations(&evidence_times),
                 fit: StageTiming::from_durations(&fit_times),
                 draw: StageTiming::from_durations(&draw_times),
+                relabel: StageTiming::from_durations(&relabel_times),
                 read: StageTiming::from_durations(&read_times),
                 total: StageTiming::from_durations(&[t0.elapsed()]),
             },
