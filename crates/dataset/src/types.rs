@@ -86,14 +86,8 @@ pub struct Workspace {
     pub max: [f64; 3],
 }
 
-/// A triangle mesh in metres (PLY on disk).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Mesh {
-    /// Vertex positions.
-    pub vertices: Vec<Point3<f64>>,
-    /// Triangles as vertex indices, counter-clockwise seen from outside.
-    pub triangles: Vec<[u32; 3]>,
-}
+/// A triangle mesh in metres (PLY on disk): the workspace's one mesh type, from `hullcut-mesh`.
+pub use hullcut_mesh::TriMesh as Mesh;
 
 /// `tool.json`: the instrument's known geometry, all in the tool frame, metres.
 #[derive(Debug, Clone, PartialEq)]

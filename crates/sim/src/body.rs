@@ -7,7 +7,7 @@
 //! warning).
 
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
@@ -24,8 +24,9 @@ pub enum Body {
         /// Edge lengths along x, y, z.
         size: Vector3<f64>,
     },
-    /// A triangle mesh, ideally closed and outward-oriented.
-    Mesh(TriMesh),
+    /// A triangle mesh, ideally closed and outward-oriented, and the file it was read from (for
+    /// messages; `None` for a mesh built in memory).
+    Mesh(TriMesh, Option<PathBuf>),
     /// The built-in liver-like organ (see [`organ_sdf`]).
     Organ,
 }
@@ -37,18 +38,19 @@ impl Body {
     /// Reads a mesh body from a `.ply` or `.obj` file, multiplying coordinates by `scale` to get
     /// metres (1 for a file in metres, 0.001 for millimetres).
     pub fn load_mesh(path: impl AsRef<Path>, scale: f64) -> Result<Self, MeshError> {
+        let path = path.as_ref();
         let mut mesh = TriMesh::load(path)?;
         if scale != 1.0 {
             mesh.scale(scale);
         }
-        Ok(Self::Mesh(mesh))
+        Ok(Self::Mesh(mesh, Some(path.to_owned())))
     }
 
     /// Axis-aligned bounds `(min, max)`; for the organ, those of its analytic shape.
     pub fn bounds(&self) -> (Point3<f64>, Point3<f64>) {
         match self {
             Self::Box { size } => (Point3::origin(), Point3::from(*size)),
-            Self::Mesh(m) => m.bounds().unwrap_or((Point3::origin(), Point3::origin())),
+            Self::Mesh(m, _) => m.bounds().unwrap_or((Point3::origin(), Point3::origin())),
             Self::Organ => (Point3::from(ORGAN_MIN), Point3::from(ORGAN_MAX)),
         }
     }
@@ -58,7 +60,7 @@ impl Body {
     pub fn contains(&self, p: &Point3<f64>) -> bool {
         match self {
             Self::Box { size } => (0..3).all(|a| p[a] >= 0.0 && p[a] <= size[a]),
-            Self::Mesh(m) => m.winding_number(p).abs() > 0.5,
+            Self::Mesh(m, _) => m.winding_number(p).abs() > 0.5,
             Self::Organ => organ_sdf(p) < 0.0,
         }
     }
@@ -70,9 +72,9 @@ impl Body {
         match self {
             Self::Box { size } => {
                 let n = [0, 1, 2].map(|a| ((size[a] / SURFACE_SPACING).ceil().max(1.0) as usize).min(64));
-                TriMesh::cuboid(Point3::origin(), Point3::from(*size), n)
+                TriMesh::cuboid_grid(Point3::origin(), Point3::from(*size), n)
             }
-            Self::Mesh(m) => m.clone(),
+            Self::Mesh(m, _) => m.clone(),
             Self::Organ => Self::organ_mesh(),
         }
     }
@@ -94,10 +96,8 @@ impl fmt::Display for Body {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Box { size } => write!(f, "box {} x {} x {} m", size.x, size.y, size.z),
-            Self::Mesh(m) => match &m.source {
-                Some(path) => write!(f, "mesh {}", path.display()),
-                None => write!(f, "mesh ({} triangles)", m.triangles.len()),
-            },
+            Self::Mesh(_, Some(path)) => write!(f, "mesh {}", path.display()),
+            Self::Mesh(m, None) => write!(f, "mesh ({} triangles)", m.triangles.len()),
             Self::Organ => write!(f, "built-in organ"),
         }
     }
@@ -391,7 +391,7 @@ pub fn voxelize(body: &Body, cell: f64, params: &VoxelizeParams) -> Result<Voxel
         Body::Box { size } if !size.iter().all(|&s| s.is_finite() && s > 0.0) => {
             return Err(invalid(format!("box size must be positive, got {:?}", size.as_slice())));
         }
-        Body::Mesh(m) => {
+        Body::Mesh(m, _) => {
             if m.triangles.is_empty() {
                 return Err(invalid("mesh has no triangles".into()));
             }
@@ -446,7 +446,7 @@ pub fn voxelize(body: &Body, cell: f64, params: &VoxelizeParams) -> Result<Voxel
             })
             .collect(),
         Body::Organ => (0..total).into_par_iter().map(|idx| sampled(cell_min(idx), &|p| organ_sdf(p) < 0.0)).collect(),
-        Body::Mesh(mesh) => {
+        Body::Mesh(mesh, _) => {
             let open_edges = mesh.open_edges();
             if open_edges > 0 {
                 warnings.push(format!(

@@ -18,7 +18,6 @@
 
 mod appearance;
 mod hand;
-mod mesh;
 pub mod render;
 mod scalpel;
 mod scene;
@@ -29,7 +28,7 @@ mod trajectory;
 
 pub use appearance::{Appearance, Background};
 pub use hand::{hand_mesh, hand_mesh_on};
-pub use mesh::TriMesh;
+pub use hullcut_mesh::TriMesh;
 pub use render::{CameraRenderer, Layers, Light, Part, ShadowMap};
 pub use scalpel::{
     BLADE_LENGTH, BLADE_THICKNESS, BLADE_WIDTH, HANDLE_LENGTH, HANDLE_THICKNESS, HANDLE_WIDTH, HandleFit, Scalpel,

@@ -135,7 +135,7 @@ impl Scalpel {
         mesh.append(&blade);
         let lift = |p: &Point2<f64>| Point3::new(p.x, p.y, 0.0);
         let geometry = ToolGeometry {
-            mesh: mesh.to_dataset(),
+            mesh,
             tip: lift(&tip),
             cutting_edge: edge.iter().rev().map(lift).collect(),
             blade_normal: Vector3::z(),
@@ -183,7 +183,7 @@ mod tests {
     #[test]
     fn blade_and_handle_have_the_stated_size() {
         let s = Scalpel::new();
-        assert!(s.blade.is_closed() && s.handle.is_closed());
+        assert!(s.blade.is_closed_oriented() && s.handle.is_closed_oriented());
         let area = s.blade.volume() / BLADE_THICKNESS;
         // A No. 10 blade's face is about 2.5 to 3.5 cm².
         assert!((2.5e-4..3.5e-4).contains(&area), "blade area {area} m²");
@@ -195,7 +195,7 @@ mod tests {
     #[test]
     fn the_pointed_scalpel_is_another_tool() {
         let p = Scalpel::pointed();
-        assert!(p.blade.is_closed() && p.handle.is_closed());
+        assert!(p.blade.is_closed_oriented() && p.handle.is_closed_oriented());
         let area = p.blade.volume() / 0.00035;
         // A No. 11 blade's face is a narrow triangle of 1 to 2 cm², smaller than the No. 10's.
         assert!((1.0e-4..2.0e-4).contains(&area), "blade area {area} m²");

@@ -310,7 +310,7 @@ impl Scene {
                 for p in parts.iter().filter(|p| p.label == l) {
                     mesh.append(&p.mesh);
                 }
-                (name, mesh.to_dataset())
+                (name, mesh)
             })
             .collect()
     }

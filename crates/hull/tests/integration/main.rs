@@ -290,14 +290,14 @@ fn a_finer_hull_inside_a_coarser_one_equals_the_whole_carving() {
 #[test]
 fn accuracy_measures_agree_with_closed_forms() {
     use hullcut_hull::accuracy::{sample_surface, surface_distance, volumetric_iou, winding_number};
-    let exact = sphere().mesh.to_dataset();
+    let exact = sphere().mesh.clone();
     let c = Point3::from(CENTRE);
     assert!((winding_number(&exact, &c) - 1.0).abs() < 1e-9);
     assert!(winding_number(&exact, &(c + Vector3::new(0.0, 0.0, 2.0 * RADIUS))).abs() < 1e-9);
 
     // The binned signed-crossing count agrees with the generalized winding number on a union of
     // overlapping closed parts (a hand), off the surface.
-    let hand = hullcut_synth::hand_mesh(0.5).to_dataset();
+    let hand = hullcut_synth::hand_mesh(0.5).clone();
     let solid = hullcut_hull::accuracy::Solid::new(&hand);
     let mut disagree = 0;
     for k in 0..2000 {

@@ -142,17 +142,15 @@ fn organ_view(
         .map(|(k, m)| Part {
             label: FIRST_PIECE_LABEL + (k % 200) as u8,
             albedo: PIECE_ALBEDO[k % PIECE_ALBEDO.len()],
-            mesh: hullcut_synth::TriMesh { vertices: m.vertices.clone(), triangles: m.triangles.clone() },
+            mesh: m.clone(),
         })
         .collect();
     // The hulls occlude the organ where the hand or scalpel is in front of it.
-    parts.extend(grids.iter().filter_map(|(l, _, _, mesh)| {
-        mesh.as_ref().map(|m| Part {
-            label: *l,
-            albedo: [0.0; 3],
-            mesh: hullcut_synth::TriMesh { vertices: m.vertices.clone(), triangles: m.triangles.clone() },
-        })
-    }));
+    parts.extend(
+        grids
+            .iter()
+            .filter_map(|(l, _, _, mesh)| mesh.as_ref().map(|m| Part { label: *l, albedo: [0.0; 3], mesh: m.clone() })),
+    );
     let layers = renderer.render(&parts);
     let (w, h) = (camera.width, camera.height);
     let mut out = match image {

@@ -1,42 +1,12 @@
-//! Closed triangle meshes built from primitives: cuboids, solids of revolution (capsules,
-//! ellipsoids) and prisms over convex outlines. Every builder returns a closed mesh with triangles
+//! Closed meshes built from primitives: boxes, solids of revolution (capsules, ellipsoids) and
+//! prisms over convex outlines. Every builder returns a closed mesh with triangles
 //! counter-clockwise seen from outside.
 
 use nalgebra::{Isometry3, Point2, Point3, Rotation3, Vector3};
 
-/// A closed triangle mesh in double precision.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct TriMesh {
-    /// Vertex positions.
-    pub vertices: Vec<Point3<f64>>,
-    /// Triangles as vertex indices, counter-clockwise seen from outside.
-    pub triangles: Vec<[u32; 3]>,
-}
+use crate::TriMesh;
 
 impl TriMesh {
-    /// Appends another mesh (a union of closed meshes, overlaps allowed).
-    pub fn append(&mut self, other: &TriMesh) {
-        let base = self.vertices.len() as u32;
-        self.vertices.extend_from_slice(&other.vertices);
-        self.triangles.extend(other.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
-    }
-
-    /// The mesh moved by a rigid transform.
-    pub fn transformed(&self, iso: &Isometry3<f64>) -> TriMesh {
-        TriMesh { vertices: self.vertices.iter().map(|p| iso * p).collect(), triangles: self.triangles.clone() }
-    }
-
-    /// Enclosed volume (divergence theorem), cubic metres; positive for outward-oriented meshes.
-    pub fn volume(&self) -> f64 {
-        self.triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i as usize].coords);
-                a.dot(&b.cross(&c)) / 6.0
-            })
-            .sum()
-    }
-
     /// An axis-aligned box between two corners.
     pub fn cuboid(min: Point3<f64>, max: Point3<f64>) -> TriMesh {
         let vertices = (0..8)
@@ -142,52 +112,5 @@ impl TriMesh {
             triangles.push([i, n + j, n + i]);
         }
         TriMesh { vertices, triangles }
-    }
-
-    /// True when every edge is used exactly twice, once in each direction (closed and consistently
-    /// oriented).
-    pub fn is_closed(&self) -> bool {
-        let mut edges: std::collections::HashMap<(u32, u32), i32> = std::collections::HashMap::new();
-        for t in &self.triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                *edges.entry((a, b)).or_insert(0) += 1;
-            }
-        }
-        edges.iter().all(|(&(a, b), &count)| count == 1 && edges.get(&(b, a)) == Some(&1))
-    }
-
-    /// The mesh in the dataset crate's type.
-    pub fn to_dataset(&self) -> hullcut_dataset::Mesh {
-        hullcut_dataset::Mesh { vertices: self.vertices.clone(), triangles: self.triangles.clone() }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn primitives_are_closed_with_the_right_volume() {
-        let cube = TriMesh::cuboid(Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.2, 0.3));
-        assert!(cube.is_closed());
-        assert!((cube.volume() - 0.006).abs() < 1e-15);
-
-        let r = 0.01;
-        let cap = TriMesh::capsule(Point3::new(0.1, 0.0, 0.0), Point3::new(0.1, 0.05, 0.02), r, 48);
-        assert!(cap.is_closed());
-        let exact = std::f64::consts::PI * r * r * (0.05f64.hypot(0.02) + 4.0 / 3.0 * r);
-        assert!((cap.volume() - exact).abs() < 0.01 * exact, "{} vs {exact}", cap.volume());
-
-        let radii = Vector3::new(0.03, 0.02, 0.01);
-        let e = TriMesh::ellipsoid(&Isometry3::translation(0.0, 0.0, 0.5), radii, 64);
-        assert!(e.is_closed());
-        let exact = 4.0 / 3.0 * std::f64::consts::PI * radii.product();
-        assert!((e.volume() - exact).abs() < 0.01 * exact);
-
-        let tri = [Point2::new(0.0, 0.0), Point2::new(1.0, 0.0), Point2::new(0.0, 1.0)];
-        let p = TriMesh::convex_prism(&tri, -0.5, 0.5);
-        assert!(p.is_closed());
-        assert!((p.volume() - 0.5).abs() < 1e-12);
     }
 }
