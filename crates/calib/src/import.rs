@@ -50,6 +50,10 @@ pub enum ImportError {
         /// What is wrong, naming the key.
         message: String,
     },
+    /// The cameras read are not a valid rig (a number out of its range; the error names the folder
+    /// and the camera).
+    #[error(transparent)]
+    Rig(#[from] hullcut_rig::RigError),
 }
 
 fn file_error(path: &Path, message: impl Into<String>) -> ImportError {
@@ -263,5 +267,8 @@ pub fn read_opencv_cameras(dir: &Path, scale: f64) -> Result<Rig, ImportError> {
         )));
     }
     let cameras = files.iter().map(|(name, path)| read_opencv_camera(path, name, scale)).collect::<Result<_, _>>()?;
-    Ok(Rig::new(cameras, WorldFrame::Other(format!("opencv files {} (scale {scale} m per unit)", dir.display()))))
+    let rig =
+        Rig::new(cameras, WorldFrame::Other(format!("opencv files {} (scale {scale} m per unit)", dir.display())));
+    rig.validate(&dir.display().to_string())?;
+    Ok(rig)
 }

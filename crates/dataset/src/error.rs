@@ -1,18 +1,35 @@
 //! Errors of the dataset crate. Every variant names the file or folder it is about and, where there
 //! is one, the key, line, frame or camera.
+//!
+//! Each message is said once: a variant that wraps another error either shows it in its own
+//! message (and does not return it from [`std::error::Error::source`]) or is `transparent`, so a
+//! chain printed the way `anyhow` prints it (`{:#}`) names the file once. Values taken from files
+//! are echoed through [`hullcut_rig::shorten`].
 
 use std::path::PathBuf;
 
 /// What can go wrong reading, validating or writing a dataset, a PLY mesh or a `tool.json`.
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    /// A file or folder could not be read, written, listed, created or renamed.
-    #[error("{path}: {source}")]
+    /// A mesh file could not be read or written (the mesh crate's error names the file).
+    #[error(transparent)]
+    Mesh(#[from] hullcut_mesh::MeshError),
+    /// A file or folder could not be read, written, listed, created or renamed (the I/O error is
+    /// part of the message, not a `source`).
+    #[error("{path}: {error}")]
     Io {
         /// The file or folder.
         path: PathBuf,
         /// The I/O error.
-        source: std::io::Error,
+        error: std::io::Error,
+    },
+    /// A file is larger than a file of its kind may be; nothing of it was parsed.
+    #[error("{path}: more than the {limit} bytes this file may have")]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit, bytes.
+        limit: u64,
     },
     /// A required file is absent.
     #[error("{path}: missing ({message})")]
@@ -58,14 +75,10 @@ pub enum DatasetError {
         /// What disagrees with what.
         message: String,
     },
-    /// `rig.yaml` could not be read or written.
-    #[error("{path}: invalid rig: {source}")]
-    Rig {
-        /// The rig file.
-        path: PathBuf,
-        /// The rig crate's error (it names the key).
-        source: hullcut_rig::RigError,
-    },
+    /// `rig.yaml` could not be read, validated or written (the rig crate's error names the file
+    /// and the key, so it is shown as it is).
+    #[error(transparent)]
+    Rig(#[from] hullcut_rig::RigError),
     /// An image could not be decoded or encoded, or has the wrong pixel format.
     #[error("{path}: {message}")]
     Image {
@@ -115,6 +128,6 @@ impl DatasetError {
     /// An [`DatasetError::Io`] for `path`.
     pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
         let path = path.into();
-        move |source| Self::Io { path, source }
+        move |error| Self::Io { path, error }
     }
 }

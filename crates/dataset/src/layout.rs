@@ -1,5 +1,6 @@
 //! File names of the dataset layout and the checks reader and writer share.
 
+use std::io::Read as _;
 use std::path::Path;
 
 use nalgebra::Matrix4;
@@ -7,8 +8,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{DatasetError, Result};
 use crate::types::{DatasetMeta, TruthPose};
-use crate::{FORMAT_VERSION, MAX_FRAME_COUNT};
-use hullcut_rig::MAX_CAMERAS;
+use crate::{FORMAT_VERSION, MAX_ABS_TIMESTAMP_NS, MAX_FPS, MAX_FRAME_COUNT, MIN_FPS};
+use hullcut_rig::{MAX_CAMERAS, MAX_WORLD_COORDINATE_M, check_rotation, short_number, shorten, shorten_to};
 
 /// `dataset.toml`.
 pub(crate) const DATASET_TOML: &str = "dataset.toml";
@@ -52,12 +53,73 @@ pub(crate) fn check_component(name: &str) -> std::result::Result<(), String> {
         return Err("the name is empty".to_owned());
     }
     if name.starts_with('.') {
-        return Err(format!("`{name}` starts with a dot"));
+        return Err(format!("`{}` starts with a dot", shorten(name)));
     }
     if name.chars().any(|c| c == '/' || c == '\\' || c == ':' || c.is_control()) {
-        return Err(format!("`{name}` contains a path separator or control character"));
+        return Err(format!("`{}` contains a path separator or control character", shorten(name)));
     }
     Ok(())
+}
+
+/// Camera names for a message: each shortened (see [`shorten`]), quoted, comma-separated.
+pub(crate) fn name_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    let names: Vec<String> = names.into_iter().map(|n| format!("`{}`", shorten(n))).collect();
+    format!("[{}]", names.join(", "))
+}
+
+/// Reads a UTF-8 text file of at most `limit` bytes (reading stops there, so a device or an
+/// endless file cannot make it read forever). A missing file is [`DatasetError::Missing`] with
+/// `missing` as its message when that is given, else [`DatasetError::Io`].
+pub(crate) fn read_text(path: &Path, limit: u64, missing: Option<&str>) -> Result<String> {
+    let file = match (std::fs::File::open(path), missing) {
+        (Ok(f), _) => f,
+        (Err(e), Some(message)) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(DatasetError::Missing { path: path.to_owned(), message: message.to_owned() });
+        }
+        (Err(error), _) => return Err(DatasetError::Io { path: path.to_owned(), error }),
+    };
+    let mut bytes = Vec::new();
+    file.take(limit.saturating_add(1)).read_to_end(&mut bytes).map_err(DatasetError::io(path))?;
+    if bytes.len() as u64 > limit {
+        return Err(DatasetError::TooLarge { path: path.to_owned(), limit });
+    }
+    String::from_utf8(bytes).map_err(|e| DatasetError::Parse {
+        path: path.to_owned(),
+        message: format!("not UTF-8 text: {}", e.utf8_error()),
+    })
+}
+
+/// A `serde_json` error's message shortened (it echoes strings and unknown keys from the file),
+/// with its place: line and column for a whole file, the column alone for one line of a
+/// line-oriented file (whose error names the line itself).
+pub(crate) fn json_message(e: &serde_json::Error, whole_file: bool) -> String {
+    let full = e.to_string();
+    let suffix = format!(" at line {} column {}", e.line(), e.column());
+    let Some(message) = full.strip_suffix(&suffix) else { return shorten_to(&full, 200) };
+    let place = if whole_file { suffix } else { format!(" at column {}", e.column()) };
+    format!("{}{place}", shorten_to(message, 200))
+}
+
+/// A `toml` error's message shortened (its default display quotes the whole offending line), with
+/// the line and column of its span in `text`.
+pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    let message = shorten_to(e.message().trim(), 200);
+    let Some(start) = e.span().map(|s| s.start) else { return message };
+    let before = text.get(..start).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    format!("{message} (line {line}, column {column})")
+}
+
+/// Checks a timestamp against [`MAX_ABS_TIMESTAMP_NS`].
+pub(crate) fn check_timestamp(t: i64) -> std::result::Result<(), String> {
+    if t.checked_abs().is_some_and(|a| a <= MAX_ABS_TIMESTAMP_NS) {
+        Ok(())
+    } else {
+        Err(format!(
+            "the timestamp {t} ns is outside ±{MAX_ABS_TIMESTAMP_NS} ns (about 127 years around the clock's epoch)"
+        ))
+    }
 }
 
 /// Checks `dataset.toml`'s values; `path` names the file in errors.
@@ -70,8 +132,11 @@ pub(crate) fn validate_meta(path: &Path, meta: &DatasetMeta) -> Result<()> {
             format!("this reader knows version {FORMAT_VERSION}, the file has {}", meta.format_version),
         ));
     }
-    if !(meta.fps.is_finite() && meta.fps > 0.0) {
-        return Err(invalid("fps", format!("must be positive, found {}", meta.fps)));
+    if !(MIN_FPS..=MAX_FPS).contains(&meta.fps) {
+        return Err(invalid(
+            "fps",
+            format!("{} is outside [{MIN_FPS}, {MAX_FPS}] frames per second", short_number(meta.fps)),
+        ));
     }
     if meta.frame_count > MAX_FRAME_COUNT {
         return Err(invalid(
@@ -89,11 +154,17 @@ pub(crate) fn validate_meta(path: &Path, meta: &DatasetMeta) -> Result<()> {
         ));
     }
     if let Some(w) = &meta.workspace {
-        let finite = w.min.iter().chain(&w.max).all(|c| c.is_finite());
-        if !finite || (0..3).any(|a| w.min[a] >= w.max[a]) {
+        let bounded = w.min.iter().chain(&w.max).all(|c| c.abs() <= MAX_WORLD_COORDINATE_M);
+        if !bounded || (0..3).any(|a| w.min[a] >= w.max[a]) {
+            let corner = |c: &[f64; 3]| c.iter().map(|v| short_number(*v)).collect::<Vec<_>>().join(", ");
             return Err(invalid(
                 "workspace",
-                format!("needs finite corners with min < max on every axis, found min {:?}, max {:?}", w.min, w.max),
+                format!(
+                    "needs corners within ±{MAX_WORLD_COORDINATE_M} m with min < max on every axis, found min [{}], \
+                     max [{}]",
+                    corner(&w.min),
+                    corner(&w.max)
+                ),
             ));
         }
     }
@@ -103,7 +174,7 @@ pub(crate) fn validate_meta(path: &Path, meta: &DatasetMeta) -> Result<()> {
             return Err(invalid("cameras", format!("camera {i}: `{name}` is reserved for the dataset's own folder")));
         }
         if meta.cameras[..i].contains(name) {
-            return Err(invalid("cameras", format!("camera `{name}` is listed twice")));
+            return Err(invalid("cameras", format!("camera `{}` is listed twice", shorten(name))));
         }
     }
     Ok(())
@@ -116,10 +187,11 @@ pub(crate) fn check_rig_cameras(rig_path: &Path, meta: &DatasetMeta, rig: &hullc
         return Err(DatasetError::Inconsistent {
             path: rig_path.to_owned(),
             message: format!(
-                "the rig's cameras {names:?} ({} cameras) differ from {DATASET_TOML}'s `cameras` {:?} ({} cameras); \
+                "the rig's cameras {} ({} cameras) differ from {DATASET_TOML}'s `cameras` {} ({} cameras); \
                  they must be the same names in the same order",
+                name_list(names.iter().copied()),
                 names.len(),
-                meta.cameras,
+                name_list(meta.cameras.iter().map(String::as_str)),
                 meta.cameras.len()
             ),
         });
@@ -146,8 +218,10 @@ impl PoseLine {
         Self { frame: pose.frame, timestamp_ns: pose.timestamp_ns, tool_to_world }
     }
 
-    /// The pose, after checking 16 finite numbers with a bottom row of `[0, 0, 0, 1]`.
+    /// The pose, after checking its timestamp ([`check_timestamp`]) and its matrix
+    /// ([`check_transform`]).
     pub(crate) fn into_pose(self) -> std::result::Result<TruthPose, String> {
+        check_timestamp(self.timestamp_ns).map_err(|m| format!("`timestamp_ns`: {m}"))?;
         let Ok(values) = <[f64; 16]>::try_from(self.tool_to_world.as_slice()) else {
             return Err(format!(
                 "`tool_to_world` must hold 16 numbers (row-major 4x4), found {}",
@@ -160,7 +234,9 @@ impl PoseLine {
     }
 }
 
-/// Checks a tool→world matrix: finite, bottom row `[0, 0, 0, 1]`.
+/// Checks a tool→world matrix: finite, bottom row `[0, 0, 0, 1]`, a rotation within
+/// [`hullcut_rig::ROTATION_TOLERANCE`] (a rotation entry of 1e19 once hung a rotation fit
+/// downstream) and a translation within ±[`MAX_WORLD_COORDINATE_M`].
 pub(crate) fn check_transform(m: &Matrix4<f64>) -> std::result::Result<(), String> {
     if !m.iter().all(|v| v.is_finite()) {
         return Err("`tool_to_world` holds a non-finite number".to_owned());
@@ -168,8 +244,18 @@ pub(crate) fn check_transform(m: &Matrix4<f64>) -> std::result::Result<(), Strin
     let bottom = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
     let expected = [0.0, 0.0, 0.0, 1.0];
     if bottom.iter().zip(expected).any(|(a, b)| (a - b).abs() > BOTTOM_ROW_TOLERANCE) {
+        let bottom: Vec<String> = bottom.iter().map(|v| short_number(*v)).collect();
         return Err(format!(
-            "`tool_to_world`'s bottom row is {bottom:?}, expected [0, 0, 0, 1] (is the matrix transposed?)"
+            "`tool_to_world`'s bottom row is [{}], expected [0, 0, 0, 1] (is the matrix transposed?)",
+            bottom.join(", ")
+        ));
+    }
+    let rotation = m.fixed_view::<3, 3>(0, 0).into_owned();
+    check_rotation(&rotation).map_err(|e| format!("`tool_to_world`'s upper-left 3x3 {e}"))?;
+    if let Some(t) = (0..3).map(|r| m[(r, 3)]).find(|t| t.abs() > MAX_WORLD_COORDINATE_M) {
+        return Err(format!(
+            "`tool_to_world`'s translation {} m is outside ±{MAX_WORLD_COORDINATE_M} m",
+            short_number(t)
         ));
     }
     Ok(())

@@ -3,19 +3,20 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use hullcut_rig::{Camera, Rig};
+use hullcut_rig::{Camera, Rig, shorten};
 use image::{GrayImage, RgbImage};
 
-use crate::FORMAT_VERSION;
 use crate::error::{DatasetError, Result};
-use crate::images::{DepthImage, load_depth, load_mask, load_rgb};
+use crate::images::{DepthImage, load_depth, load_mask, load_rgb, png_size};
 use crate::layout::{
     DATASET_TOML, DEPTH, FRAMES_CSV, FRAMES_CSV_HEADER, MASKS, MESHES, POSES_JSONL, PoseLine, RIG_YAML, TOOL_JSON,
-    TRUTH, check_component, check_rig_cameras, frame_file_name, parse_frame_file_name, validate_meta,
+    TRUTH, check_component, check_rig_cameras, check_timestamp, frame_file_name, json_message, name_list,
+    parse_frame_file_name, read_text, toml_message, validate_meta,
 };
 use crate::ply::read_ply;
 use crate::tool::read_tool;
 use crate::types::{DatasetMeta, FrameSet, Mesh, ToolGeometry, TruthPose, View};
+use crate::{FORMAT_VERSION, MAX_LIST_FILE_BYTES, MAX_SMALL_FILE_BYTES, TIMESTAMP_BACKSTEP_TOLERANCE_NS};
 
 /// A camera image that `frames.csv` does not list: the camera dropped that frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -46,12 +47,15 @@ impl Dataset {
     /// Opens and validates the dataset in `dir`.
     ///
     /// Checks, each error naming the file or folder: `dataset.toml` (format version
-    /// [`FORMAT_VERSION`], no unknown keys, valid values); `rig.yaml` (valid, with the same camera
-    /// names in the same order as `dataset.toml`); a folder for every camera and no folder of frame
-    /// images for a camera the rig lacks; `frames.csv` (present; header; every row with a frame below
-    /// `frame_count`, a rig camera and an integer timestamp; no duplicates); a PNG for every row and
-    /// a row for every frame PNG (`^[0-9]{6}\.png$`); the size of each camera's first image against
-    /// the rig; a per-camera folder under `masks/` and `depth/` when those exist.
+    /// [`FORMAT_VERSION`], no unknown keys, values in their documented ranges); `rig.yaml` (valid
+    /// by [`Rig::load`], with the same camera names in the same order as `dataset.toml`); a folder
+    /// for every camera and no folder of frame images for a camera the rig lacks; `frames.csv`
+    /// (present; header; every row with a frame below `frame_count`, a rig camera and an integer
+    /// timestamp within ±[`MAX_ABS_TIMESTAMP_NS`](crate::MAX_ABS_TIMESTAMP_NS); no duplicates; each
+    /// camera's timestamps, in frame order, never going back by more than
+    /// [`TIMESTAMP_BACKSTEP_TOLERANCE_NS`]); a PNG for every row and a row for every frame PNG
+    /// (`^[0-9]{6}\.png$`); the size in the header of each camera's first image against the rig; a
+    /// per-camera folder under `masks/` and `depth/` when those exist.
     ///
     /// A (frame, camera) without a row is a dropped frame: it is listed in [`Dataset::dropped`],
     /// logged as one warning, and read as a missing view.
@@ -69,7 +73,7 @@ impl Dataset {
                 message: "every dataset has its calibration".to_owned(),
             });
         }
-        let rig = Rig::load(&rig_path).map_err(|source| DatasetError::Rig { path: rig_path.clone(), source })?;
+        let rig = Rig::load(&rig_path)?;
         check_rig_cameras(&rig_path, &meta, &rig)?;
         check_camera_folders(&root, &rig)?;
 
@@ -178,14 +182,17 @@ impl Dataset {
     /// Ground-truth poses from `truth/poses.jsonl` sorted by frame, when the dataset has them.
     ///
     /// Each line must be a JSON object with `frame` (below `frame_count`, not repeated),
-    /// `timestamp_ns` and `tool_to_world` (16 finite numbers, row-major, bottom row `[0, 0, 0, 1]`);
-    /// errors name the file and the line. Blank lines are skipped.
+    /// `timestamp_ns` (within ±[`MAX_ABS_TIMESTAMP_NS`](crate::MAX_ABS_TIMESTAMP_NS)) and
+    /// `tool_to_world` (16 finite numbers, row-major, bottom row `[0, 0, 0, 1]`, a rotation within
+    /// [`hullcut_rig::ROTATION_TOLERANCE`], a translation within
+    /// ±[`hullcut_rig::MAX_WORLD_COORDINATE_M`]); errors name the file and the line. Blank lines are
+    /// skipped.
     pub fn truth_poses(&self) -> Result<Option<Vec<TruthPose>>> {
         let path = self.root.join(POSES_JSONL);
         if path.symlink_metadata().is_err() {
             return Ok(None);
         }
-        let text = std::fs::read_to_string(&path).map_err(DatasetError::io(&path))?;
+        let text = read_text(&path, MAX_LIST_FILE_BYTES, None)?;
         let mut poses: BTreeMap<u64, (usize, TruthPose)> = BTreeMap::new();
         for (i, line) in text.lines().enumerate() {
             let line_no = i + 1;
@@ -193,7 +200,7 @@ impl Dataset {
                 continue;
             }
             let err = |message: String| DatasetError::Line { path: path.clone(), line: line_no, message };
-            let parsed: PoseLine = serde_json::from_str(line).map_err(|e| err(e.to_string()))?;
+            let parsed: PoseLine = serde_json::from_str(line).map_err(|e| err(json_message(&e, false)))?;
             let pose = parsed.into_pose().map_err(err)?;
             if pose.frame >= self.meta.frame_count {
                 return Err(err(format!(
@@ -227,45 +234,38 @@ impl Dataset {
         paths
             .iter()
             .map(|path| {
-                let image = load_rgb(path, "background image")?;
-                check_size(path, cam, image.dimensions())?;
-                Ok(image)
+                let check = |size: (u32, u32)| check_size(path, cam, size);
+                load_rgb(path, "background image", &check)
             })
             .collect()
     }
 
-    /// Camera `camera`'s colour image of `frame`. A dropped frame is a [`DatasetError::Missing`].
+    /// Camera `camera`'s colour image of `frame`. A dropped frame is a [`DatasetError::Missing`];
+    /// an image whose header disagrees with the rig is refused before it is decoded.
     pub fn read_image(&self, frame: u64, camera: usize) -> Result<RgbImage> {
         self.check_frame(frame)?;
         let path = self.image_path(frame, camera)?;
-        let image =
-            load_rgb(&path, &format!("camera `{}` has no image of frame {frame}", self.rig.cameras[camera].name))?;
-        check_size(&path, &self.rig.cameras[camera], image.dimensions())?;
-        Ok(image)
+        let cam = &self.rig.cameras[camera];
+        let check = |size: (u32, u32)| check_size(&path, cam, size);
+        load_rgb(&path, &format!("camera `{}` has no image of frame {frame}", cam.name), &check)
     }
 
     /// Camera `camera`'s label mask of `frame`.
     pub fn read_mask(&self, frame: u64, camera: usize) -> Result<GrayImage> {
         self.check_frame(frame)?;
         let path = self.mask_path(frame, camera)?;
-        let mask = load_mask(
-            &path,
-            &format!("camera `{}` has no label mask of frame {frame}", self.rig.cameras[camera].name),
-        )?;
-        check_size(&path, &self.rig.cameras[camera], mask.dimensions())?;
-        Ok(mask)
+        let cam = &self.rig.cameras[camera];
+        let check = |size: (u32, u32)| check_size(&path, cam, size);
+        load_mask(&path, &format!("camera `{}` has no label mask of frame {frame}", cam.name), &check)
     }
 
     /// Camera `camera`'s depth image of `frame`, millimetres.
     pub fn read_depth(&self, frame: u64, camera: usize) -> Result<DepthImage> {
         self.check_frame(frame)?;
         let path = self.depth_path(frame, camera)?;
-        let depth = load_depth(
-            &path,
-            &format!("camera `{}` has no depth image of frame {frame}", self.rig.cameras[camera].name),
-        )?;
-        check_size(&path, &self.rig.cameras[camera], depth.dimensions())?;
-        Ok(depth)
+        let cam = &self.rig.cameras[camera];
+        let check = |size: (u32, u32)| check_size(&path, cam, size);
+        load_depth(&path, &format!("camera `{}` has no depth image of frame {frame}", cam.name), &check)
     }
 
     /// Reads frame set `frame`: one view per camera in rig order, `None` for a dropped camera, with
@@ -336,18 +336,9 @@ impl Dataset {
 /// Reads `dataset.toml`: the format version first (so a newer file is named as such rather than
 /// for its unknown keys), then every key.
 fn read_meta(path: &Path) -> Result<DatasetMeta> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(DatasetError::Missing {
-                path: path.to_owned(),
-                message: "not a dataset: every dataset has a dataset.toml".to_owned(),
-            });
-        }
-        Err(source) => return Err(DatasetError::Io { path: path.to_owned(), source }),
-    };
-    let parse = |message: String| DatasetError::Parse { path: path.to_owned(), message };
-    let table: toml::Table = toml::from_str(&text).map_err(|e| parse(e.to_string()))?;
+    let text = read_text(path, MAX_SMALL_FILE_BYTES, Some("not a dataset: every dataset has a dataset.toml"))?;
+    let parse = |e: toml::de::Error| DatasetError::Parse { path: path.to_owned(), message: toml_message(&e, &text) };
+    let table: toml::Table = toml::from_str(&text).map_err(parse)?;
     match table.get("format_version").and_then(toml::Value::as_integer) {
         Some(v) if v == i64::from(FORMAT_VERSION) => {}
         Some(v) => {
@@ -365,7 +356,7 @@ fn read_meta(path: &Path) -> Result<DatasetMeta> {
             });
         }
     }
-    let meta: DatasetMeta = toml::from_str(&text).map_err(|e| parse(e.to_string()))?;
+    let meta: DatasetMeta = toml::from_str(&text).map_err(parse)?;
     validate_meta(path, &meta)?;
     Ok(meta)
 }
@@ -395,14 +386,14 @@ fn check_camera_folders(root: &Path, rig: &Rig) -> Result<()> {
     }
     extra.sort();
     if let Some(path) = extra.into_iter().next() {
-        let names: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
         return Err(DatasetError::Inconsistent {
             path: path.clone(),
             message: format!(
-                "this folder holds frame images, but `{}` is not a camera of {} (its {} cameras are {names:?})",
-                path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+                "this folder holds frame images, but `{}` is not a camera of {} (its {} cameras are {})",
+                shorten(&path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()),
                 root.join(RIG_YAML).display(),
-                names.len()
+                rig.len(),
+                name_list(rig.cameras.iter().map(|c| c.name.as_str()))
             ),
         });
     }
@@ -424,24 +415,18 @@ fn frame_files(dir: &Path) -> Result<BTreeSet<u64>> {
 /// Rows of `frames.csv`: frame → per camera (timestamp, line number).
 type Rows = BTreeMap<u64, Vec<Option<(i64, usize)>>>;
 
+/// Reads `frames.csv` (at most [`MAX_LIST_FILE_BYTES`]): the header, then rows whose frame, camera
+/// and timestamp are each checked where they are read (see [`Dataset::open`]); then each camera's
+/// timestamps in frame order.
 fn read_frames_csv(path: &Path, meta: &DatasetMeta, rig: &Rig) -> Result<Rows> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(DatasetError::Missing {
-                path: path.to_owned(),
-                message: "it lists every captured image with its timestamp".to_owned(),
-            });
-        }
-        Err(source) => return Err(DatasetError::Io { path: path.to_owned(), source }),
-    };
+    let text = read_text(path, MAX_LIST_FILE_BYTES, Some("it lists every captured image with its timestamp"))?;
     let mut lines = text.lines().enumerate();
     let header = lines.next().map(|(_, l)| l.trim()).unwrap_or_default();
     if header != FRAMES_CSV_HEADER {
         return Err(DatasetError::Line {
             path: path.to_owned(),
             line: 1,
-            message: format!("the header must be `{FRAMES_CSV_HEADER}`, found `{header}`"),
+            message: format!("the header must be `{FRAMES_CSV_HEADER}`, found `{}`", shorten(header)),
         });
     }
     let mut rows = Rows::new();
@@ -452,28 +437,68 @@ fn read_frames_csv(path: &Path, meta: &DatasetMeta, rig: &Rig) -> Result<Rows> {
             continue;
         }
         let err = |message: String| DatasetError::Line { path: path.to_owned(), line: line_no, message };
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let fields: Vec<&str> = line.splitn(4, ',').map(str::trim).collect();
         let [frame, camera, timestamp] = fields[..] else {
-            return Err(err(format!("expected 3 fields (`{FRAMES_CSV_HEADER}`), found {}: `{line}`", fields.len())));
+            return Err(err(format!(
+                "expected 3 fields (`{FRAMES_CSV_HEADER}`), found {}: `{}`",
+                line.split(',').count(),
+                shorten(line)
+            )));
         };
         let frame: u64 =
-            frame.parse().map_err(|_| err(format!("the frame `{frame}` is not a non-negative integer")))?;
+            frame.parse().map_err(|_| err(format!("the frame `{}` is not a non-negative integer", shorten(frame))))?;
         if frame >= meta.frame_count {
             return Err(err(format!("frame {frame} is outside the dataset (frame_count = {})", meta.frame_count)));
         }
         let Some(cam) = rig.index_of(camera) else {
-            return Err(err(format!("`{camera}` is not a camera of the rig (cameras: {:?})", meta.cameras)));
+            return Err(err(format!(
+                "`{}` is not a camera of the rig (cameras: {})",
+                shorten(camera),
+                name_list(meta.cameras.iter().map(String::as_str))
+            )));
         };
-        let timestamp: i64 = timestamp
-            .parse()
-            .map_err(|_| err(format!("the timestamp `{timestamp}` is not an integer (nanoseconds)")))?;
+        let timestamp: i64 = timestamp.parse().map_err(|_| {
+            err(format!("the timestamp `{}` is not an integer (nanoseconds) in the range of i64", shorten(timestamp)))
+        })?;
+        check_timestamp(timestamp).map_err(err)?;
         let slot = &mut rows.entry(frame).or_insert_with(|| vec![None; rig.len()])[cam];
         if let Some((_, first)) = slot {
             return Err(err(format!("frame {frame} of camera `{camera}` is listed twice (first on line {first})")));
         }
         *slot = Some((timestamp, line_no));
     }
+    check_timestamp_order(path, rig, &rows)?;
     Ok(rows)
+}
+
+/// Each camera's timestamps, in frame order, go back by at most
+/// [`TIMESTAMP_BACKSTEP_TOLERANCE_NS`] from one of its frames to its next; the error names the
+/// later row's line. Timestamps are already within ±`MAX_ABS_TIMESTAMP_NS`, so the subtraction
+/// cannot overflow.
+fn check_timestamp_order(path: &Path, rig: &Rig, rows: &Rows) -> Result<()> {
+    for (c, cam) in rig.cameras.iter().enumerate() {
+        let mut previous: Option<(u64, i64, usize)> = None;
+        for (&frame, cams) in rows {
+            let Some((t, line)) = cams.get(c).copied().flatten() else { continue };
+            if let Some((earlier, t0, line0)) = previous
+                && t0 - t > TIMESTAMP_BACKSTEP_TOLERANCE_NS
+            {
+                return Err(DatasetError::Line {
+                    path: path.to_owned(),
+                    line,
+                    message: format!(
+                        "camera `{}`'s timestamp {t} ns for frame {frame} is {} ns before its frame {earlier} \
+                         (line {line0}); a camera's timestamps may go back by at most \
+                         {TIMESTAMP_BACKSTEP_TOLERANCE_NS} ns",
+                        cam.name,
+                        t0 - t
+                    ),
+                });
+            }
+            previous = Some((frame, t, line));
+        }
+    }
+    Ok(())
 }
 
 /// Every row has its PNG, every frame PNG has its row.
@@ -512,10 +537,7 @@ fn check_image_sizes(root: &Path, rig: &Rig, rows: &Rows) -> Result<()> {
     for (c, cam) in rig.cameras.iter().enumerate() {
         let Some((&frame, _)) = rows.iter().find(|(_, cams)| cams[c].is_some()) else { continue };
         let path = root.join(&cam.name).join(frame_file_name(frame));
-        let size = image::image_dimensions(&path).map_err(|e| DatasetError::Image {
-            path: path.clone(),
-            message: format!("cannot read the PNG header: {e}"),
-        })?;
+        let size = png_size(&path, &format!("{FRAMES_CSV} lists frame {frame} of camera `{}`", cam.name))?;
         check_size(&path, cam, size)?;
     }
     Ok(())

@@ -2,15 +2,21 @@
 
 use std::path::{Path, PathBuf};
 
+use hullcut_rig::{short_number, shorten};
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DatasetError, Result};
+use crate::layout::{json_message, read_text};
 use crate::ply::{read_ply, write_ply};
 use crate::types::ToolGeometry;
+use crate::{MAX_SMALL_FILE_BYTES, MAX_TOOL_COORDINATE_M, MAX_TOOL_EXTENT_M};
 
 /// Normals shorter than this are refused as zero.
 const MIN_NORMAL_LENGTH: f64 = 1e-12;
+
+/// The longest mesh path `tool.json` may name, bytes.
+const MAX_MESH_PATH_BYTES: usize = 4096;
 
 /// The file as written: arrays of numbers, the mesh as a path relative to the JSON file.
 #[derive(Debug, Serialize, Deserialize)]
@@ -33,73 +39,134 @@ fn array(p: &Point3<f64>) -> [f64; 3] {
     [p.x, p.y, p.z]
 }
 
-/// Checks the geometry's values (not the mesh file); returns the unit blade normal.
-fn validate(path: &Path, tool: &ToolGeometry) -> Result<Vector3<f64>> {
+/// A point for a message, its coordinates through [`short_number`].
+fn show(p: &Point3<f64>) -> String {
+    format!("[{}, {}, {}]", short_number(p.x), short_number(p.y), short_number(p.z))
+}
+
+/// Checks the geometry's numbers (not the mesh): finite; tip, cutting edge and outline within
+/// ±[`MAX_TOOL_COORDINATE_M`] and together within a box of side [`MAX_TOOL_EXTENT_M`]; a cutting
+/// edge of at least two points; a non-zero blade normal; a positive blade thickness of at most
+/// [`MAX_TOOL_EXTENT_M`]. Returns the unit blade normal.
+fn check_numbers(
+    path: &Path,
+    tip: &Point3<f64>,
+    cutting_edge: &[Point3<f64>],
+    blade_normal: &Vector3<f64>,
+    blade_thickness: f64,
+    blade_outline: Option<&[Point3<f64>]>,
+) -> Result<Vector3<f64>> {
     let invalid =
         |key: &str, message: String| DatasetError::Invalid { path: path.to_owned(), key: key.to_owned(), message };
-    let finite = |p: &Point3<f64>| p.coords.iter().all(|c| c.is_finite());
-    if !finite(&tool.tip) {
-        return Err(invalid("tip", "not finite".to_owned()));
+    let bounded = |p: &Point3<f64>| p.coords.iter().all(|c| c.abs() <= MAX_TOOL_COORDINATE_M);
+    let range = format!("finite and within ±{MAX_TOOL_COORDINATE_M} m (tool frame, metres)");
+    if !bounded(tip) {
+        return Err(invalid("tip", format!("{} must be {range}", show(tip))));
     }
-    if tool.cutting_edge.len() < 2 {
+    if cutting_edge.len() < 2 {
         return Err(invalid(
             "cutting_edge",
-            format!("a polyline of at least 2 points is needed, found {}", tool.cutting_edge.len()),
+            format!("a polyline of at least 2 points is needed, found {}", cutting_edge.len()),
         ));
     }
-    if let Some(i) = tool.cutting_edge.iter().position(|p| !finite(p)) {
-        return Err(invalid("cutting_edge", format!("point {i} is not finite")));
+    if let Some(i) = cutting_edge.iter().position(|p| !bounded(p)) {
+        return Err(invalid("cutting_edge", format!("point {i} {} must be {range}", show(&cutting_edge[i]))));
     }
-    let n = tool.blade_normal;
+    if let Some(outline) = blade_outline
+        && let Some(i) = outline.iter().position(|p| !bounded(p))
+    {
+        return Err(invalid("blade_outline", format!("point {i} {} must be {range}", show(&outline[i]))));
+    }
+    let points = std::iter::once(tip).chain(cutting_edge).chain(blade_outline.unwrap_or_default());
+    let (lo, hi) = points.fold((tip.coords, tip.coords), |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)));
+    let side = (hi - lo).max();
+    if side > MAX_TOOL_EXTENT_M {
+        return Err(invalid(
+            "cutting_edge",
+            format!(
+                "the tip, cutting edge and blade outline span {} m, more than the {MAX_TOOL_EXTENT_M} m of a hand-held \
+                 tool (tool.json is in metres: a file in millimetres?)",
+                short_number(side)
+            ),
+        ));
+    }
+    let n = blade_normal;
     let length = n.norm();
     if !length.is_finite() || length < MIN_NORMAL_LENGTH {
         return Err(invalid(
             "blade_normal",
-            format!("must be a non-zero finite vector, found [{}, {}, {}]", n.x, n.y, n.z),
+            format!(
+                "must be a non-zero finite vector, found [{}, {}, {}]",
+                short_number(n.x),
+                short_number(n.y),
+                short_number(n.z)
+            ),
         ));
     }
-    if !(tool.blade_thickness.is_finite() && tool.blade_thickness > 0.0) {
-        return Err(invalid("blade_thickness", format!("must be positive (metres), found {}", tool.blade_thickness)));
+    if !(blade_thickness > 0.0 && blade_thickness <= MAX_TOOL_EXTENT_M) {
+        return Err(invalid(
+            "blade_thickness",
+            format!("{} must be in (0, {MAX_TOOL_EXTENT_M}] (metres)", short_number(blade_thickness)),
+        ));
     }
-    if let Some(outline) = &tool.blade_outline
-        && let Some(i) = outline.iter().position(|p| !finite(p))
-    {
-        return Err(invalid("blade_outline", format!("point {i} is not finite")));
-    }
-    tool.mesh.check().map_err(|message| invalid("mesh", message))?;
+    // A normal that is already unit (to rounding) is kept bit for bit, so files round-trip exactly.
+    Ok(if (length - 1.0).abs() <= 4.0 * f64::EPSILON { *n } else { n / length })
+}
+
+/// Checks the geometry's values and its mesh; returns the unit blade normal.
+fn validate(path: &Path, tool: &ToolGeometry) -> Result<Vector3<f64>> {
+    let normal = check_numbers(
+        path,
+        &tool.tip,
+        &tool.cutting_edge,
+        &tool.blade_normal,
+        tool.blade_thickness,
+        tool.blade_outline.as_deref(),
+    )?;
+    let invalid =
+        |key: &str, message: String| DatasetError::Invalid { path: path.to_owned(), key: key.to_owned(), message };
+    tool.mesh.validate().map_err(|message| invalid("mesh", message))?;
     if tool.mesh.triangles.is_empty() {
         return Err(invalid("mesh", "the mesh has no triangles".to_owned()));
     }
-    // A normal that is already unit (to rounding) is kept bit for bit, so files round-trip exactly.
-    Ok(if (length - 1.0).abs() <= 4.0 * f64::EPSILON { n } else { n / length })
+    Ok(normal)
 }
 
-/// Reads and validates a `tool.json` and the mesh it names (relative to the JSON file).
+/// Reads and validates a `tool.json` (at most [`MAX_SMALL_FILE_BYTES`]) and the mesh it names
+/// (relative to the JSON file).
 ///
-/// Checks, each error naming the file and the key: unknown keys, a cutting edge of at least two
-/// points, a non-zero blade normal (returned normalized), a positive blade thickness, finite
-/// numbers, and a readable, non-empty mesh. A mesh that is not closed is accepted with a warning.
+/// Checks, each error naming the file and the key, before the mesh is read: unknown keys; finite
+/// tip, cutting edge and blade outline within ±[`MAX_TOOL_COORDINATE_M`] and together within a
+/// box of side [`MAX_TOOL_EXTENT_M`]; a cutting edge of at least two points; a non-zero blade
+/// normal (returned normalized); a positive blade thickness of at most [`MAX_TOOL_EXTENT_M`].
+/// Then the mesh must be readable and non-empty. A mesh that is not closed is accepted with a warning.
 pub fn read_tool(path: impl AsRef<Path>) -> Result<ToolGeometry> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(DatasetError::io(path))?;
+    let text = read_text(path, MAX_SMALL_FILE_BYTES, None)?;
     let file: ToolFile = serde_json::from_str(&text)
-        .map_err(|e| DatasetError::Parse { path: path.to_owned(), message: e.to_string() })?;
+        .map_err(|e| DatasetError::Parse { path: path.to_owned(), message: json_message(&e, true) })?;
+    let tip = point(file.tip);
+    let cutting_edge: Vec<Point3<f64>> = file.cutting_edge.into_iter().map(point).collect();
+    let blade_normal = Vector3::from(file.blade_normal);
+    let blade_outline: Option<Vec<Point3<f64>>> = file.blade_outline.map(|o| o.into_iter().map(point).collect());
+    check_numbers(path, &tip, &cutting_edge, &blade_normal, file.blade_thickness, blade_outline.as_deref())?;
+    if file.mesh.len() > MAX_MESH_PATH_BYTES {
+        return Err(DatasetError::Invalid {
+            path: path.to_owned(),
+            key: "mesh".to_owned(),
+            message: format!("the path `{}` is longer than {MAX_MESH_PATH_BYTES} bytes", shorten(&file.mesh)),
+        });
+    }
     let mesh_path = path.parent().unwrap_or(Path::new("")).join(&file.mesh);
     let mesh = read_ply(&mesh_path).map_err(|e| DatasetError::Invalid {
         path: path.to_owned(),
         key: "mesh".to_owned(),
         message: format!("cannot read the mesh: {e}"),
     })?;
-    let mut tool = ToolGeometry {
-        mesh,
-        tip: point(file.tip),
-        cutting_edge: file.cutting_edge.into_iter().map(point).collect(),
-        blade_normal: Vector3::from(file.blade_normal),
-        blade_thickness: file.blade_thickness,
-        blade_outline: file.blade_outline.map(|o| o.into_iter().map(point).collect()),
-    };
+    let mut tool =
+        ToolGeometry { mesh, tip, cutting_edge, blade_normal, blade_thickness: file.blade_thickness, blade_outline };
     tool.blade_normal = validate(path, &tool)?;
-    if !tool.mesh.is_closed() {
+    if !tool.mesh.is_closed_oriented() {
         tracing::warn!(file = %mesh_path.display(), "the tool mesh is not closed");
     }
     Ok(tool)

@@ -11,11 +11,12 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 use hullcut_rig::{Camera, Rig};
 use image::{GrayImage, ImageBuffer, PixelWithColorType, RgbImage};
 
+use crate::TIMESTAMP_BACKSTEP_TOLERANCE_NS;
 use crate::error::{DatasetError, Result};
 use crate::images::{DepthImage, PngCompression, save_png};
 use crate::layout::{
     DATASET_TOML, DEPTH, FRAMES_CSV, FRAMES_CSV_HEADER, MASKS, MESHES, POSES_JSONL, PoseLine, RIG_YAML, TOOL_JSON,
-    TRUTH, check_component, check_rig_cameras, check_transform, frame_file_name, validate_meta,
+    TRUTH, check_component, check_rig_cameras, check_timestamp, check_transform, frame_file_name, validate_meta,
 };
 use crate::ply::write_ply;
 use crate::tool::write_tool;
@@ -65,11 +66,14 @@ impl DatasetWriter {
     /// Refuses ([`DatasetError::Exists`]) when `out` exists and `force` is false; with `force`, an
     /// existing `out` is replaced at [`DatasetWriter::finish`], and only if it is a dataset (has a
     /// `dataset.toml`) or an empty folder ([`DatasetError::NotADataset`] otherwise). `meta` must be
-    /// valid (format version, positive fps, at most [`crate::MAX_FRAME_COUNT`] frames) and its
-    /// cameras must be the rig's camera names in order. Parent folders of `out` are created.
+    /// valid (format version, fps from [`crate::MIN_FPS`] to [`crate::MAX_FPS`], at most
+    /// [`crate::MAX_FRAME_COUNT`] frames), the rig valid by [`Rig::validate`] (what a reader of the
+    /// dataset will check), and `meta`'s cameras the rig's camera names in order. Parent folders of
+    /// `out` are created.
     pub fn create(out: &Path, meta: DatasetMeta, rig: &Rig, force: bool) -> Result<Self> {
         let meta_path = out.join(DATASET_TOML);
         validate_meta(&meta_path, &meta)?;
+        rig.validate(&out.join(RIG_YAML).display().to_string())?;
         check_rig_cameras(&out.join(RIG_YAML), &meta, rig)?;
         if out.symlink_metadata().is_ok() {
             if !force {
@@ -145,12 +149,16 @@ impl DatasetWriter {
     }
 
     /// Writes camera `camera`'s image of frame `frame` (`<cam>/<frame:06>.png`) and records its
-    /// `frames.csv` row. The image must have the camera's size; each (frame, camera) is written once.
+    /// `frames.csv` row. The image must have the camera's size and the timestamp be within
+    /// ±[`crate::MAX_ABS_TIMESTAMP_NS`]; each (frame, camera) is written once. A camera's
+    /// timestamps are checked for order at [`DatasetWriter::finish`].
     pub fn write_image(&self, frame: u64, camera: usize, image: &RgbImage, timestamp_ns: i64) -> Result<()> {
         let cam = self.camera(camera)?;
         let rel = Path::new(&cam.name).join(frame_file_name(frame));
         self.check_frame(frame)?;
         self.check_size(&rel, cam, image)?;
+        check_timestamp(timestamp_ns)
+            .map_err(|message| DatasetError::Inconsistent { path: self.out.join(&rel), message })?;
         match self.lock().rows.entry((frame, camera)) {
             Entry::Occupied(_) => {
                 return Err(DatasetError::Inconsistent {
@@ -194,14 +202,15 @@ impl DatasetWriter {
     }
 
     /// Records a ground-truth pose; `truth/poses.jsonl` is written, sorted by frame, at
-    /// [`DatasetWriter::finish`]. One pose per frame; the matrix must be finite with a bottom row of
-    /// `[0, 0, 0, 1]`.
+    /// [`DatasetWriter::finish`]. One pose per frame; the timestamp within
+    /// ±[`crate::MAX_ABS_TIMESTAMP_NS`]; the matrix finite with a bottom row of `[0, 0, 0, 1]`, a
+    /// rotation within [`hullcut_rig::ROTATION_TOLERANCE`] and a translation within
+    /// ±[`hullcut_rig::MAX_WORLD_COORDINATE_M`].
     pub fn write_truth_pose(&self, pose: &TruthPose) -> Result<()> {
         let path = self.out.join(POSES_JSONL);
         self.check_frame(pose.frame)?;
-        check_transform(&pose.tool_to_world).map_err(|message| DatasetError::Inconsistent {
-            path: path.clone(),
-            message: format!("frame {}: {message}", pose.frame),
+        check_timestamp(pose.timestamp_ns).and_then(|()| check_transform(&pose.tool_to_world)).map_err(|message| {
+            DatasetError::Inconsistent { path: path.clone(), message: format!("frame {}: {message}", pose.frame) }
         })?;
         match self.lock().poses.entry(pose.frame) {
             Entry::Occupied(_) => Err(DatasetError::Inconsistent {
@@ -226,7 +235,7 @@ impl DatasetWriter {
         })?;
         self.check_frame(frame)?;
         let rel = dir_rel.join(format!("{frame:06}.ply"));
-        mesh.check().map_err(|message| DatasetError::Inconsistent { path: self.out.join(&rel), message })?;
+        mesh.validate().map_err(|message| DatasetError::Inconsistent { path: self.out.join(&rel), message })?;
         let dir = self.tmp.join(&dir_rel);
         std::fs::create_dir_all(&dir).map_err(DatasetError::io(&dir))?;
         write_ply(self.tmp.join(rel), mesh)
@@ -235,9 +244,12 @@ impl DatasetWriter {
     /// Writes `dataset.toml`, `rig.yaml`, `frames.csv` (sorted by frame, then rig camera order) and
     /// `truth/poses.jsonl` (when poses were written), then renames the temporary folder to the
     /// output path and returns it. With `force`, an existing output is moved aside first and removed
-    /// after the rename. Frames without any image are allowed; readers report them as dropped.
+    /// after the rename. Frames without any image are allowed; readers report them as dropped. A
+    /// camera whose timestamps go back by more than [`crate::TIMESTAMP_BACKSTEP_TOLERANCE_NS`] from
+    /// one of its frames to its next is refused (readers refuse it too) and nothing is written.
     pub fn finish(mut self) -> Result<PathBuf> {
         let state = std::mem::take(self.state.get_mut().unwrap_or_else(PoisonError::into_inner));
+        self.check_timestamp_order(&state)?;
 
         let meta_text = toml::to_string(&self.meta).map_err(|e| DatasetError::Parse {
             path: self.out.join(DATASET_TOML),
@@ -246,7 +258,7 @@ impl DatasetWriter {
         write_file(&self.tmp.join(DATASET_TOML), meta_text.as_bytes())?;
 
         let rig_path = self.tmp.join(RIG_YAML);
-        self.rig.save(&rig_path).map_err(|source| DatasetError::Rig { path: rig_path.clone(), source })?;
+        self.rig.save(&rig_path)?;
 
         let mut csv = String::with_capacity(32 * (state.rows.len() + 1));
         csv.push_str(FRAMES_CSV_HEADER);
@@ -288,9 +300,9 @@ impl DatasetWriter {
     /// the output path always holds a complete dataset or nothing).
     fn move_into_place(&self) -> Result<()> {
         let rename = |from: &Path, to: &Path| {
-            std::fs::rename(from, to).map_err(|source| DatasetError::Io {
+            std::fs::rename(from, to).map_err(|error| DatasetError::Io {
                 path: to.to_owned(),
-                source: std::io::Error::new(source.kind(), format!("cannot rename {} to it: {source}", from.display())),
+                error: std::io::Error::new(error.kind(), format!("cannot rename {} to it: {error}", from.display())),
             })
         };
         if self.out.symlink_metadata().is_err() {
@@ -314,6 +326,30 @@ impl DatasetWriter {
         }
         if let Err(e) = remove_path(&old) {
             tracing::warn!(path = %old.display(), error = %e, "cannot remove the replaced dataset");
+        }
+        Ok(())
+    }
+
+    /// Each camera's timestamps, in frame order, go back by at most
+    /// [`crate::TIMESTAMP_BACKSTEP_TOLERANCE_NS`] (all are within ±`MAX_ABS_TIMESTAMP_NS`, so the
+    /// subtraction cannot overflow).
+    fn check_timestamp_order(&self, state: &State) -> Result<()> {
+        let mut last: BTreeMap<usize, (u64, i64)> = BTreeMap::new();
+        for (&(frame, camera), &t) in &state.rows {
+            if let Some(&(earlier, t0)) = last.get(&camera)
+                && t0 - t > TIMESTAMP_BACKSTEP_TOLERANCE_NS
+            {
+                let name = self.rig.cameras.get(camera).map_or("?", |c| c.name.as_str());
+                return Err(DatasetError::Inconsistent {
+                    path: self.out.join(FRAMES_CSV),
+                    message: format!(
+                        "camera `{name}`'s timestamp {t} ns for frame {frame} is {} ns before its frame {earlier}; a \
+                         camera's timestamps may go back by at most {TIMESTAMP_BACKSTEP_TOLERANCE_NS} ns",
+                        t0 - t
+                    ),
+                });
+            }
+            last.insert(camera, (frame, t));
         }
         Ok(())
     }
@@ -426,7 +462,7 @@ fn create_unique_dir(parent: &Path, prefix: &str) -> Result<PathBuf> {
         match std::fs::create_dir(&path) {
             Ok(()) => return Ok(path),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(source) => return Err(DatasetError::Io { path, source }),
+            Err(error) => return Err(DatasetError::Io { path, error }),
         }
     }
 }

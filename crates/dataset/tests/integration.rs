@@ -787,15 +787,15 @@ mod ply {
 
     #[test]
     fn is_closed_detects_holes_and_flips() {
-        assert!(tetra().is_closed());
-        assert!(unit_cube().is_closed());
+        assert!(tetra().is_closed_oriented());
+        assert!(unit_cube().is_closed_oriented());
         let mut open = tetra();
         open.triangles.pop();
-        assert!(!open.is_closed());
+        assert!(!open.is_closed_oriented());
         let mut flipped = tetra();
         flipped.triangles[0].swap(1, 2);
-        assert!(!flipped.is_closed());
-        assert!(!Mesh::default().is_closed());
+        assert!(!flipped.is_closed_oriented());
+        assert!(!Mesh::default().is_closed_oriented());
     }
 
     #[test]
@@ -836,18 +836,34 @@ mod properties {
         prop_oneof![-1e3..1e3f64, any::<f64>().prop_filter("finite", |v| v.is_finite())]
     }
 
+    /// Any accepted timestamp, the bounds included.
+    fn timestamp_ns() -> impl Strategy<Value = i64> {
+        let max = hullcut_dataset::MAX_ABS_TIMESTAMP_NS;
+        prop_oneof![Just(-max), Just(max), -max..=max, -1_000_000_000i64..1_000_000_000]
+    }
+
+    /// Translations a pose may have once the test adds up to 2 m: tiny, ordinary and near the bound.
+    fn translation_m() -> impl Strategy<Value = f64> {
+        let max = hullcut_rig::MAX_WORLD_COORDINATE_M - 2.0;
+        prop_oneof![-1.0..1.0f64, -max..max, -1e-300..1e-300f64, Just(max), Just(-max)]
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(24))]
 
-        /// Timestamps (any i64) and poses (any rigid transform with any finite translation) come back
+        /// Timestamps (any within ±MAX_ABS_TIMESTAMP_NS, each camera's in order) and poses (any
+        /// rotation, any translation within the world's bound less the 2 m the test adds) come back
         /// bit for bit, whatever order they were written in.
         #[test]
         fn poses_and_timestamps_round_trip(
-            stamps in proptest::collection::vec(any::<i64>(), 6),
+            stamps in proptest::collection::vec(timestamp_ns(), 6),
             angles in proptest::collection::vec(-3.2..3.2f64, 3),
-            translation in proptest::collection::vec(finite(), 3),
+            translation in proptest::collection::vec(translation_m(), 3),
             reverse in any::<bool>(),
         ) {
+            // Sorted, every camera's timestamps increase with the frame number.
+            let mut stamps = stamps;
+            stamps.sort_unstable();
             let tmp = tempfile::tempdir().expect("tempdir");
             let out = tmp.path().join("ds");
             let rig = small_rig(2);
@@ -903,5 +919,379 @@ mod properties {
             write_ply(&path, &mesh).expect("write");
             prop_assert_eq!(read_ply(&path).expect("read"), mesh);
         }
+    }
+}
+
+/// Bad input never crashes, hangs or lies (issue 24): every case below is an error that names the
+/// file and the key or line, returned before anything is sized from the bad value.
+mod hostile {
+    use std::time::{Duration, Instant};
+
+    use super::*;
+    use hullcut_dataset::{Dataset, MAX_ABS_TIMESTAMP_NS, TIMESTAMP_BACKSTEP_TOLERANCE_NS, read_tool, write_tool};
+    use proptest::prelude::any;
+    use proptest::test_runner::{Config, TestRunner};
+
+    fn sample(tmp: &Path) -> PathBuf {
+        write_sample(&tmp.join("ds"), &[])
+    }
+
+    /// The error and its sources joined the way `anyhow` prints them with `{:#}`.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut parts = vec![e.to_string()];
+        let mut next = e.source();
+        while let Some(source) = next {
+            parts.push(source.to_string());
+            next = source.source();
+        }
+        parts.join(": ")
+    }
+
+    /// Replaces `file` of a fresh sample dataset by `edit` of its text and returns the error of
+    /// opening it.
+    fn open_with(file: &str, edit: impl FnOnce(String) -> String) -> String {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let text = std::fs::read_to_string(ds.join(file)).expect("read");
+        std::fs::write(ds.join(file), edit(text)).expect("write");
+        open_err(&ds)
+    }
+
+    /// A PNG signature and IHDR chunk claiming `width` x `height` RGB pixels, and nothing else.
+    fn png_header(width: u32, height: u32) -> Vec<u8> {
+        let mut bytes = vec![0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n', 0, 0, 0, 13];
+        bytes.extend_from_slice(b"IHDR");
+        bytes.extend_from_slice(&width.to_be_bytes());
+        bytes.extend_from_slice(&height.to_be_bytes());
+        bytes.extend_from_slice(&[8, 2, 0, 0, 0, 0, 0, 0, 0]);
+        bytes
+    }
+
+    #[test]
+    fn timestamps_beyond_the_bound_are_refused() {
+        let first = format!("0,cam0,{}", timestamp(0, 0));
+        for t in [i64::MAX.to_string(), i64::MIN.to_string(), (MAX_ABS_TIMESTAMP_NS + 1).to_string()] {
+            let err = open_with("frames.csv", |c| c.replacen(&first, &format!("0,cam0,{t}"), 1));
+            assert!(err.contains("frames.csv:2") && err.contains(&MAX_ABS_TIMESTAMP_NS.to_string()), "{t}: {err}");
+        }
+        let err = open_with("frames.csv", |c| c.replacen(&first, "0,cam0,99999999999999999999", 1));
+        assert!(err.contains("frames.csv:2") && err.contains("not an integer"), "{err}");
+        // The bound itself is accepted (frame 0 may be any time before frame 1).
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let csv = std::fs::read_to_string(ds.join("frames.csv")).expect("read");
+        let low = csv.replacen(&first, &format!("0,cam0,{}", -MAX_ABS_TIMESTAMP_NS), 1);
+        std::fs::write(ds.join("frames.csv"), low).expect("write");
+        let opened = Dataset::open(&ds).expect("the bound is accepted");
+        assert_eq!(opened.timestamp(0, 0), Some(-MAX_ABS_TIMESTAMP_NS));
+    }
+
+    #[test]
+    fn timestamps_going_back_are_refused_beyond_the_tolerance() {
+        // Rows are sorted by frame, then camera: frame 2 of cam1 is line 2 + 2 * 3 + 1 = 9.
+        let row = format!("2,cam1,{}", timestamp(2, 1));
+        let back = timestamp(1, 1) - 10 * TIMESTAMP_BACKSTEP_TOLERANCE_NS;
+        let err = open_with("frames.csv", |c| c.replacen(&row, &format!("2,cam1,{back}"), 1));
+        assert!(err.contains("frames.csv:9") && err.contains("cam1") && err.contains("frame 1"), "{err}");
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let csv = std::fs::read_to_string(ds.join("frames.csv")).expect("read");
+        let jitter = timestamp(1, 1) - TIMESTAMP_BACKSTEP_TOLERANCE_NS / 2;
+        std::fs::write(ds.join("frames.csv"), csv.replacen(&row, &format!("2,cam1,{jitter}"), 1)).expect("write");
+        assert!(Dataset::open(&ds).is_ok(), "a step back within the tolerance is accepted");
+    }
+
+    #[test]
+    fn the_writer_refuses_what_readers_refuse() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let out = tmp.path().join("ds");
+        let rig = small_rig(2);
+        let writer = DatasetWriter::create(&out, meta(&rig, 3), &rig, false).expect("create");
+        let err = message(writer.write_image(0, 0, &image(0, 0), i64::MAX));
+        assert!(err.contains("000000.png") && err.contains("timestamp"), "{err}");
+        let mut skewed = pose(0);
+        skewed.tool_to_world[(0, 0)] = 1e19;
+        let err = message(writer.write_truth_pose(&skewed));
+        assert!(err.contains("poses.jsonl") && err.contains("not a rotation"), "{err}");
+        let mut late = pose(0);
+        late.timestamp_ns = i64::MIN;
+        assert!(message(writer.write_truth_pose(&late)).contains("timestamp"));
+        // A camera's clock running backwards is refused at finish, and nothing appears.
+        writer.write_image(0, 0, &image(0, 0), 1_000_000_000).expect("frame 0");
+        writer.write_image(1, 0, &image(1, 0), 1).expect("frame 1");
+        let err = message(writer.finish());
+        assert!(err.contains("frames.csv") && err.contains("cam0"), "{err}");
+        assert!(!out.exists());
+        // A rig a reader would refuse is refused when the writer starts.
+        let mut bad = small_rig(2);
+        bad.cameras[1].fx = 1e-300;
+        let err = message(DatasetWriter::create(&out, meta(&bad, 3), &bad, false));
+        assert!(err.contains("rig.yaml") && err.contains("camera_1.camera_matrix") && err.contains("1e-300"), "{err}");
+    }
+
+    #[test]
+    fn truth_poses_must_be_rotations_with_bounded_translations() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let opened = Dataset::open(&ds).expect("open");
+        let path = ds.join("truth/poses.jsonl");
+        let line = |t: &str, m: &str| format!("{{\"frame\":1,\"timestamp_ns\":{t},\"tool_to_world\":[{m}]}}\n");
+        let cases = [
+            line("5", "1e19,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1"),
+            line("5", "2,0,0,0, 0,2,0,0, 0,0,2,0, 0,0,0,1"),
+            line("5", "-1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1"),
+            line("5", "1,0,0,1e300, 0,1,0,0, 0,0,1,0, 0,0,0,1"),
+            line("9223372036854775807", "1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1"),
+            line("5", "1e400,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1"),
+        ];
+        for text in cases {
+            std::fs::write(&path, &text).expect("write");
+            let start = Instant::now();
+            let err = message(opened.truth_poses());
+            assert!(start.elapsed() < Duration::from_secs(5), "{text}");
+            assert!(err.contains("poses.jsonl:1") && err.len() < 400, "{text}: {err}");
+        }
+    }
+
+    /// tool.json as written for the sample tool, edited; the error of reading it.
+    fn tool_error(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let path = tmp.path().join("tool.json");
+        write_tool(&path, &tool()).expect("write");
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+        edit(&mut v);
+        std::fs::write(&path, v.to_string()).expect("write");
+        message(read_tool(&path))
+    }
+
+    #[test]
+    fn tool_numbers_outside_their_ranges_are_refused() {
+        use serde_json::json;
+        let cases: [(serde_json::Value, &str, &str); 6] = [
+            (json!({"cutting_edge": [[1e308, 0.0, 0.0], [0.0, 0.0, 0.0]]}), "cutting_edge", "1e308"),
+            (json!({"tip": [11.0, 0.0, 0.0]}), "tip", "±10 m"),
+            // 0.1 + 0.9 rounds to exactly 1.
+            (json!({"cutting_edge": [[0.1, 0.0, 0.0], [-0.9, 0.0, 0.0]]}), "cutting_edge", "span 1 m"),
+            (json!({"blade_outline": [[0.0, -1e300, 0.0]]}), "blade_outline", "-1e300"),
+            (json!({"blade_thickness": 1.0}), "blade_thickness", "(0, 0.5]"),
+            (json!({"blade_normal": [1e308, 1e308, 0.0]}), "blade_normal", "1e308"),
+        ];
+        for (patch, key, what) in cases {
+            let err = tool_error(|v| {
+                for (k, value) in patch.as_object().expect("object") {
+                    v[k] = value.clone();
+                }
+                // The numbers are checked before the mesh is read: a missing mesh is not the error.
+                v["mesh"] = json!("nowhere.ply");
+            });
+            assert!(err.contains("tool.json") && err.contains(key) && err.contains(what), "{what}: {err}");
+            assert!(err.len() < 400, "a short message: {err}");
+        }
+        let mut far = tool();
+        far.cutting_edge[1] = Point3::new(1e308, 0.0, 0.0);
+        let tmp = tempfile::tempdir().expect("tempdir");
+        assert!(message(write_tool(tmp.path().join("tool.json"), &far)).contains("cutting_edge"));
+    }
+
+    #[test]
+    fn oversized_png_headers_are_refused_before_decoding() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        // A later frame: open reads only first frames' headers; reading it refuses the header.
+        std::fs::write(ds.join("cam1/000002.png"), png_header(100_000, 100_000)).expect("write");
+        std::fs::write(ds.join("masks/cam2/000001.png"), png_header(16_385, 1)).expect("write");
+        let opened = Dataset::open(&ds).expect("open");
+        let start = Instant::now();
+        let err = message(opened.read_frame_set(2, false));
+        assert!(start.elapsed() < Duration::from_secs(5));
+        assert!(err.contains("cam1") && err.contains("000002.png") && err.contains("100000x100000"), "{err}");
+        assert!(err.contains("1..=16384"), "{err}");
+        let err = message(opened.read_mask(1, 2));
+        assert!(err.contains("000001.png") && err.contains("16385x1"), "{err}");
+        // A size within the limit that is not the rig's is refused before decoding too.
+        std::fs::write(ds.join("cam0/000003.png"), png_header(16_384, 16_384)).expect("write");
+        let err = message(opened.read_image(3, 0));
+        assert!(err.contains("16384x16384") && err.contains("8x6"), "{err}");
+        // At open, the first frame's header.
+        std::fs::write(ds.join("cam2/000000.png"), png_header(0, 7)).expect("write");
+        let err = open_err(&ds);
+        assert!(err.contains("cam2") && err.contains("000000.png") && err.contains("0x7"), "{err}");
+    }
+
+    #[test]
+    fn dataset_toml_numbers_outside_their_ranges_are_refused() {
+        let cases = [
+            ("fps = 30.0", "fps = 1e-300", "fps"),
+            ("fps = 30.0", "fps = 1e300", "fps"),
+            ("fps = 30.0", "fps = nan", "fps"),
+            ("frame_count = 4", "frame_count = 9223372036854775807", "frame_count"),
+        ];
+        for (from, to, key) in cases {
+            let err = open_with("dataset.toml", |t| t.replacen(from, to, 1));
+            assert!(err.contains("dataset.toml") && err.contains(key) && err.len() < 400, "{to}: {err}");
+        }
+        let workspace = "workspace = { min = [-1e300, 0, 0], max = [1, 1, 1] }";
+        let err = open_with("dataset.toml", |t| format!("{t}{workspace}\n"));
+        assert!(err.contains("dataset.toml") && err.contains("workspace") && err.contains("-1e300"), "{err}");
+    }
+
+    #[test]
+    fn an_error_chain_names_the_path_once() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let rig = ds.join("rig.yaml");
+        std::fs::write(&rig, "%YAML:1.0\n---\ncamera_count: 3\n").expect("write");
+        let e = Dataset::open(&ds).expect_err("bad rig");
+        let text = chain(&e);
+        assert_eq!(text.matches(&rig.display().to_string()).count(), 1, "{text}");
+        assert!(text.contains("missing key `camera_0`"), "{text}");
+        // An I/O error: frames.csv is a folder.
+        let ds = write_sample(&tmp.path().join("ds2"), &[]);
+        let csv = ds.join("frames.csv");
+        std::fs::remove_file(&csv).expect("rm");
+        std::fs::create_dir(&csv).expect("mkdir");
+        let text = chain(&Dataset::open(&ds).expect_err("a folder"));
+        assert_eq!(text.matches(&csv.display().to_string()).count(), 1, "{text}");
+    }
+
+    #[test]
+    fn long_values_are_shortened_in_messages() {
+        let long = "c".repeat(100_000);
+        let err = open_with("frames.csv", |c| format!("{c}1,{long},5\n"));
+        assert!(err.contains("more chars") && err.len() < 600, "{} chars", err.len());
+        let err = open_with("frames.csv", |c| format!("{c}{long}\n"));
+        assert!(err.len() < 600, "{} chars", err.len());
+        let err = open_with("dataset.toml", |t| format!("{t}{long} = 1\n"));
+        assert!(err.contains("dataset.toml") && err.len() < 600, "{} chars", err.len());
+        let err = tool_error(|v| v[long.as_str()] = serde_json::json!(1));
+        assert!(err.contains("tool.json") && err.len() < 600, "{} chars", err.len());
+        let err = tool_error(|v| v["mesh"] = serde_json::json!(long));
+        assert!(err.contains("tool.json") && err.len() < 600, "{} chars", err.len());
+    }
+
+    /// Where each corpus file goes in a sample dataset, by its name's prefix, and the file the
+    /// error must name.
+    fn corpus_target(name: &str) -> Option<&'static str> {
+        [
+            ("frames_", "frames.csv"),
+            ("poses_", "truth/poses.jsonl"),
+            ("tool_", "tool.json"),
+            ("png_", "cam0/000000.png"),
+            ("dataset_", "dataset.toml"),
+            ("rig_", "rig.yaml"),
+        ]
+        .into_iter()
+        .find(|(prefix, _)| name.starts_with(prefix))
+        .map(|(_, target)| target)
+    }
+
+    /// Every file in `tests/corpus/` is a bad input that once crashed, hung or was believed: put in
+    /// place in a sample dataset, reading it must be an error that names the file, with the file's
+    /// path once in the error chain.
+    #[test]
+    fn the_regression_corpus_is_refused() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
+        let mut paths: Vec<PathBuf> =
+            std::fs::read_dir(&dir).expect("tests/corpus").map(|e| e.expect("entry").path()).collect();
+        paths.sort();
+        assert!(paths.len() >= 10, "the corpus has its files: {paths:?}");
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let pristine = sample(tmp.path());
+        for (i, path) in paths.iter().enumerate() {
+            let name = path.file_name().expect("name").to_string_lossy().into_owned();
+            let target = corpus_target(&name).unwrap_or_else(|| panic!("{name}: no known prefix"));
+            let ds = tmp.path().join(format!("case{i}"));
+            copy_tree(&pristine, &ds);
+            let installed = ds.join(target);
+            std::fs::copy(path, &installed).expect("install");
+            let start = Instant::now();
+            let e = match Dataset::open(&ds) {
+                Err(e) => e,
+                Ok(opened) => match (opened.tool(), opened.truth_poses()) {
+                    (Err(e), _) | (_, Err(e)) => e,
+                    _ => panic!("{name}: accepted"),
+                },
+            };
+            assert!(start.elapsed() < Duration::from_secs(5), "{name} took {:?}", start.elapsed());
+            let text = chain(&e);
+            assert_eq!(text.matches(&installed.display().to_string()).count(), 1, "{name}: {text}");
+            assert!(text.len() < 600, "{name}: a short message: {text}");
+        }
+    }
+
+    /// Copies a folder tree.
+    fn copy_tree(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).expect("mkdir");
+        for entry in std::fs::read_dir(from).expect("read_dir") {
+            let entry = entry.expect("entry");
+            let target = to.join(entry.file_name());
+            if entry.file_type().expect("type").is_dir() {
+                copy_tree(&entry.path(), &target);
+            } else {
+                std::fs::copy(entry.path(), &target).expect("copy");
+            }
+        }
+    }
+
+    /// Fragments of the formats a byte mutation rarely produces on its own.
+    const TOKENS: [&str; 12] =
+        ["1e308", "-9223372036854775808", "9223372036854775807", ",", "\n", "[", "{", "\"", ":", "nan", "cam1", "="];
+
+    /// Applies edits `(kind, position, byte)` to `bytes`: flip a bit, insert a byte, delete a byte or
+    /// insert a token.
+    fn mutate(mut bytes: Vec<u8>, edits: &[(u8, usize, u8)]) -> Vec<u8> {
+        for &(kind, pos, byte) in edits {
+            let at = pos % (bytes.len() + 1);
+            match kind % 4 {
+                0 if at < bytes.len() => bytes[at] ^= 1 << (byte % 8),
+                1 => bytes.insert(at, byte),
+                2 if at < bytes.len() => {
+                    bytes.remove(at);
+                }
+                3 => {
+                    let token = TOKENS[usize::from(byte) % TOKENS.len()].as_bytes();
+                    for (k, &b) in token.iter().enumerate() {
+                        bytes.insert(at + k, b);
+                    }
+                }
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    /// The files of the sample dataset the fuzz test replaces, one per case.
+    const FUZZED: [&str; 6] =
+        ["frames.csv", "tool.json", "truth/poses.jsonl", "dataset.toml", "rig.yaml", "cam0/000000.png"];
+
+    /// A valid file with bytes flipped, inserted or deleted, or arbitrary bytes, in place of one of
+    /// the sample's files: opening and reading never panic (the result itself is not asserted).
+    #[test]
+    fn mutated_and_arbitrary_files_never_panic() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let ds = sample(tmp.path());
+        let valid: Vec<Vec<u8>> = FUZZED.iter().map(|f| std::fs::read(ds.join(f)).expect("read")).collect();
+        let strategy = (
+            0..FUZZED.len(),
+            proptest::collection::vec((any::<u8>(), any::<usize>(), any::<u8>()), 1..12),
+            proptest::option::weighted(0.25, proptest::collection::vec(any::<u8>(), 0..512)),
+        );
+        let mut runner = TestRunner::new(Config::with_cases(64));
+        let result = runner.run(&strategy, |(which, edits, raw)| {
+            for (file, bytes) in FUZZED.iter().zip(&valid) {
+                std::fs::write(ds.join(file), bytes).expect("restore");
+            }
+            let bytes = raw.unwrap_or_else(|| mutate(valid[which].clone(), &edits));
+            std::fs::write(ds.join(FUZZED[which]), bytes).expect("write");
+            if let Ok(opened) = Dataset::open(&ds) {
+                let _ = opened.tool();
+                let _ = opened.truth_poses();
+                let _ = opened.read_frame_set(0, true);
+            }
+            let _ = read_tool(ds.join("tool.json"));
+            Ok(())
+        });
+        result.expect("no reader panics");
     }
 }

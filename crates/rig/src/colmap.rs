@@ -19,11 +19,13 @@
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use std::io::Read as _;
 use std::path::Path;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
-use crate::{Camera, Distortion, MAX_CAMERAS, Rig, RigError, WorldFrame};
+use crate::limits::check_camera;
+use crate::{Camera, Distortion, MAX_CAMERAS, Rig, RigError, WorldFrame, shorten};
 
 /// Largest file of a COLMAP text model read, bytes (a rig's model is a few kilobytes; points
 /// lines of a large reconstruction are skipped line by line, never held whole beyond this).
@@ -42,18 +44,28 @@ struct Intrinsics {
     distortion: Distortion,
 }
 
-fn read_text(path: &Path) -> Result<String, RigError> {
-    let read = |e| RigError::Read { path: path.to_owned(), source: e };
-    let meta = std::fs::metadata(path).map_err(read)?;
-    if meta.len() > MAX_FILE_BYTES {
-        let file = path.display().to_string();
-        return Err(RigError::Invalid {
-            file,
-            key: String::new(),
-            message: format!("{} bytes, more than the {MAX_FILE_BYTES} a COLMAP text model may have here", meta.len()),
-        });
+impl Intrinsics {
+    /// A camera with these intrinsics at the world origin, named `name`.
+    fn camera(&self, name: String) -> Camera {
+        let mut cam = Camera::new(name, self.width, self.height, self.fx, self.fy, self.cx, self.cy);
+        cam.distortion = self.distortion;
+        cam
     }
-    std::fs::read_to_string(path).map_err(read)
+}
+
+/// Reads a text file of at most [`MAX_FILE_BYTES`] (reading stops there, so a device or a growing
+/// file cannot make it read forever).
+fn read_text(path: &Path) -> Result<String, RigError> {
+    let read = |error| RigError::Read { path: path.to_owned(), error };
+    let file = std::fs::File::open(path).map_err(read)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes).map_err(read)?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(RigError::TooLarge { file: path.display().to_string(), limit: MAX_FILE_BYTES });
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        read(std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not UTF-8 text: {}", e.utf8_error())))
+    })
 }
 
 /// The lines of a COLMAP text file with their 1-based numbers, comments and blank lines skipped.
@@ -71,15 +83,11 @@ fn numbers(file: &Path, line: usize, fields: &[&str]) -> Result<Vec<f64>, RigErr
         .map(|f| {
             let v: f64 = f.parse().map_err(|_| invalid(file, line, format!("`{}` is not a number", shorten(f))))?;
             if !v.is_finite() {
-                return Err(invalid(file, line, format!("`{f}` is not finite")));
+                return Err(invalid(file, line, format!("`{}` is not finite", shorten(f))));
             }
             Ok(v)
         })
         .collect()
-}
-
-fn shorten(s: &str) -> String {
-    if s.chars().count() <= 40 { s.to_owned() } else { format!("{}…", s.chars().take(40).collect::<String>()) }
 }
 
 fn parse_cameras(path: &Path) -> Result<BTreeMap<u64, Intrinsics>, RigError> {
@@ -140,14 +148,13 @@ fn parse_cameras(path: &Path) -> Result<BTreeMap<u64, Intrinsics>, RigError> {
                 (p[0], p[1], p[2], p[3], Distortion { k1: p[4], k2: p[5], p1: p[6], p2: p[7], k3: p[8] })
             }
         };
-        if !(fx > 0.0 && fy > 0.0) {
-            return Err(invalid(path, n, "focal lengths must be positive"));
-        }
         if out.len() >= MAX_CAMERAS * 16 {
-            return Err(invalid(path, n, "too many cameras for a rig"));
+            return Err(invalid(path, n, format!("more than {} cameras, too many for a rig", MAX_CAMERAS * 16)));
         }
         // COLMAP's top-left pixel centre is (0.5, 0.5); ours is (0, 0).
-        out.insert(id, Intrinsics { width, height, fx, fy, cx: cx - 0.5, cy: cy - 0.5, distortion });
+        let intrinsics = Intrinsics { width, height, fx, fy, cx: cx - 0.5, cy: cy - 0.5, distortion };
+        check_camera(&intrinsics.camera(String::new())).map_err(|p| invalid(path, n, p.message))?;
+        out.insert(id, intrinsics);
     }
     Ok(out)
 }
@@ -168,7 +175,7 @@ pub fn read_colmap(dir: &Path, scale: f64) -> Result<Rig, RigError> {
         return Err(RigError::Invalid {
             file: dir.display().to_string(),
             key: "scale".to_owned(),
-            message: format!("must be a positive number of metres per model unit, got {scale}"),
+            message: format!("must be a positive number of metres per model unit, got {}", crate::short_number(scale)),
         });
     }
     let cameras_path = dir.join("cameras.txt");
@@ -201,22 +208,27 @@ pub fn read_colmap(dir: &Path, scale: f64) -> Result<Rig, RigError> {
         }
         let rotation = UnitQuaternion::from_quaternion(q).to_rotation_matrix();
         let name = camera_name(&name_field);
+        if name.is_empty() {
+            return Err(invalid(&images_path, n, "the image name gives no camera name"));
+        }
         if let Some((_, first, _)) = cameras.iter().find(|(c, _, _)| *c == name) {
             return Err(invalid(
                 &images_path,
                 n,
                 format!(
-                    "a second image of camera `{name}` (the first on line {first}): a rig's model has one image per camera"
+                    "a second image of camera `{}` (the first on line {first}): a rig's model has one image per camera",
+                    shorten(&name)
                 ),
             ));
         }
         if cameras.len() >= MAX_CAMERAS {
             return Err(invalid(&images_path, n, format!("more than {MAX_CAMERAS} cameras")));
         }
-        let mut cam = Camera::new(name.clone(), k.width, k.height, k.fx, k.fy, k.cx, k.cy);
-        cam.distortion = k.distortion;
+        let mut cam = k.camera(name.clone());
         cam.rotation = rotation;
         cam.translation = Vector3::new(v[4], v[5], v[6]) * scale;
+        check_camera(&cam)
+            .map_err(|p| invalid(&images_path, n, format!("camera `{}`: {}", shorten(&name), p.message)))?;
         cameras.push((name, n, cam));
         // The image's 2-D points.
         lines.next();
@@ -224,7 +236,7 @@ pub fn read_colmap(dir: &Path, scale: f64) -> Result<Rig, RigError> {
     if cameras.is_empty() {
         return Err(RigError::Invalid {
             file: images_path.display().to_string(),
-            key: String::new(),
+            key: "IMAGE_ID lines".to_owned(),
             message: "no images: nothing to make cameras of".to_owned(),
         });
     }
@@ -237,7 +249,7 @@ pub fn read_colmap(dir: &Path, scale: f64) -> Result<Rig, RigError> {
 /// `points3D.txt`): one camera and one image (`NAME.png`) per rig camera, `OPENCV` cameras, or
 /// `FULL_OPENCV` where k3 is not zero; translations divided by `scale` (metres per model unit).
 pub fn write_colmap(rig: &Rig, dir: &Path, scale: f64) -> Result<(), RigError> {
-    let io = |path: std::path::PathBuf| move |e: std::io::Error| RigError::Write { path, source: e };
+    let io = |path: std::path::PathBuf| move |error: std::io::Error| RigError::Write { path, error };
     std::fs::create_dir_all(dir).map_err(io(dir.to_owned()))?;
     let mut cameras = String::from(
         "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",

@@ -12,6 +12,11 @@
 //! - [`default_rig`]: the six-camera rig of the synthetic scenes (`calibration/default-rig.yaml`);
 //!   [`lab8_rig`] (eight 1280x720 cameras, one overhead, one strongly distorted) and
 //!   [`random_rig`] (seeded) so that nothing is tuned to one rig; [`RigPreset`] names them.
+//! - Input limits ([`MAX_CAMERAS`], [`MAX_IMAGE_SIDE`], [`MIN_FOCAL_PX`]..[`MAX_FOCAL_PX`],
+//!   [`MAX_DISTORTION_COEFFICIENT`], [`MAX_WORLD_COORDINATE_M`], [`ROTATION_TOLERANCE`],
+//!   [`MAX_RIG_FILE_BYTES`]): every reader refuses numbers outside them, naming the file, the key
+//!   and the range; [`Rig::validate`] checks a rig built in memory. [`shorten`] and [`short_number`]
+//!   keep values echoed in error messages short.
 //!
 //! Conventions (see DESIGN.md): SI units, OpenCV camera axes (x right, y down, z forward),
 //! extrinsics world→camera `x_cam = R · x_world + t`, the centre of pixel (col i, row j) at (i, j).
@@ -24,6 +29,7 @@ pub mod colmap;
 mod default;
 mod distortion;
 mod error;
+mod limits;
 mod presets;
 mod rig;
 mod yaml;
@@ -32,14 +38,12 @@ pub use camera::{Camera, Projection, Ray};
 pub use default::{DEFAULT_TARGET, DEFAULT_WORKSPACE, default_rig};
 pub use distortion::{Distortion, UNDISTORT_MAX_ITERATIONS, UNDISTORT_TOLERANCE};
 pub use error::RigError;
+pub use limits::{
+    MAX_CAMERAS, MAX_DISTORTION_COEFFICIENT, MAX_FOCAL_PX, MAX_IMAGE_SIDE, MAX_RIG_FILE_BYTES, MAX_WORLD_COORDINATE_M,
+    MIN_FOCAL_PX, ROTATION_TOLERANCE, SHORT_VALUE_CHARS, check_rotation, short_number, shorten, shorten_to,
+};
 pub use presets::{RigPreset, lab8_rig, random_rig};
 pub use rig::{Rig, WorldFrame};
-
-/// The most cameras a rig may have (a file claiming more is refused before anything is allocated).
-pub const MAX_CAMERAS: usize = 64;
-
-/// The longest image side a camera may have, pixels.
-pub const MAX_IMAGE_SIDE: u32 = 16_384;
 
 /// Orders strings so that embedded numbers compare by value ("cam2" < "cam10"): the order of
 /// camera folders and names everywhere in hullcut.

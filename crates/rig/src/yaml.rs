@@ -2,17 +2,34 @@
 //!
 //! OpenCV writes a `%YAML:1.0` directive and `!!opencv-matrix` tags that YAML 1.2 parsers reject;
 //! both are removed before parsing. Matrices are mappings `{rows, cols, dt, data}`.
+//!
+//! Hostile input. yaml-rust2's loader expands every alias (`*name`) by cloning the anchored node,
+//! so a few hundred bytes of nested anchors and aliases ("billion laughs") grow to gigabytes; it
+//! also builds (and later drops, recursively) a tree as deep as the input nests. Rig files need
+//! neither aliases nor more than four levels of nesting, so before the loader runs, the text (at
+//! most [`MAX_RIG_FILE_BYTES`](crate::MAX_RIG_FILE_BYTES)) goes through yaml-rust2's event parser,
+//! which never expands anything: an `Alias` event, nesting deeper than [`MAX_YAML_DEPTH`] or more
+//! than [`MAX_YAML_EVENTS`] events is refused, naming the line. This is exact where a textual
+//! pre-scan for `*` would have to re-implement YAML's quoting and comment rules, and cheap: the
+//! parser holds one event at a time.
 
 use std::fmt::Write as _;
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
-use yaml_rust2::{Yaml, YamlLoader};
+use yaml_rust2::parser::{Event, Parser};
+use yaml_rust2::{ScanError, Yaml, YamlLoader};
 
-use crate::{Camera, Distortion, Rig, RigError, WorldFrame};
+use crate::limits::{is_rotation, rotation_deviation};
+use crate::{Camera, Distortion, MAX_CAMERAS, Rig, RigError, WorldFrame, shorten, shorten_to};
 
-/// Largest accepted max |RᵀR − I| of a stored rotation (files rounded to ~6 significant digits pass);
-/// accepted rotations are re-orthonormalized.
-const ROTATION_TOLERANCE: f64 = 1e-5;
+/// Deepest nesting of YAML collections accepted. A rig needs four (top-level mapping, camera,
+/// matrix, data list); the margin is for files that group things differently.
+const MAX_YAML_DEPTH: usize = 16;
+
+/// Most YAML events (scalars, collection starts and ends, document markers) accepted: a camera of
+/// `rig.yaml` is about 80 events, so [`MAX_CAMERAS`] cameras and any extra keys a calibration tool
+/// adds stay far below this, and loading this many nodes takes a few megabytes at most.
+const MAX_YAML_EVENTS: usize = 100_000;
 
 struct Reader<'a> {
     file: &'a str,
@@ -106,9 +123,6 @@ impl Reader<'_> {
         let height = self.size(node, &p, "image_height")?;
         let k = self.matrix(node, &p, "camera_matrix", &[(3, 3)])?;
         let key_k = join(&p, "camera_matrix");
-        if k[0] <= 0.0 || k[4] <= 0.0 {
-            return Err(self.invalid(&key_k, "focal lengths (fx, fy) must be positive"));
-        }
         if k[1] != 0.0 || k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
             return Err(self.invalid(&key_k, "expected [fx 0 cx; 0 fy cy; 0 0 1] (skew is not supported)"));
         }
@@ -117,9 +131,8 @@ impl Reader<'_> {
         coeffs[..d.len()].copy_from_slice(&d);
         let r = self.matrix(node, &p, "rotation_matrix", &[(3, 3)])?;
         let r = Matrix3::from_row_slice(&r);
-        let deviation = (r.transpose() * r - Matrix3::identity()).abs().max();
-        let det = r.determinant();
-        if deviation > ROTATION_TOLERANCE || det <= 0.0 {
+        let (deviation, det) = rotation_deviation(&r);
+        if !is_rotation(deviation, det) {
             return Err(RigError::NotRotation {
                 file: self.file.to_owned(),
                 key: join(&p, "rotation_matrix"),
@@ -165,9 +178,10 @@ fn join(parent: &str, key: &str) -> String {
     if parent.is_empty() { key.to_owned() } else { format!("{parent}.{key}") }
 }
 
+/// What a node holds, for error messages (values shortened, see [`shorten`]).
 fn describe(v: &Yaml) -> String {
     match v {
-        Yaml::Real(s) | Yaml::String(s) => format!("`{s}`"),
+        Yaml::Real(s) | Yaml::String(s) => format!("`{}`", shorten(s)),
         Yaml::Integer(i) => format!("`{i}`"),
         Yaml::Boolean(b) => format!("`{b}`"),
         Yaml::Array(_) => "a list".to_owned(),
@@ -197,45 +211,106 @@ fn strip_opencv_syntax(text: &str) -> String {
     out
 }
 
+/// A parser error as [`RigError::Syntax`], its message shortened (a duplicated key is echoed) and its
+/// place as line and column.
+fn syntax_error(file: &str, e: &ScanError) -> RigError {
+    let mark = e.marker();
+    RigError::Syntax {
+        file: file.to_owned(),
+        message: format!("{} at line {} column {}", shorten_to(e.info(), 160), mark.line(), mark.col() + 1),
+    }
+}
+
+/// Runs yaml-rust2's event parser over `text` without building anything, refusing aliases, nesting
+/// deeper than [`MAX_YAML_DEPTH`] and more than [`MAX_YAML_EVENTS`] events (see the module docs).
+/// Syntax errors are reported here too, with the parser's line and column.
+fn check_yaml_events(text: &str, file: &str) -> Result<(), RigError> {
+    let unsupported = |line: usize, message: String| RigError::Unsupported { file: file.to_owned(), line, message };
+    let mut parser = Parser::new_from_str(text);
+    let mut depth = 0usize;
+    for _ in 0..MAX_YAML_EVENTS {
+        let (event, mark) = parser.next_token().map_err(|e| syntax_error(file, &e))?;
+        match event {
+            Event::StreamEnd => return Ok(()),
+            Event::Alias(_) => {
+                return Err(unsupported(
+                    mark.line(),
+                    "YAML aliases (`*name`) are not accepted in rig files (expanding them can exhaust memory); \
+                     write the values out"
+                        .to_owned(),
+                ));
+            }
+            Event::SequenceStart(..) | Event::MappingStart(..) => {
+                depth += 1;
+                if depth > MAX_YAML_DEPTH {
+                    return Err(unsupported(
+                        mark.line(),
+                        format!("collections nest deeper than the {MAX_YAML_DEPTH} levels a rig file may use"),
+                    ));
+                }
+            }
+            Event::SequenceEnd | Event::MappingEnd => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    Err(unsupported(
+        0,
+        format!("more than {MAX_YAML_EVENTS} YAML nodes, far more than a rig of {MAX_CAMERAS} cameras has"),
+    ))
+}
+
+/// The index `N` of a top-level `camera_N` key (`camera_count` and other keys give `None`); an
+/// index too large for `u64` is `Some(u64::MAX)`.
+fn camera_key_index(key: &str) -> Option<u64> {
+    let digits = key.strip_prefix("camera_")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some(digits.parse().unwrap_or(u64::MAX))
+}
+
 pub(crate) fn parse_rig(text: &str, file: &str) -> Result<Rig, RigError> {
-    let docs = YamlLoader::load_from_str(&strip_opencv_syntax(text))
-        .map_err(|e| RigError::Syntax { file: file.to_owned(), message: e.to_string() })?;
+    let text = strip_opencv_syntax(text);
+    check_yaml_events(&text, file)?;
+    let docs = YamlLoader::load_from_str(&text).map_err(|e| syntax_error(file, &e))?;
     let Some(root) = docs.first() else {
         return Err(RigError::Syntax { file: file.to_owned(), message: "the file is empty".to_owned() });
     };
     let r = Reader { file };
-    if root.as_hash().is_none() {
+    let Some(top) = root.as_hash() else {
         return Err(RigError::Syntax { file: file.to_owned(), message: "the top level must be a mapping".to_owned() });
-    }
-    let count = r.get(root, "", "camera_count")?;
-    let count = count
+    };
+    let count_node = r.get(root, "", "camera_count")?;
+    // The count is checked against the limit and against the camera keys actually present before
+    // anything is sized from it.
+    let count = count_node
         .as_i64()
-        .filter(|&n| n > 0)
-        .ok_or_else(|| r.invalid("camera_count", format!("expected a positive integer, found {}", describe(count))))?;
-    if count as u64 > crate::MAX_CAMERAS as u64 {
-        return Err(
-            r.invalid("camera_count", format!("{count} exceeds the {} cameras a rig may have", crate::MAX_CAMERAS))
-        );
+        .and_then(|n| usize::try_from(n).ok())
+        .filter(|n| (1..=MAX_CAMERAS).contains(n))
+        .ok_or_else(|| {
+            r.invalid(
+                "camera_count",
+                format!("expected an integer in 1..={MAX_CAMERAS}, found {}", describe(count_node)),
+            )
+        })?;
+    let extra = top.keys().filter_map(Yaml::as_str).filter_map(camera_key_index).find(|&i| i >= count as u64);
+    if let Some(i) = extra {
+        let key = if i == u64::MAX { "camera_<huge number>".to_owned() } else { format!("camera_{i}") };
+        return Err(r.invalid("camera_count", format!("is {count} but the file also has {key}")));
     }
-    let mut cameras = Vec::with_capacity(count as usize);
-    for i in 0..count as usize {
+    let mut cameras = Vec::new();
+    for i in 0..count {
         let key = format!("camera_{i}");
         let node = r.get(root, "", &key)?;
         cameras.push(r.camera(node, i)?);
-    }
-    if !root[format!("camera_{count}").as_str()].is_badvalue() {
-        return Err(r.invalid("camera_count", format!("is {count} but the file also has camera_{count}")));
-    }
-    for (i, c) in cameras.iter().enumerate() {
-        if let Some(j) = cameras[..i].iter().position(|o| o.name == c.name) {
-            return Err(r.invalid(&format!("camera_{i}.name"), format!("`{}` is also camera_{j}'s name", c.name)));
-        }
     }
     let world_frame = match &root["world_frame"] {
         Yaml::String(s) => WorldFrame::from_key(s),
         _ => WorldFrame::Other("unspecified".to_owned()),
     };
-    Ok(Rig { cameras, world_frame })
+    let rig = Rig { cameras, world_frame };
+    rig.validate(file)?;
+    Ok(rig)
 }
 
 fn write_matrix(out: &mut String, key: &str, rows: usize, cols: usize, data: &[f64]) {

@@ -1,4 +1,5 @@
-//! Integration tests of hullcut-rig: projection round trips, rig.yaml I/O and its errors.
+//! Integration tests of hullcut-rig: projection round trips, rig.yaml I/O and its errors, and
+//! hostile input (limits, alias bombs, a committed corpus of bad files, fuzzing).
 
 use hullcut_rig::{Camera, Distortion, Rig, RigError, WorldFrame, default_rig};
 use nalgebra::{Point2, Point3, Vector3};
@@ -116,7 +117,7 @@ mod yaml {
     }
 
     /// A file as OpenCV's FileStorage writes it (flow and block styles, `%YAML:1.0`, tags, `1.`).
-    const OPENCV_STYLE: &str = "%YAML:1.0
+    pub(super) const OPENCV_STYLE: &str = "%YAML:1.0
 ---
 camera_count: 1
 camera_0:
@@ -325,5 +326,276 @@ mod colmap {
         let e = read_colmap(empty.path(), 1.0).expect_err("no files").to_string();
         assert!(e.contains("cameras.txt"), "{e}");
         assert!(read_colmap(empty.path(), 0.0).is_err(), "a scale of 0");
+    }
+}
+
+/// Bad input never crashes, hangs or lies (issue 24): every case below is an error that names the
+/// file and the key or line, returned before anything is sized from the bad value.
+mod hostile {
+    use std::path::Path;
+    use std::time::{Duration, Instant};
+
+    use hullcut_rig::colmap::read_colmap;
+    use hullcut_rig::{MAX_CAMERAS, MAX_RIG_FILE_BYTES};
+
+    use super::yaml::OPENCV_STYLE;
+    use super::*;
+
+    /// The error of reading `text` as `bad.yaml`, checked to name the file first.
+    fn refused(text: &str) -> RigError {
+        let e = Rig::from_yaml_str(text, "bad.yaml").expect_err("must be refused");
+        assert!(e.to_string().starts_with("bad.yaml: "), "error names the file: {e}");
+        e
+    }
+
+    /// The error and its sources joined the way `anyhow` prints them with `{:#}`.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut parts = vec![e.to_string()];
+        let mut next = e.source();
+        while let Some(source) = next {
+            parts.push(source.to_string());
+            next = source.source();
+        }
+        parts.join(": ")
+    }
+
+    const ROTATION: &str = "data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1. ]";
+    const K: &str = "data: [ 5.3e+02, 0., 3.2e+02, 0., 5.3e+02,";
+
+    #[test]
+    fn camera_count_out_of_range_is_refused_before_allocating() {
+        for count in ["9223372036854775807", "1000000000", "65", "0", "-3", "1e30", "99999999999999999999999", "two"] {
+            let text = OPENCV_STYLE.replace("camera_count: 1", &format!("camera_count: {count}"));
+            let msg = refused(&text).to_string();
+            assert!(msg.contains("`camera_count`") && msg.contains(&format!("1..={MAX_CAMERAS}")), "{count}: {msg}");
+        }
+    }
+
+    #[test]
+    fn camera_count_must_match_the_cameras_present() {
+        let extra = format!("{OPENCV_STYLE}camera_7:\n   name: late\n");
+        let msg = refused(&extra).to_string();
+        assert!(msg.contains("`camera_count`") && msg.contains("camera_7"), "{msg}");
+        let msg = refused(&OPENCV_STYLE.replace("camera_count: 1", "camera_count: 64")).to_string();
+        assert!(msg.contains("missing key `camera_1`"), "{msg}");
+    }
+
+    /// "Billion laughs": nine levels of nine aliases, 9^9 strings once expanded. The event scan stops
+    /// at the first alias (line 2), so this takes microseconds; the bound below only catches a
+    /// regression to expanding it, which takes minutes and gigabytes.
+    #[test]
+    fn an_alias_bomb_is_refused_quickly() {
+        let mut text = String::from("camera_count: 1\nl0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n");
+        for level in 1..9 {
+            let p = level - 1;
+            text += &format!("l{level}: &l{level} [{}]\n", vec![format!("*l{p}"); 9].join(", "));
+        }
+        let start = Instant::now();
+        let e = refused(&text);
+        assert!(start.elapsed() < Duration::from_secs(5), "took {:?}", start.elapsed());
+        assert!(matches!(e, RigError::Unsupported { line: 3, .. }), "{e}");
+        assert!(e.to_string().contains("alias"), "{e}");
+        // An alias inside a quoted string or a comment is text, not an alias.
+        let quoted = OPENCV_STYLE.replace("name: left", "name: \"*left\" # *not an alias");
+        assert_eq!(Rig::from_yaml_str(&quoted, "q.yaml").expect("quoted").cameras[0].name, "*left");
+    }
+
+    #[test]
+    fn deep_nesting_and_huge_files_are_refused() {
+        // Past 255 flow levels yaml-rust2's scanner refuses by itself; below that, the event scan.
+        let deep = format!("camera_count: {}{}\n", "[".repeat(100_000), "]".repeat(100_000));
+        refused(&deep);
+        let nested = format!("camera_count: {}{}\n", "[".repeat(200), "]".repeat(200));
+        assert!(matches!(refused(&nested), RigError::Unsupported { .. }));
+        let nested: String = (0..700).map(|i| format!("{}-\n", "  ".repeat(i))).collect();
+        let block = format!("camera_count:\n{nested}");
+        assert!(matches!(refused(&block), RigError::Unsupported { .. }));
+        let huge = format!("{OPENCV_STYLE}#{}\n", "x".repeat(MAX_RIG_FILE_BYTES as usize));
+        assert!(matches!(refused(&huge), RigError::TooLarge { .. }));
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("rig.yaml");
+        std::fs::write(&path, &huge).expect("write");
+        let e = Rig::load(&path).expect_err("too large");
+        assert!(matches!(e, RigError::TooLarge { .. }) && e.to_string().contains("rig.yaml"), "{e}");
+    }
+
+    #[test]
+    fn intrinsics_outside_their_ranges_are_refused() {
+        let cases = [
+            (OPENCV_STYLE.replace(K, "data: [ 1e-300, 0., 3.2e+02, 0., 5.3e+02,"), "fx = 1e-300"),
+            (OPENCV_STYLE.replace(K, "data: [ 5.3e+02, 0., 3.2e+02, 0., -5.3e+02,"), "fy = -530"),
+            (OPENCV_STYLE.replace(K, "data: [ 5.3e+02, 0., 3.2e+02, 0., 1e7,"), "fy = 10000000"),
+            (OPENCV_STYLE.replace(K, "data: [ 5.3e+02, 0., 1e300, 0., 5.3e+02,"), "cx = 1e300"),
+            (OPENCV_STYLE.replace("-0.28, 0.07", "-1e300, 0.07"), "k1 = -1e300"),
+            (OPENCV_STYLE.replace("image_width: 640", "image_width: 1000000"), "1..=16384"),
+            (OPENCV_STYLE.replace("image_height: 480", "image_height: -480"), "1..=16384"),
+            (OPENCV_STYLE.replace("data: [ 0., 0., 0. ]", "data: [ 0., 1e300, 0. ]"), "ty = 1e300"),
+            (format!("{OPENCV_STYLE}   rms_reprojection_error: -1\n"), "rms_reprojection_error"),
+        ];
+        for (text, what) in cases {
+            let msg = refused(&text).to_string();
+            assert!(msg.contains("camera_0.") && msg.contains(what), "{what}: {msg}");
+            assert!(msg.len() < 300, "a short message: {msg}");
+        }
+        let msg = refused(&OPENCV_STYLE.replace(K, "data: [ 1e-300, 0., 3.2e+02, 0., 5.3e+02,")).to_string();
+        assert!(msg.contains("`camera_0.camera_matrix`") && msg.contains("[1, 1e6] px"), "{msg}");
+    }
+
+    #[test]
+    fn rotations_that_are_not_rotations_are_refused() {
+        for data in [
+            "data: [ 1e19, 0., 0., 0., 1., 0., 0., 0., 1. ]",
+            "data: [ 1., 0., 0., 0., 1., 0., 0., 0., 1.0001 ]",
+            "data: [ 0., 0., 0., 0., 0., 0., 0., 0., 0. ]",
+            "data: [ 1., 0., 0., 0., 1., 0., 0., 0., .inf ]",
+        ] {
+            let msg = refused(&OPENCV_STYLE.replace(ROTATION, data)).to_string();
+            assert!(msg.contains("camera_0.rotation_matrix"), "{data}: {msg}");
+            assert!(msg.len() < 300, "a short message: {msg}");
+        }
+        // Rounded to six digits, a rotation still passes (and is re-orthonormalized).
+        let c = std::f64::consts::FRAC_1_SQRT_2;
+        let rounded = format!("data: [ {c:.6}, {c:.6}, 0., -{c:.6}, {c:.6}, 0., 0., 0., 1. ]");
+        let rig = Rig::from_yaml_str(&OPENCV_STYLE.replace(ROTATION, &rounded), "ok.yaml").expect("rounded rotation");
+        let r = rig.cameras[0].rotation.matrix();
+        assert!((r.transpose() * r - nalgebra::Matrix3::identity()).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn validate_checks_rigs_built_in_memory() {
+        assert!(default_rig().validate("default").is_ok());
+        let mut rig = default_rig();
+        rig.cameras[3].fx = 1e-300;
+        let msg = rig.validate("mem").expect_err("tiny fx").to_string();
+        assert!(msg.starts_with("mem: `camera_3.camera_matrix`") && msg.contains("fx"), "{msg}");
+        let mut rig = default_rig();
+        rig.cameras[1].name = rig.cameras[0].name.clone();
+        assert!(rig.validate("mem").expect_err("duplicate").to_string().contains("camera_1.name"));
+        let mut rig = default_rig();
+        rig.cameras[0].translation.z = f64::NAN;
+        assert!(rig.validate("mem").expect_err("NaN").to_string().contains("camera_0.translation_vector"));
+    }
+
+    #[test]
+    fn long_values_are_shortened_in_messages() {
+        let long = "x".repeat(100_000);
+        let msg = refused(&OPENCV_STYLE.replace("image_width: 640", &format!("image_width: {long}"))).to_string();
+        assert!(msg.contains("more chars") && msg.len() < 400, "{} chars", msg.len());
+        let dup = format!("{OPENCV_STYLE}{long}: 1\n{long}: 2\n");
+        let msg = refused(&dup).to_string();
+        assert!(msg.len() < 400, "{} chars", msg.len());
+    }
+
+    #[test]
+    fn an_error_chain_names_the_path_once() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let missing = dir.path().join("missing-rig.yaml");
+        let bad = dir.path().join("bad-rig.yaml");
+        std::fs::write(&bad, OPENCV_STYLE.replace("   image_height: 480\n", "")).expect("write");
+        for path in [&missing, &bad] {
+            let e = Rig::load(path).expect_err("refused");
+            let text = chain(&e);
+            let shown = path.display().to_string();
+            assert_eq!(text.matches(&shown).count(), 1, "{text}");
+        }
+    }
+
+    #[test]
+    fn colmap_numbers_outside_their_ranges_are_refused() {
+        let cases = [
+            ("1 PINHOLE 640 480 1e-300 600 320 240\n", "1 1 0 0 0 0 0 0 1 a.png\n\n", "cameras.txt", "fx = 1e-300"),
+            ("1 PINHOLE 640 480 600 600 1e300 240\n", "1 1 0 0 0 0 0 0 1 a.png\n\n", "cameras.txt", "cx = 1e300"),
+            ("1 OPENCV 640 480 600 600 320 240 1e300 0 0 0\n", "1 1 0 0 0 0 0 0 1 a.png\n\n", "cameras.txt", "k1"),
+            ("1 PINHOLE 640 480 600 600 320 240\n", "1 1 0 0 0 1e300 0 0 1 a.png\n\n", "images.txt", "tx = 1e300"),
+        ];
+        for (cameras, images, file, what) in cases {
+            let dir = tempfile::tempdir().expect("tempdir");
+            std::fs::write(dir.path().join("cameras.txt"), cameras).expect("cameras.txt");
+            std::fs::write(dir.path().join("images.txt"), images).expect("images.txt");
+            let e = read_colmap(dir.path(), 1.0).expect_err(what).to_string();
+            assert!(e.contains(file) && e.contains("line 1") && e.contains(what), "{what}: {e}");
+        }
+    }
+
+    /// Every file in `tests/corpus/` is a bad rig.yaml that once crashed, hung or was believed: each
+    /// must be an error naming the file, with the file's path once in the error chain.
+    #[test]
+    fn the_regression_corpus_is_refused() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
+        let mut paths: Vec<_> =
+            std::fs::read_dir(&dir).expect("tests/corpus").map(|e| e.expect("entry").path()).collect();
+        paths.sort();
+        assert!(paths.len() >= 10, "the corpus has its files: {paths:?}");
+        for path in paths {
+            let name = path.file_name().expect("name").to_string_lossy().into_owned();
+            let start = Instant::now();
+            let e = Rig::load(&path).expect_err(&name);
+            assert!(start.elapsed() < Duration::from_secs(5), "{name} took {:?}", start.elapsed());
+            let text = chain(&e);
+            assert!(text.contains(&name), "{name}: {text}");
+            assert_eq!(text.matches(&path.display().to_string()).count(), 1, "{text}");
+            assert!(text.len() < 400, "{name}: a short message: {text}");
+        }
+    }
+
+    /// YAML fragments a byte mutation rarely produces on its own.
+    const TOKENS: [&str; 12] =
+        ["*a", "&a ", "[", "{", "- ", ": ", "1e-300", "9223372036854775807", "\n", "!!opencv-matrix ", ".nan", "'"];
+
+    /// Applies edits `(kind, position, byte)` to `bytes`: flip a bit, insert a byte, delete a byte or
+    /// insert a YAML token.
+    fn mutate(mut bytes: Vec<u8>, edits: &[(u8, usize, u8)]) -> Vec<u8> {
+        for &(kind, pos, byte) in edits {
+            let at = pos % (bytes.len() + 1);
+            match kind % 4 {
+                0 if at < bytes.len() => bytes[at] ^= 1 << (byte % 8),
+                1 => bytes.insert(at, byte),
+                2 if at < bytes.len() => {
+                    bytes.remove(at);
+                }
+                3 => {
+                    let token = TOKENS[usize::from(byte) % TOKENS.len()].as_bytes();
+                    for (k, &b) in token.iter().enumerate() {
+                        bytes.insert(at + k, b);
+                    }
+                }
+                _ => {}
+            }
+        }
+        bytes
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Arbitrary bytes are read without a panic (the result itself is not asserted).
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2048)) {
+            let _ = Rig::from_yaml_str(&String::from_utf8_lossy(&bytes), "fuzz.yaml");
+        }
+
+        /// A valid rig.yaml with bytes flipped, inserted or deleted is read without a panic.
+        #[test]
+        fn mutated_rig_files_never_panic(
+            edits in proptest::collection::vec((any::<u8>(), any::<usize>(), any::<u8>()), 1..12),
+        ) {
+            let valid = default_rig().to_yaml_string().into_bytes();
+            let text = mutate(valid, &edits);
+            let _ = Rig::from_yaml_str(&String::from_utf8_lossy(&text), "fuzz.yaml");
+        }
+
+        /// A valid COLMAP model with mutated bytes is read without a panic.
+        #[test]
+        fn mutated_colmap_models_never_panic(
+            edits in proptest::collection::vec((any::<u8>(), any::<usize>(), any::<u8>()), 1..12),
+            which in any::<bool>(),
+        ) {
+            let dir = tempfile::tempdir().expect("tempdir");
+            hullcut_rig::colmap::write_colmap(&default_rig(), dir.path(), 1.0).expect("write");
+            let file = dir.path().join(if which { "cameras.txt" } else { "images.txt" });
+            let bytes = std::fs::read(&file).expect("read");
+            std::fs::write(&file, mutate(bytes, &edits)).expect("write");
+            let _ = read_colmap(dir.path(), 1.0);
+        }
     }
 }
