@@ -70,10 +70,14 @@ const COLLAPSED: f64 = 1e-12;
 /// Smallest parallel work item, grid points or nodes.
 const MIN_LEN: usize = 512;
 
+/// Largest region half-width accepted (`flsm.w`), cells. The cost per step does not depend on it,
+/// but the region sums index the grid by `t ± w`, which must not overflow.
+pub const MAX_W: usize = 1000;
+
 /// Parameters of FLSM, the scenario's `[flsm]` table.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct FlsmParams {
-    /// Region half-width in cells (`flsm.w`), at least 1. Larger regions are stiffer and propagate
+    /// Region half-width in cells (`flsm.w`), 1 to [`MAX_W`]. Larger regions are stiffer and propagate
     /// deformation further per step; the cost per step does not depend on it.
     pub w: usize,
     /// Stiffness of the goal pull (`flsm.alpha`, the seed's "∂"), in (0, 1]: the share of the
@@ -94,8 +98,8 @@ impl FlsmParams {
     /// Checks the ranges; the error names the scenario key.
     pub fn validate(&self) -> Result<(), SimError> {
         let invalid = |key: &str, message: String| Err(SimError::Invalid { key: key.into(), message });
-        if self.w < 1 {
-            return invalid("flsm.w", format!("must be >= 1 cell, got {}", self.w));
+        if !(1..=MAX_W).contains(&self.w) {
+            return invalid("flsm.w", format!("must be 1 to {MAX_W} cells, got {}", self.w));
         }
         if !(self.alpha > 0.0 && self.alpha <= 1.0) {
             return invalid("flsm.alpha", format!("must be in (0, 1], got {}", self.alpha));

@@ -1,8 +1,10 @@
 //! Soft-tissue simulation for hullcut: lattice, TLED, FLSM and their hybrid.
 //!
 //! Entry points: [`Scenario`] (the TOML scenario) and [`Simulation::from_scenario`] /
-//! [`Simulation::advance`]; the building blocks [`Lattice`], [`body::voxelize`], [`Tled`],
-//! [`flsm::Flsm`], [`stability::estimate`], [`dynamics::Integrator`] and [`embed::Embedding`].
+//! [`Simulation::advance`]; every value a scenario gives is checked against documented limits
+//! ([`scenario`]'s constants, [`MAX_STEPS`], [`MAX_SUBSTEPS`], [`MAX_LATTICE_CELLS`]). The building
+//! blocks: [`Lattice`], [`body::voxelize`], [`Tled`], [`flsm::Flsm`], [`stability::estimate`],
+//! [`dynamics::Integrator`] and [`embed::Embedding`].
 //!
 //! Cutting: [`SweptSurface`] (the blade edge's sweep between two trusted poses), [`cut_edges`] with
 //! a [`SpatialHash`] (the lattice edges it crosses), [`CutTopology`] (the virtual node algorithm's
@@ -53,9 +55,9 @@ pub use lattice::{CORNERS, Cell, Lattice};
 pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
-pub use operational::{HybridParams, HybridSteps, match_flsm};
-pub use scenario::Scenario;
-pub use simulation::{NodeRole, Simulation};
+pub use operational::{HybridParams, HybridSteps, MAX_SUBSTEPS, match_flsm};
+pub use scenario::{MAX_LATTICE_CELLS, Scenario};
+pub use simulation::{MAX_STEPS, NodeRole, Simulation};
 pub use sweep::{SweptSurface, interpolate};
 pub use tled::{Integration, Tled, TledParams};
 pub use vna::{CellCopy, CellSplit, CutTopology};

@@ -43,8 +43,11 @@ impl Material {
         ((self.lambda + 2.0 * self.mu) / self.density).sqrt()
     }
 
-    /// Checks that the material is physical: μ > 0, bulk modulus λ + 2μ/3 > 0, ρ > 0, all finite.
-    /// Errors name the scenario key (`material.mu`, ...).
+    /// Checks that the material is physical and within the documented ranges: all finite, the shear
+    /// modulus μ from [`MIN_SHEAR_MODULUS_PA`] to [`MAX_MODULUS_PA`], |λ| at most [`MAX_MODULUS_PA`]
+    /// with a positive bulk modulus λ + 2μ/3 (so Poisson's ratio lies in (−1, 0.5)), the density
+    /// from [`MIN_DENSITY`] to [`MAX_DENSITY`]. Errors name the scenario key (`material.mu`, ...)
+    /// and the allowed range.
     pub fn validate(&self) -> Result<(), SimError> {
         let bad = |key: &str, msg: String| Err(SimError::Invalid { key: key.to_owned(), message: msg });
         for (key, v) in [("material.lambda", self.lambda), ("material.mu", self.mu), ("material.density", self.density)]
@@ -53,21 +56,52 @@ impl Material {
                 return bad(key, format!("{v} is not a finite number"));
             }
         }
-        if self.mu <= 0.0 {
-            return bad("material.mu", format!("the shear modulus must be positive, got {}", self.mu));
+        if !(MIN_SHEAR_MODULUS_PA..=MAX_MODULUS_PA).contains(&self.mu) {
+            return bad(
+                "material.mu",
+                format!(
+                    "the shear modulus must lie in [{MIN_SHEAR_MODULUS_PA}, {MAX_MODULUS_PA:e}] Pa, got {}",
+                    self.mu
+                ),
+            );
+        }
+        if self.lambda.abs() > MAX_MODULUS_PA {
+            return bad(
+                "material.lambda",
+                format!("must lie in [-{MAX_MODULUS_PA:e}, {MAX_MODULUS_PA:e}] Pa, got {}", self.lambda),
+            );
         }
         if self.lambda + 2.0 * self.mu / 3.0 <= 0.0 {
             return bad(
                 "material.lambda",
-                format!("the bulk modulus λ + 2μ/3 must be positive, got λ = {}", self.lambda),
+                format!(
+                    "the bulk modulus λ + 2μ/3 must be positive (λ > {} Pa for μ = {} Pa), got λ = {}",
+                    -2.0 * self.mu / 3.0,
+                    self.mu,
+                    self.lambda
+                ),
             );
         }
-        if self.density <= 0.0 {
-            return bad("material.density", format!("must be positive, got {}", self.density));
+        if !(MIN_DENSITY..=MAX_DENSITY).contains(&self.density) {
+            return bad(
+                "material.density",
+                format!("must lie in [{MIN_DENSITY}, {MAX_DENSITY:e}] kg/m³, got {}", self.density),
+            );
         }
         Ok(())
     }
 }
+
+/// Smallest shear modulus μ accepted, pascals (softer than any tissue; a softer body's stable step
+/// and sag leave the ranges the simulator is checked in).
+pub const MIN_SHEAR_MODULUS_PA: f64 = 1.0;
+/// Largest μ and |λ| accepted, pascals (1 TPa, above any solid's shear modulus): TLED's stresses
+/// and forces are `f32`.
+pub const MAX_MODULUS_PA: f64 = 1e12;
+/// Smallest density accepted, kg/m³ (about air's).
+pub const MIN_DENSITY: f64 = 1.0;
+/// Largest density accepted, kg/m³ (over four times osmium's): node masses stay well inside `f32`.
+pub const MAX_DENSITY: f64 = 1e5;
 
 /// First Piola–Kirchhoff stress `P = F S` of the neo-Hookean material for a deformation gradient
 /// with `det F > 0`.
@@ -145,5 +179,9 @@ mod tests {
         assert!(e.to_string().contains("material.mu"));
         let e = Material { lambda: -20_000.0, ..Material::default() }.validate().expect_err("bulk");
         assert!(e.to_string().contains("material.lambda"));
+        let e = Material { density: 1e308, ..Material::default() }.validate().expect_err("too dense");
+        assert!(e.to_string().contains("material.density"), "{e}");
+        let e = Material { lambda: 1e300, mu: 1e300, ..Material::default() }.validate().expect_err("too stiff");
+        assert!(e.to_string().contains("material.mu"), "{e}");
     }
 }

@@ -31,6 +31,10 @@ use crate::simulation::NodeRole;
 use crate::vna::CutTopology;
 use crate::{CELL_EDGES, SimError};
 
+/// Most TLED steps per FLSM step: the limit of `hybrid.substeps` and of the FLSM step
+/// [`match_flsm`] matches to the material (a longer one would be softer than the material anyway).
+pub const MAX_SUBSTEPS: usize = 1000;
+
 /// Settings of the hybrid model in a [`crate::CutSim`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct HybridParams {
@@ -41,7 +45,8 @@ pub struct HybridParams {
     pub flsm: FlsmParams,
     /// Interface pull toward the FLSM goal, N/m; `None`: `2.5 E × cell` ([`HybridParams::resolve`]).
     pub beta: Option<f32>,
-    /// TLED steps per FLSM step; `None`: matched to the material ([`HybridParams::resolve`]).
+    /// TLED steps per FLSM step, 1 to [`MAX_SUBSTEPS`]; `None`: matched to the material
+    /// ([`HybridParams::resolve`]).
     pub substeps: Option<usize>,
     /// A TLED cell returns to FLSM only when all its nodes are slower than this, m/s.
     pub rest_speed: f32,
@@ -66,8 +71,10 @@ impl HybridParams {
         {
             return invalid("hybrid.beta", format!("must be >= 0, got {beta}"));
         }
-        if self.substeps == Some(0) {
-            return invalid("hybrid.substeps", "must be at least 1".into());
+        if let Some(n) = self.substeps
+            && !(1..=MAX_SUBSTEPS).contains(&n)
+        {
+            return invalid("hybrid.substeps", format!("must be 1 to {MAX_SUBSTEPS} TLED steps, got {n}"));
         }
         if !(self.rest_speed.is_finite() && self.rest_speed >= 0.0) {
             return invalid("hybrid.rest_speed", format!("must be >= 0 m/s, got {}", self.rest_speed));
@@ -118,7 +125,8 @@ impl HybridParams {
 /// - else the longest FLSM step within the match at `α = 1`, and `α` set to match the material at
 ///   it.
 ///
-/// `beta`, when not given, is `2.5 E cell`.
+/// A matched FLSM step is at most [`MAX_SUBSTEPS`] TLED steps (with `α` matched to that step when
+/// `alpha` is not given). `beta`, when not given, is `2.5 E cell`.
 pub fn match_flsm(
     dt: f64,
     cell: f64,
@@ -133,15 +141,18 @@ pub fn match_flsm(
     let h_match = |alpha: f64| FLSM_MATCH * cell * (alpha * material.density / young).sqrt();
     match (given, alpha) {
         (Some((substeps, alpha)), _) => HybridSteps { substeps, alpha, beta },
-        (None, Some(alpha)) => {
-            HybridSteps { substeps: (h_match(f64::from(alpha)) / dt).floor().max(1.0) as usize, alpha, beta }
-        }
+        (None, Some(alpha)) => HybridSteps { substeps: whole_steps(h_match(f64::from(alpha)) / dt), alpha, beta },
         (None, None) => {
-            let substeps = (h_match(1.0) / dt).floor().max(1.0) as usize;
+            let substeps = whole_steps(h_match(1.0) / dt);
             let alpha = ((substeps as f64 * dt / h_match(1.0)).powi(2)).min(1.0) as f32;
             HybridSteps { substeps, alpha, beta }
         }
     }
+}
+
+/// The whole number of TLED steps within `ratio` of them, 1 to [`MAX_SUBSTEPS`] (1 for NaN).
+fn whole_steps(ratio: f64) -> usize {
+    ratio.floor().max(1.0).min(MAX_SUBSTEPS as f64) as usize
 }
 
 /// The constant `C` of [`HybridParams::resolve`].

@@ -1,11 +1,60 @@
 //! The simulation scenario file (TOML; DESIGN.md "Simulation scenario file", extended as documented
 //! in docs/scenario.md). Unknown keys are errors.
+//!
+//! Every value is checked where it is read ([`Scenario::parse`] runs [`Scenario::validate`]): numbers
+//! must be finite and inside the ranges the constants of this module document, and lists and the
+//! lattice the body makes are bounded, so that no file makes the simulator allocate or loop without
+//! limit. Errors name the file, the key and the allowed range.
 
+use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
 use crate::SimError;
+
+/// Largest scenario file read, bytes.
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
+/// Smallest lattice spacing `body.cell`, metres.
+pub const MIN_CELL_M: f64 = 1e-5;
+/// Largest lattice spacing `body.cell`, metres.
+pub const MAX_CELL_M: f64 = 10.0;
+/// Largest box edge `body.size`, metres.
+pub const MAX_SIZE_M: f64 = 1e3;
+/// Largest mesh scale `body.scale`.
+pub const MAX_SCALE: f64 = 1e6;
+/// Most lattice cells a body may make (the grid of `body.size` or the organ at `body.cell`; a mesh's
+/// grid is checked when it is voxelized). Also the voxelizer's limit in [`crate::Simulation`].
+pub const MAX_LATTICE_CELLS: usize = 20_000_000;
+/// Largest magnitude of a position or displacement component (probes, boxes, the operational centre
+/// and radius, prescribed displacements), metres.
+pub const MAX_POSITION_M: f64 = 1e6;
+/// Largest hourglass coefficient `tled.hourglass` (typical values are 0.05 to 0.15).
+pub const MAX_HOURGLASS: f64 = 1.0;
+/// Largest interface pull `hybrid.beta`, N/m.
+pub const MAX_BETA: f64 = 1e12;
+/// Longest simulated time `run.duration` (and `report.interval`, `[[boundary]] ramp`), seconds.
+pub const MAX_DURATION_S: f64 = 1e4;
+/// Smallest time step, seconds: `run.dt` when given, and the step `dt = "auto"` computes.
+pub const MIN_DT: f64 = 1e-9;
+/// Largest time step `run.dt`, seconds.
+pub const MAX_DT: f64 = 1.0;
+/// Smallest share of the critical step `run.safety` (largest: 1).
+pub const MIN_SAFETY: f64 = 0.01;
+/// Largest mass-proportional damping `run.damping`, 1/s.
+pub const MAX_DAMPING: f64 = 1e6;
+/// Largest magnitude of a gravity component `run.gravity`, m/s² (a thousand g).
+pub const MAX_GRAVITY: f64 = 1e4;
+/// Largest magnitude of a load's force component, newtons.
+pub const MAX_FORCE_N: f64 = 1e9;
+/// Most `[[boundary]]` entries.
+pub const MAX_BOUNDARIES: usize = 256;
+/// Most `[[load]]` entries.
+pub const MAX_LOADS: usize = 256;
+/// Most faces in `report.reaction` (one bit each in a node's reaction groups).
+pub const MAX_REACTIONS: usize = 32;
+/// Most points in `report.probes`.
+pub const MAX_PROBES: usize = 1000;
 
 /// A whole scenario.
 #[derive(Debug, Clone, Deserialize)]
@@ -108,7 +157,7 @@ impl Default for TledSpec {
 #[derive(Debug, Clone, Copy, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FlsmSpec {
-    /// Region half-width, cells.
+    /// Region half-width, cells, 1 to [`crate::flsm::MAX_W`].
     #[serde(default = "w_default")]
     pub w: usize,
     /// Goal stiffness; default: matched to the material with the FLSM step (see
@@ -145,7 +194,8 @@ pub struct HybridSpec {
     pub operational: Option<OperationalSpec>,
     /// Interface pull, N/m; default `2.5 E cell` (see [`crate::match_flsm`]).
     pub beta: Option<f64>,
-    /// TLED steps per FLSM step; default: the FLSM step matched to the material.
+    /// TLED steps per FLSM step, 1 to [`crate::MAX_SUBSTEPS`]; default: the FLSM step matched to
+    /// the material.
     pub substeps: Option<usize>,
 }
 
@@ -202,10 +252,10 @@ pub struct RunSpec {
     /// Simulated time, seconds.
     #[serde(default = "duration_default")]
     pub duration: f64,
-    /// `"auto"` or seconds.
+    /// `"auto"` or seconds, [`MIN_DT`] to [`MAX_DT`].
     #[serde(default)]
     pub dt: DtSpec,
-    /// Share of the computed critical step used by `dt = "auto"`.
+    /// Share of the computed critical step used by `dt = "auto"`, [`MIN_SAFETY`] to 1.
     #[serde(default = "safety_default")]
     pub safety: f64,
     /// Mass-proportional damping, 1/s.
@@ -288,17 +338,32 @@ pub struct ReportSpec {
 }
 
 impl Scenario {
-    /// Parses scenario text; `file` names it in errors.
+    /// Parses scenario text and checks every value ([`Scenario::validate`]); `file` names it in
+    /// errors.
     pub fn parse(text: &str, file: &str) -> Result<Self, SimError> {
-        toml::from_str(text)
-            .map_err(|e| SimError::Scenario { file: file.to_owned(), message: e.to_string().trim_end().to_owned() })
+        let s: Self = toml::from_str(text)
+            .map_err(|e| SimError::Scenario { file: file.to_owned(), message: e.to_string().trim_end().to_owned() })?;
+        s.validate().map_err(|e| SimError::Scenario { file: file.to_owned(), message: e.to_string() })?;
+        Ok(s)
     }
 
-    /// Reads a scenario file; relative mesh paths are resolved against its folder.
+    /// Reads a scenario file (at most [`MAX_SCENARIO_BYTES`]); relative mesh paths are resolved
+    /// against its folder.
     pub fn load(path: &Path) -> Result<Self, SimError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| SimError::Scenario { file: file.clone(), message: e.to_string() })?;
+        let read_error = |e: std::io::Error| SimError::Scenario { file: file.clone(), message: e.to_string() };
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .map_err(read_error)?
+            .take(MAX_SCENARIO_BYTES + 1)
+            .read_to_string(&mut text)
+            .map_err(read_error)?;
+        if text.len() as u64 > MAX_SCENARIO_BYTES {
+            return Err(SimError::Scenario {
+                file,
+                message: format!("larger than {MAX_SCENARIO_BYTES} bytes: not a scenario file"),
+            });
+        }
         let mut s = Self::parse(&text, &file)?;
         if let (Some(mesh), Some(dir)) = (&s.body.mesh, path.parent())
             && mesh.is_relative()
@@ -315,6 +380,191 @@ impl Scenario {
             DtSpec::Auto | DtSpec::Text(_) => None,
         }
     }
+
+    /// Checks every value against its documented range (the constants of this module,
+    /// [`crate::Material::validate`], [`crate::flsm::MAX_W`]): numbers finite, lists and the body's
+    /// lattice bounded. The error names the key and the allowed range. [`Scenario::parse`] and
+    /// [`crate::Simulation::from_scenario`] run it; what needs the lattice (faces that select no
+    /// node, contradicting constraints) is checked when the simulation is built.
+    pub fn validate(&self) -> Result<(), SimError> {
+        self.validate_body()?;
+        let m = &self.material;
+        crate::Material { lambda: m.lambda, mu: m.mu, density: m.density }.validate()?;
+        let t = &self.tled;
+        if !matches!(t.integration.as_str(), "one-point" | "gauss8") {
+            return Err(invalid(
+                "tled.integration",
+                format!("unknown `{}` (expected \"one-point\" or \"gauss8\")", t.integration),
+            ));
+        }
+        in_range("tled.hourglass", f64::from(t.hourglass), 0.0, MAX_HOURGLASS, "")?;
+        let f = &self.flsm;
+        if !(1..=crate::flsm::MAX_W).contains(&f.w) {
+            return Err(invalid("flsm.w", format!("must be 1 to {} cells, got {}", crate::flsm::MAX_W, f.w)));
+        }
+        if let Some(alpha) = f.alpha
+            && !(alpha.is_finite() && alpha > 0.0 && alpha <= 1.0)
+        {
+            return Err(invalid("flsm.alpha", format!("must lie in (0, 1], got {alpha}")));
+        }
+        in_range("flsm.region_damping", f64::from(f.region_damping), 0.0, 1.0, "")?;
+        self.validate_hybrid()?;
+        self.validate_constraints()?;
+        self.validate_run()?;
+        self.validate_report()
+    }
+
+    fn validate_body(&self) -> Result<(), SimError> {
+        let b = &self.body;
+        in_range("body.cell", b.cell, MIN_CELL_M, MAX_CELL_M, " m")?;
+        if let Some(size) = b.size {
+            for x in size {
+                positive("body.size", x, MAX_SIZE_M, " m")?;
+            }
+        }
+        positive("body.scale", b.scale, MAX_SCALE, "")?;
+        // The grid the voxelizer will make for a box or the organ (a mesh's is checked when it is
+        // read), estimated before anything is allocated.
+        let extent = match (b.shape.as_deref(), b.size, &b.mesh) {
+            (Some("box"), Some(size), None) => Some(size),
+            (Some("organ"), _, None) => {
+                let (lo, hi) = crate::Body::Organ.bounds();
+                Some([hi.x - lo.x, hi.y - lo.y, hi.z - lo.z])
+            }
+            _ => None,
+        };
+        if let Some(extent) = extent {
+            let cells: f64 = extent.iter().map(|e| (e / b.cell).ceil().max(1.0)).product();
+            if !(cells.is_finite() && cells <= MAX_LATTICE_CELLS as f64) {
+                return Err(invalid(
+                    "body.cell",
+                    format!(
+                        "a lattice of {} m cells over {extent:?} m has about {cells:.3e} cells, above the limit of \
+                         {MAX_LATTICE_CELLS} (give a larger cell or a smaller body)",
+                        b.cell
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_hybrid(&self) -> Result<(), SimError> {
+        let h = &self.hybrid;
+        in_range("hybrid.ratio", h.ratio, 0.0, 1.0, "")?;
+        if let Some(o) = &h.operational {
+            position("hybrid.operational.center", &o.center)?;
+            if let Some(radius) = o.radius {
+                in_range("hybrid.operational.radius", radius, 0.0, MAX_POSITION_M, " m")?;
+            }
+        }
+        if let Some(beta) = h.beta {
+            in_range("hybrid.beta", beta, 0.0, MAX_BETA, " N/m")?;
+        }
+        if let Some(n) = h.substeps
+            && !(1..=crate::MAX_SUBSTEPS).contains(&n)
+        {
+            return Err(invalid(
+                "hybrid.substeps",
+                format!("must be 1 to {} TLED steps, got {n}", crate::MAX_SUBSTEPS),
+            ));
+        }
+        Ok(())
+    }
+
+    fn validate_constraints(&self) -> Result<(), SimError> {
+        count("boundary", self.boundary.len(), MAX_BOUNDARIES)?;
+        for (i, b) in self.boundary.iter().enumerate() {
+            count(&format!("boundary[{i}].faces"), b.faces.len(), 6)?;
+            count(&format!("boundary[{i}].fix"), b.fix.len(), 3)?;
+            if let Some(r) = &b.region {
+                region(&format!("boundary[{i}].box"), r)?;
+            }
+            if let Some(d) = &b.displace {
+                position(&format!("boundary[{i}].displace"), d)?;
+            }
+            in_range(&format!("boundary[{i}].ramp"), b.ramp, 0.0, MAX_DURATION_S, " s")?;
+        }
+        count("load", self.load.len(), MAX_LOADS)?;
+        for (i, l) in self.load.iter().enumerate() {
+            region(&format!("load[{i}].box"), &l.region)?;
+            bounded3(&format!("load[{i}].force"), &l.force, MAX_FORCE_N, " N")?;
+        }
+        Ok(())
+    }
+
+    fn validate_run(&self) -> Result<(), SimError> {
+        let r = &self.run;
+        positive("run.duration", r.duration, MAX_DURATION_S, " s")?;
+        if let Some(dt) = self.dt() {
+            in_range("run.dt", dt, MIN_DT, MAX_DT, " s")?;
+        }
+        in_range("run.safety", r.safety, MIN_SAFETY, 1.0, "")?;
+        in_range("run.damping", r.damping, 0.0, MAX_DAMPING, " 1/s")?;
+        bounded3("run.gravity", &r.gravity, MAX_GRAVITY, " m/s²")
+    }
+
+    fn validate_report(&self) -> Result<(), SimError> {
+        let r = &self.report;
+        count("report.reaction", r.reaction.len(), MAX_REACTIONS)?;
+        count("report.probes", r.probes.len(), MAX_PROBES)?;
+        for (i, p) in r.probes.iter().enumerate() {
+            position(&format!("report.probes[{i}]"), p)?;
+        }
+        in_range("report.interval", r.interval, 0.0, MAX_DURATION_S, " s")
+    }
+}
+
+fn invalid(key: &str, message: String) -> SimError {
+    SimError::Invalid { key: key.to_owned(), message }
+}
+
+/// A number as the messages write it: plain for everyday magnitudes, else in exponent form.
+fn num(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) { format!("{x}") } else { format!("{x:e}") }
+}
+
+/// `value` is finite and in `[min, max]`.
+fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), SimError> {
+    if value.is_finite() && (min..=max).contains(&value) {
+        return Ok(());
+    }
+    Err(invalid(key, format!("must be a finite number in [{}, {}]{unit}, got {}", num(min), num(max), num(value))))
+}
+
+/// `value` is finite and in `(0, max]`.
+fn positive(key: &str, value: f64, max: f64, unit: &str) -> Result<(), SimError> {
+    if value.is_finite() && value > 0.0 && value <= max {
+        return Ok(());
+    }
+    Err(invalid(key, format!("must be a finite number in (0, {}]{unit}, got {}", num(max), num(value))))
+}
+
+/// Every component finite and at most `max` in magnitude.
+fn bounded3(key: &str, v: &[f64; 3], max: f64, unit: &str) -> Result<(), SimError> {
+    if v.iter().all(|x| x.is_finite() && x.abs() <= max) {
+        return Ok(());
+    }
+    Err(invalid(key, format!("must be three finite numbers within ±{}{unit}, got {v:?}", num(max))))
+}
+
+/// A point or displacement: components finite and within [`MAX_POSITION_M`].
+fn position(key: &str, p: &[f64; 3]) -> Result<(), SimError> {
+    bounded3(key, p, MAX_POSITION_M, " m")
+}
+
+/// A box: both corners are positions (`key.min`, `key.max`).
+fn region(key: &str, b: &BoxSpec) -> Result<(), SimError> {
+    position(&format!("{key}.min"), &b.min)?;
+    position(&format!("{key}.max"), &b.max)
+}
+
+/// A list of at most `max` entries.
+fn count(key: &str, n: usize, max: usize) -> Result<(), SimError> {
+    if n <= max {
+        return Ok(());
+    }
+    Err(invalid(key, format!("at most {max} entries, got {n}")))
 }
 
 #[cfg(test)]

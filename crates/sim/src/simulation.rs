@@ -8,7 +8,7 @@ use crate::embed::Embedding;
 use crate::flsm::{Flsm, FlsmParams};
 use crate::mesh::TriMesh;
 use crate::operational::HybridSteps;
-use crate::scenario::{BoxSpec, Scenario};
+use crate::scenario::{BoxSpec, MAX_LATTICE_CELLS, MIN_DT, Scenario};
 use crate::stability::{self, StabilityLimit};
 use crate::tled::{Integration, Tled, TledParams};
 use crate::{Lattice, Material, SimError};
@@ -37,6 +37,11 @@ impl NodeRole {
         }
     }
 }
+
+/// Most TLED steps a scenario's run may take: [`Simulation::from_scenario`] refuses a `run.duration`
+/// that needs more ([`Simulation::advances_for`]), so that a tiny time step cannot make a run go on
+/// for days.
+pub const MAX_STEPS: u64 = 10_000_000;
 
 /// Power-iteration budget for the stability estimate.
 const STABILITY_ITERATIONS: usize = 300;
@@ -134,9 +139,11 @@ fn box_nodes(lattice: &Lattice, b: &BoxSpec) -> Vec<u32> {
         .collect()
 }
 
-/// The lattice of a scenario's body, with any warnings, and the body's surface mesh.
+/// The lattice of a scenario's body, with any warnings, and the body's surface mesh. Grids of more
+/// than [`MAX_LATTICE_CELLS`] cells are refused before they are allocated.
 pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), SimError> {
     let b = &s.body;
+    let params = crate::body::VoxelizeParams { max_cells: MAX_LATTICE_CELLS, ..Default::default() };
     if !(b.cell.is_finite() && b.cell > 0.0) {
         return Err(invalid("body.cell", format!("must be a positive length in metres, got {}", b.cell)));
     }
@@ -147,12 +154,11 @@ pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), Si
                 return Err(invalid("body.size", format!("must be positive, got {size:?}")));
             }
             let body = crate::body::Body::Box { size: Vector3::from(size) };
-            let vox = crate::body::voxelize(&body, b.cell, &crate::body::VoxelizeParams::default())
-                .map_err(|e| invalid("body", e.to_string()))?;
+            let vox = crate::body::voxelize(&body, b.cell, &params).map_err(|e| invalid("body", e.to_string()))?;
             Ok((vox.lattice, vox.warnings, body.surface()))
         }
         (Some("organ"), None) => {
-            let vox = crate::body::voxelize(&crate::body::Body::Organ, b.cell, &crate::body::VoxelizeParams::default())
+            let vox = crate::body::voxelize(&crate::body::Body::Organ, b.cell, &params)
                 .map_err(|e| invalid("body", e.to_string()))?;
             Ok((vox.lattice, vox.warnings, crate::body::Body::Organ.surface()))
         }
@@ -161,8 +167,7 @@ pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), Si
                 return Err(invalid("body.scale", format!("must be a positive factor, got {}", b.scale)));
             }
             let body = crate::body::Body::load_mesh(path, b.scale).map_err(|e| invalid("body.mesh", e.to_string()))?;
-            let vox = crate::body::voxelize(&body, b.cell, &crate::body::VoxelizeParams::default())
-                .map_err(|e| invalid("body.mesh", e.to_string()))?;
+            let vox = crate::body::voxelize(&body, b.cell, &params).map_err(|e| invalid("body.mesh", e.to_string()))?;
             Ok((vox.lattice, vox.warnings, body.surface()))
         }
         (Some(other), None) => Err(invalid(
@@ -223,8 +228,11 @@ fn tled_cells(lattice: &Lattice, s: &Scenario) -> Result<Vec<usize>, SimError> {
 }
 
 impl Simulation {
-    /// Builds the simulation a scenario describes.
+    /// Builds the simulation a scenario describes. The scenario is checked first
+    /// ([`Scenario::validate`]); a stable step that cannot be computed (not finite and positive, or
+    /// below [`MIN_DT`]) and a run of more than [`MAX_STEPS`] TLED steps are errors naming the key.
     pub fn from_scenario(s: &Scenario) -> Result<Self, SimError> {
+        s.validate()?;
         let (lattice, mut warnings, surface) = build_lattice(s)?;
         let embedding = Embedding::new(&lattice, &surface.vertices).map_err(|e| invalid("body", e.to_string()))?;
         if embedding.clamped > 0 {
@@ -310,10 +318,7 @@ impl Simulation {
                 }
             }
         }
-        // Reaction groups.
-        if s.report.reaction.len() > 32 {
-            return Err(invalid("report.reaction", format!("at most 32 faces, got {}", s.report.reaction.len())));
-        }
+        // Reaction groups: one bit each (at most `MAX_REACTIONS`, checked by `validate`).
         let mut group_of = vec![0u32; 3 * n];
         for (gi, face) in s.report.reaction.iter().enumerate() {
             for node in face_nodes(&lattice, face, "report.reaction")? {
@@ -389,26 +394,20 @@ impl Simulation {
             f
         };
         let zeros = vec![Vector3::zeros(); n];
-        let mut stability = if cells.is_empty() {
-            let mut all = Tled::new(&lattice, None, &material, params)?;
-            stability::estimate(&mut all, &mass, &free, &zeros, lattice.cell, STABILITY_ITERATIONS, STABILITY_TOLERANCE)
-        } else {
-            stability::estimate(
-                &mut tled,
-                &mass,
-                &free,
-                &zeros,
-                lattice.cell,
-                STABILITY_ITERATIONS,
-                STABILITY_TOLERANCE,
-            )
+        // The TLED part, or an all-TLED model when FLSM does everything.
+        let mut all_tled = if cells.is_empty() { Some(Tled::new(&lattice, None, &material, params)?) } else { None };
+        let model = match all_tled.as_mut() {
+            Some(all) => all,
+            None => &mut tled,
         };
+        let mut stability =
+            stability::estimate(model, &mass, &free, &zeros, lattice.cell, STABILITY_ITERATIONS, STABILITY_TOLERANCE);
         if !stability.dt_critical.is_finite() {
             // Every component is prescribed: nothing can vibrate, so any step is stable. Step at the
             // free body's limit anyway, so the prescribed ramps are followed finely.
             let all_free = vec![[true; 3]; n];
             stability = stability::estimate(
-                &mut tled,
+                model,
                 &mass,
                 &all_free,
                 &zeros,
@@ -417,13 +416,34 @@ impl Simulation {
                 STABILITY_TOLERANCE,
             );
         }
-        let dt_wave = lattice.cell / material.wave_speed();
-        if !(s.run.safety > 0.0 && s.run.safety <= 1.0) {
-            return Err(invalid("run.safety", format!("must lie in (0, 1], got {}", s.run.safety)));
+        if !(stability.dt_critical.is_finite() && stability.dt_critical > 0.0) {
+            return Err(invalid(
+                "material",
+                format!(
+                    "the stable time step could not be computed (ω_max = {} rad/s, critical step {} s): check \
+                     material.lambda, material.mu and material.density against body.cell = {} m",
+                    stability.omega_max, stability.dt_critical, lattice.cell
+                ),
+            ));
         }
+        let dt_wave = lattice.cell / material.wave_speed();
         let (dt, dt_above_critical) = match s.dt() {
-            None => (s.run.safety * stability.dt_critical, false),
-            Some(dt) if dt > 0.0 && dt.is_finite() => {
+            None => {
+                let dt = s.run.safety * stability.dt_critical;
+                if !(dt.is_finite() && dt >= MIN_DT) {
+                    return Err(invalid(
+                        "material",
+                        format!(
+                            "the stable step run.safety × {:e} s = {dt:e} s is below the smallest time step \
+                             {MIN_DT:e} s: material.lambda and material.mu are too stiff, or material.density \
+                             too low, for body.cell = {} m",
+                            stability.dt_critical, lattice.cell
+                        ),
+                    ));
+                }
+                (dt, false)
+            }
+            Some(dt) => {
                 let above = dt > stability.dt_critical;
                 if above {
                     warnings.push(format!(
@@ -433,34 +453,12 @@ impl Simulation {
                 }
                 (dt, above)
             }
-            Some(dt) => {
-                return Err(invalid("run.dt", format!("must be \"auto\" or a positive number of seconds, got {dt}")));
-            }
         };
-        if !(s.run.damping.is_finite() && s.run.damping >= 0.0) {
-            return Err(invalid("run.damping", format!("must be >= 0, got {}", s.run.damping)));
-        }
-        if !(s.run.duration.is_finite() && s.run.duration > 0.0) {
-            return Err(invalid("run.duration", format!("must be positive, got {}", s.run.duration)));
-        }
         let speed_limit = 10.0 * material.wave_speed() as f32;
         let integrator =
             Integrator::new(mass, prescribed, s.report.reaction.len(), s.run.damping as f32, dt as f32, speed_limit);
 
         let flsm = if roles.iter().any(|&r| r != NodeRole::Tled) && cells.len() < lattice.cells.len() {
-            if let Some(beta) = s.hybrid.beta
-                && !(beta.is_finite() && beta >= 0.0)
-            {
-                return Err(invalid("hybrid.beta", format!("must be >= 0, got {beta}")));
-            }
-            if s.hybrid.substeps == Some(0) {
-                return Err(invalid("hybrid.substeps", "must be at least 1"));
-            }
-            if let Some(alpha) = s.flsm.alpha
-                && !(alpha > 0.0 && alpha <= 1.0)
-            {
-                return Err(invalid("flsm.alpha", format!("must be in (0, 1], got {alpha}")));
-            }
             let given = s.hybrid.substeps.map(|n| (n, s.flsm.alpha.unwrap_or(crate::scenario::ALPHA_DEFAULT)));
             let steps =
                 crate::match_flsm(dt, lattice.cell, &material, given, s.flsm.alpha, s.hybrid.beta.map(|b| b as f32));
@@ -489,7 +487,7 @@ impl Simulation {
         }
         let probes = s.report.probes.iter().map(|p| (*p, lattice.locate(&Point3::from(*p)))).collect();
         let rest = lattice.rest.iter().map(|p| p.coords.cast::<f32>()).collect();
-        Ok(Self {
+        let sim = Self {
             material,
             roles,
             integrator,
@@ -511,7 +509,37 @@ impl Simulation {
             #[cfg(feature = "gpu")]
             gpu: None,
             lattice,
-        })
+        };
+        sim.advances_for(s.run.duration)?;
+        Ok(sim)
+    }
+
+    /// Calls of [`Simulation::advance`] that cover `duration` seconds of simulated time (the last
+    /// may overshoot it by less than one call). An error names `run.duration` when `duration` is
+    /// not a positive finite number or when the run would take more than [`MAX_STEPS`] TLED steps.
+    pub fn advances_for(&self, duration: f64) -> Result<u64, SimError> {
+        if !(duration.is_finite() && duration > 0.0) {
+            return Err(invalid("run.duration", format!("must be a positive number of seconds, got {duration}")));
+        }
+        let dt = self.dt();
+        let substeps = self.steps_per_advance().max(1) as f64;
+        let per_advance = dt * substeps;
+        if !(per_advance.is_finite() && per_advance > 0.0) {
+            return Err(invalid("run.dt", format!("the time step {dt:e} s is not a positive number of seconds")));
+        }
+        let advances = (duration / per_advance).ceil().max(1.0);
+        let steps = advances * substeps;
+        if !(steps.is_finite() && steps <= MAX_STEPS as f64) {
+            return Err(invalid(
+                "run.duration",
+                format!(
+                    "{duration} s at a time step of {dt:e} s is {steps:.3e} TLED steps, above the limit of \
+                     {MAX_STEPS}: shorten run.duration, or lengthen the step (run.dt; with dt = \"auto\", a \
+                     coarser body.cell or a softer or denser material)"
+                ),
+            ));
+        }
+        Ok(advances as u64)
     }
 
     /// Time step, seconds.

@@ -18,6 +18,9 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// scenario's hybrid split says, FLSM elsewhere. The time step is computed from the highest
 /// eigenfrequency of the lattice (power iteration) unless the scenario gives one. A run that
 /// diverges stops, is reported as unstable with the step it failed at, and exits with status 1.
+/// Every value in the scenario is checked against its documented range before anything is built
+/// (docs/scenario.md), a run of more than 10 million TLED steps is refused, and a run whose figures
+/// are not all finite writes no report and exits with status 1, naming the figure.
 ///
 /// Writes: REPORT (JSON, docs/reports.md: reactions, probe displacements, kinetic energy, dt and
 /// critical dt, stability, timings) with --report; an .rrd recording (lattice nodes coloured by
@@ -164,17 +167,19 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let duration = scenario.run.duration;
+    // At most MAX_STEPS TLED steps (checked here and when the simulation was built).
+    let advances = sim.advances_for(scenario.run.duration).with_context(|| args.scenario.display().to_string())?;
     let per_advance = sim.dt() * sim.steps_per_advance() as f64;
-    let advances = (duration / per_advance).ceil() as u64;
-    // Log at ~60 Hz of simulated time (or the scenario's interval).
+    // Log at ~60 Hz of simulated time (or the scenario's interval); the float-to-integer cast
+    // saturates, and the stride is at least one advance.
     let log_every = if scenario.report.interval > 0.0 { scenario.report.interval } else { 1.0 / 60.0 };
     let log_stride = ((log_every / per_advance).round() as u64).max(1);
     // The CPU steps one advance per call (so the report's step times are per step); the GPU runs
     // a log interval's advances per submission and is read back only then.
     let chunk = if args.backend == Backend::Gpu { log_stride } else { 1 };
     let pb = bar(advances, "simulating");
-    let mut step_times = Vec::with_capacity(advances.div_ceil(chunk) as usize);
+    // Grown as the steps run, never sized from the scenario's numbers up front.
+    let mut step_times = Vec::new();
     let mut failure = None;
     let t_run = Instant::now();
     // The loop runs on a rayon worker: each step's parallel passes then start on the stepping
@@ -185,7 +190,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let n = chunk.min(advances - done);
             let t = Instant::now();
             let r = sim.advance_by(n);
-            let per_advance = t.elapsed() / n as u32;
+            let per_advance = t.elapsed() / u32::try_from(n).unwrap_or(u32::MAX).max(1);
             step_times.push(per_advance);
             if let Err(d) = r {
                 failure = Some(d);
@@ -257,6 +262,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             total: StageTiming::from_durations(&[t0.elapsed()]),
         },
     };
+    if let Some(what) = first_non_finite(&report) {
+        let diverged = report
+            .failure
+            .as_ref()
+            .map(|f| format!(" (unstable from step {}: {}; {})", f.step, f.reason, instability_cause(&sim)))
+            .unwrap_or_default();
+        bail!("{}: {what} is not finite{diverged}; no report written", args.scenario.display());
+    }
     print_summary(&report);
     if let Some(path) = &args.report {
         write_json(path, &report)?;
@@ -267,9 +280,70 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     if let Some(f) = &report.failure {
         tracing::debug!(role = ?sim.roles[f.node], rest = ?sim.lattice.rest[f.node], "diverged node");
-        bail!("the simulation became unstable at step {} (t = {:.6} s): {}", f.step, f.time, f.reason);
+        bail!(
+            "{}: the simulation became unstable at step {} (t = {:.6} s): {}; {}",
+            args.scenario.display(),
+            f.step,
+            f.time,
+            f.reason,
+            instability_cause(&sim)
+        );
     }
     Ok(())
+}
+
+/// The scenario keys that most likely made a run diverge, for its error message.
+fn instability_cause(sim: &Simulation) -> String {
+    if sim.dt_above_critical {
+        format!(
+            "`run.dt` = {:e} s is above the computed critical step {:e} s (give a smaller `run.dt` or \"auto\")",
+            sim.dt(),
+            sim.stability.dt_critical
+        )
+    } else {
+        format!(
+            "the step {:e} s is within the computed limit {:e} s, so look at `run.safety`, `[material]`, \
+             `[[load]]` forces and `[[boundary]]` displacements",
+            sim.dt(),
+            sim.stability.dt_critical
+        )
+    }
+}
+
+/// The first figure of a report that is not a finite number (NaN or infinite), named by its report
+/// field, with its value; `None` when all are finite.
+fn first_non_finite(r: &Report) -> Option<String> {
+    let s = &r.stability;
+    let mut figures: Vec<(String, f64)> = vec![
+        ("stability.dt_s".into(), s.dt_s),
+        ("stability.dt_critical_s".into(), s.dt_critical_s),
+        ("stability.omega_max_rad_s".into(), s.omega_max_rad_s),
+        ("stability.l_over_c_s".into(), s.l_over_c_s),
+        ("stability.dt_critical_over_l_over_c".into(), s.dt_critical_over_l_over_c),
+        ("simulated_time_s".into(), r.simulated_time_s),
+        ("kinetic_energy_j".into(), r.kinetic_energy_j),
+        ("throughput.element_steps_per_s".into(), r.throughput.element_steps_per_s),
+        ("throughput.node_steps_per_s".into(), r.throughput.node_steps_per_s),
+        ("throughput.realtime_factor".into(), r.throughput.realtime_factor),
+        ("lattice.cell_m".into(), r.lattice.cell_m),
+    ];
+    if let Some(h) = &r.hybrid {
+        figures.push(("hybrid.alpha".into(), f64::from(h.alpha)));
+        figures.push(("hybrid.beta".into(), f64::from(h.beta)));
+    }
+    if let Some(ms) = r.gpu.and_then(|g| g.device_ms) {
+        figures.push(("gpu.device_ms".into(), ms));
+    }
+    for (i, x) in r.reactions.iter().enumerate() {
+        figures.extend(x.force_n.iter().map(|&f| (format!("reactions[{i}] ({}) force_n", x.face), f)));
+    }
+    for (i, p) in r.probes.iter().enumerate() {
+        figures.extend(p.at_m.iter().map(|&v| (format!("probes[{i}].at_m"), v)));
+        if let Some(d) = p.displacement_m {
+            figures.extend(d.iter().map(|&v| (format!("probes[{i}].displacement_m"), v)));
+        }
+    }
+    figures.into_iter().find(|(_, v)| !v.is_finite()).map(|(name, v)| format!("{name} = {v}"))
 }
 
 fn print_summary(r: &Report) {

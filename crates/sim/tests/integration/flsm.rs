@@ -289,6 +289,7 @@ fn parameter_errors_name_the_key() {
     let masses = lattice.lumped_masses(1000.0);
     for (params, key) in [
         (FlsmParams { w: 0, ..FlsmParams::default() }, "flsm.w"),
+        (FlsmParams { w: usize::MAX, ..FlsmParams::default() }, "flsm.w"),
         (FlsmParams { alpha: 0.0, ..FlsmParams::default() }, "flsm.alpha"),
         (FlsmParams { alpha: 1.5, ..FlsmParams::default() }, "flsm.alpha"),
         (FlsmParams { alpha: f32::NAN, ..FlsmParams::default() }, "flsm.alpha"),

@@ -3,4 +3,5 @@
 mod body;
 mod flsm;
 mod mechanics;
+mod scenario;
 mod tled;
