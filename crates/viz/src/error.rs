@@ -8,20 +8,20 @@ pub enum VizError {
     ApplicationId,
     /// The recording stream could not be created (file not creatable, viewer not spawnable,
     /// malformed or non-`/proxy` URL).
-    #[error("cannot open rerun recording ({sink}): {source}")]
+    #[error("cannot open rerun recording ({sink}): {error}")]
     Open {
         /// The sink, in words (e.g. `file out.rrd`, `connect rerun+http://127.0.0.1:9876/proxy`).
         sink: String,
-        /// rerun's error.
-        source: rerun::RecordingStreamError,
+        /// rerun's error (in the message, so not a `source`: said once).
+        error: rerun::RecordingStreamError,
     },
     /// Data could not be logged to an entity.
-    #[error("cannot log to rerun entity {entity}: {source}")]
+    #[error("cannot log to rerun entity {entity}: {error}")]
     Log {
         /// The entity path.
         entity: String,
-        /// rerun's error.
-        source: rerun::RecordingStreamError,
+        /// rerun's error (in the message, so not a `source`: said once).
+        error: rerun::RecordingStreamError,
     },
     /// An image buffer does not hold `width × height × channels` bytes.
     #[error("camera {camera}: {what} of {width}x{height} needs {expected} bytes, got {actual}")]
@@ -39,6 +39,14 @@ pub enum VizError {
         /// Bytes given.
         actual: u64,
     },
+    /// An `.rrd` file could not be created or its header written.
+    #[error("cannot create rerun recording {path}: {message}")]
+    Create {
+        /// The file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
     /// An `.rrd` file could not be read back.
     #[error("cannot read rerun recording {path}: {message}")]
     Read {
@@ -48,9 +56,10 @@ pub enum VizError {
         message: String,
     },
     /// Flushing the recording to its sink failed or timed out.
-    #[error("cannot flush rerun recording: {source}")]
+    #[error("cannot write rerun recording: {error}")]
     Flush {
-        /// rerun's error.
-        source: rerun::sink::SinkFlushError,
+        /// rerun's error, or the file's write error and what was kept (in the message, so not a
+        /// `source`: said once).
+        error: rerun::sink::SinkFlushError,
     },
 }

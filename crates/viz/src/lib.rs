@@ -19,6 +19,7 @@
 #![warn(missing_docs)]
 
 mod error;
+mod file_sink;
 mod log;
 mod read;
 mod recording;

@@ -34,7 +34,7 @@ pub fn image_entity_path(camera_name: &str) -> EntityPath {
 
 fn log_at(rec: &RecordingStream, entity: EntityPath, data: &impl AsComponents, static_: bool) -> Result<(), VizError> {
     rec.log_with_static(entity.clone(), static_, data)
-        .map_err(|source| VizError::Log { entity: entity.to_string(), source })
+        .map_err(|error| VizError::Log { entity: entity.to_string(), error })
 }
 
 fn check_size(

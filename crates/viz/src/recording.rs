@@ -7,6 +7,7 @@ use std::time::Duration;
 use rerun::{ApplicationId, RecordingStream, RecordingStreamBuilder};
 
 use crate::VizError;
+use crate::file_sink::CheckedFileSink;
 
 /// Name of the sequence timeline: the index of a synchronised multi-camera frame.
 pub const FRAME_TIMELINE: &str = "frame";
@@ -21,7 +22,8 @@ pub const FLUSH_TIMEOUT: Duration = Duration::from_secs(60);
 /// Where a recording goes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Sink {
-    /// Write an `.rrd` file (created or truncated when the recording opens).
+    /// Write an `.rrd` file (created or truncated when the recording opens). A failed write (a full
+    /// disk) cuts the file after the last whole message and is reported by [`flush`].
     File(PathBuf),
     /// Start a Rerun Viewer (the `rerun` executable must be on `PATH`) and stream to it; a viewer
     /// already listening on the default port is reused.
@@ -53,18 +55,27 @@ impl fmt::Display for Sink {
 pub fn open_recording(application_id: &str, sink: &Sink) -> Result<RecordingStream, VizError> {
     let id = ApplicationId::try_new(application_id).map_err(|_| VizError::ApplicationId)?;
     let builder = RecordingStreamBuilder::new(id).enabled(true);
-    let result = match sink {
-        Sink::File(path) => builder.save(path.clone()),
-        Sink::Spawn => builder.spawn(),
-        Sink::Connect(url) => builder.connect_grpc_opts(url.clone()),
-    };
-    result.map_err(|source| VizError::Open { sink: sink.to_string(), source })
+    let open = |error| VizError::Open { sink: sink.to_string(), error };
+    match sink {
+        Sink::File(path) => {
+            let file_sink = CheckedFileSink::create(path)?;
+            let rec = builder.buffered().map_err(open)?;
+            rec.set_sink(Box::new(file_sink));
+            Ok(rec)
+        }
+        Sink::Spawn => builder.spawn().map_err(open),
+        Sink::Connect(url) => builder.connect_grpc_opts(url.clone()).map_err(open),
+    }
 }
 
 /// Sends everything logged so far to the sink and waits (at most [`FLUSH_TIMEOUT`]) until it is
 /// there. Dropping the last handle to a recording flushes too, but cannot report an error.
+///
+/// For a file, an error names the write that failed (a full disk, a file-size limit), how many
+/// bytes of the recording were kept (the file is cut after the last whole message, so it reads
+/// back) and how many messages were dropped since.
 pub fn flush(rec: &RecordingStream) -> Result<(), VizError> {
-    rec.flush_with_timeout(FLUSH_TIMEOUT).map_err(|source| VizError::Flush { source })
+    rec.flush_with_timeout(FLUSH_TIMEOUT).map_err(|error| VizError::Flush { error })
 }
 
 /// Sets the `frame` timeline (a sequence) for everything this thread logs next.

@@ -132,8 +132,19 @@ mod file_sink {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("no_such_dir").join("x.rrd");
         let err = hullcut_viz::open_recording("hullcut_viz_test", &Sink::File(path)).expect_err("cannot create");
-        assert!(matches!(err, VizError::Open { .. }), "{err}");
+        assert!(matches!(err, VizError::Create { .. }), "{err}");
         assert!(err.to_string().contains("no_such_dir"), "{err}");
+    }
+
+    /// A disk that is full from the first byte: the header cannot be written, and opening says so
+    /// (rerun's own sink would start a writer thread that fails later, out of sight).
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_full_disk_at_open_is_an_error() {
+        let err = hullcut_viz::open_recording("hullcut_viz_test", &Sink::File("/dev/full".into()))
+            .expect_err("no space left on /dev/full");
+        assert!(matches!(err, VizError::Create { .. }), "{err}");
+        assert!(err.to_string().contains("/dev/full") && err.to_string().contains("header"), "{err}");
     }
 }
 
