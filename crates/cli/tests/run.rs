@@ -18,6 +18,20 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("JSON")
 }
 
+/// A CSV file read with the csv crate: its header and rows, every row as wide as the header.
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let header: Vec<String> = reader.headers().expect("a header").iter().map(str::to_owned).collect();
+    let rows: Vec<Vec<String>> = reader
+        .records()
+        .map(|r| r.unwrap_or_else(|e| panic!("{}: {e}", path.display())).iter().map(str::to_owned).collect())
+        .collect();
+    for (k, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), header.len(), "{} row {}: {row:?} under {header:?}", path.display(), k + 1);
+    }
+    (header, rows)
+}
+
 /// `hullcut run` on the shipped dataset at 1 cm cells with `extra` arguments, recording and
 /// reporting into `dir`; the output and the report (null when none was written).
 fn run_cut_small(dir: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
@@ -154,8 +168,9 @@ fn run_repeated_replays_every_frame_set_on_after_the_last_and_samples_memory() {
     let last = memory.last().expect("a sample");
     assert_eq!(last["frame_sets"].as_u64(), Some(27));
     assert!(last["peak_rss_mib"].as_f64() >= last["rss_mib"].as_f64(), "{last}");
+    // No passes at all is bad usage (exit 2), refused before anything runs.
     let (o, r) = run_cut_small(dir.path(), &["--repeat", "0"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).contains("--repeat"), "{}", text(&o));
     assert!(r.is_null(), "no report for a refused run");
 }
@@ -168,18 +183,21 @@ fn run_names_what_is_wrong_with_its_input() {
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--tissue", "/nonexistent/liver.ply"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("/nonexistent/liver.ply"), "{}", text(&o));
+    // Values outside a flag's range, or not among its values, are bad usage (exit 2).
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--cell=0"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).contains("--cell"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--operational-radius=-0.01"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).contains("--operational-radius"), "{}", text(&o));
+    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--masks", "guess"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).contains("--masks") && text(&o).contains("guess"), "{}", text(&o));
+    // The leaf's bounds depend on the working volume, known once the dataset is read: a failure
+    // (exit 1), as is a frame range the dataset lacks.
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--voxel=0"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("--voxel"), "{}", text(&o));
-    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--operational-radius=-0.01"]);
-    assert_eq!(o.status.code(), Some(1));
-    assert!(text(&o).contains("--operational-radius"), "{}", text(&o));
-    let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--masks", "guess"]);
-    assert_eq!(o.status.code(), Some(1));
-    assert!(text(&o).contains("--masks guess"), "{}", text(&o));
     let o = hullcut(&["run", "--dataset", CUT_SMALL, "--rrd", rrd, "--frames", "20:30"]);
     assert_eq!(o.status.code(), Some(1));
     let o = hullcut(&["run", "--dataset", "/nonexistent/dataset", "--rrd", rrd]);
@@ -316,12 +334,10 @@ fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
     let dir = tempfile::tempdir().expect("tempdir");
     let o = hullcut(&["bench", "pipeline", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
     assert!(o.status.success(), "{}", text(&o));
-    let summary = std::fs::read_to_string(dir.path().join("pipeline.csv")).expect("csv");
-    let header: Vec<&str> = summary.lines().next().expect("header").split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
-    let rows: Vec<Vec<&str>> = summary.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let (header, rows) = read_csv(&dir.path().join("pipeline.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).expect(name);
     assert_eq!(rows.len(), 6, "two hull leaves x two tissue cells, TLED; the coarse hull with the hybrid");
-    let hybrid: Vec<&Vec<&str>> = rows.iter().filter(|r| r[col("model")] == "hybrid").collect();
+    let hybrid: Vec<&Vec<String>> = rows.iter().filter(|r| r[col("model")] == "hybrid").collect();
     assert_eq!(hybrid.len(), 2);
     for r in &rows {
         // Truth masks: the quick run's twelve frames are all trusted, within a millimetre.
@@ -331,7 +347,7 @@ fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
         // The hybrid runs TLED on part of the lattice only; the TLED model on every cell.
         let tled_cells: f64 = r[col("tled_cells_mean")].parse().expect("tled cells");
         let nodes: f64 = r[col("nodes")].parse().expect("nodes");
-        match r[col("model")] {
+        match r[col("model")].as_str() {
             "hybrid" => assert!(tled_cells < 0.5 * nodes, "{r:?}"),
             model => assert_eq!((model, tled_cells > 0.7 * nodes), ("tled", true), "{r:?}"),
         }
@@ -339,10 +355,13 @@ fn bench_pipeline_quick_times_every_stage_of_every_configuration() {
     let paper_scale = rows.iter().find(|r| r[col("cell_mm")] == "6").expect("6 mm row");
     let nodes: usize = paper_scale[col("nodes")].parse().expect("nodes");
     assert!((2_500..3_500).contains(&nodes), "the seed paper's size is 2,250-2,886 nodes: {nodes}");
-    let stages = std::fs::read_to_string(dir.path().join("pipeline_stages.csv")).expect("stages");
+    let (header, stages) = read_csv(&dir.path().join("pipeline_stages.csv"));
+    let stage_col = header.iter().position(|h| h == "stage").expect("a stage column");
     for stage in ["carve", "pose", "collide", "cut_topology", "cut_surface", "deform", "total"] {
-        assert_eq!(stages.lines().filter(|l| l.contains(&format!(",{stage},"))).count(), 6, "{stage}");
+        assert_eq!(stages.iter().filter(|r| r[stage_col] == stage).count(), 6, "{stage}");
     }
+    let (_, seed) = read_csv(&dir.path().join("pipeline_seed_table2.csv"));
+    assert_eq!(seed.len(), 4, "{seed:?}");
     assert!(std::fs::read(dir.path().join("pipeline.png")).expect("png").starts_with(b"\x89PNG"));
 }
 
@@ -446,4 +465,159 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 14, "{c}");
     assert!(c["edges_cut"].as_u64().expect("edges") > 0, "{c}");
     assert!(r["tissue"]["virtual_nodes"].as_u64().expect("virtual nodes") > 0, "{}", r["tissue"]);
+}
+
+/// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.
+fn retime(ds: &Path, timestamp: impl Fn(u64, i64) -> i64) {
+    let path = ds.join("frames.csv");
+    let csv = std::fs::read_to_string(&path).expect("frames.csv");
+    let mut out = String::new();
+    for (k, line) in csv.lines().enumerate() {
+        let fields: Vec<&str> = line.split(',').collect();
+        match (k, fields.as_slice()) {
+            (0, _) => out += line,
+            (_, [frame, camera, ts]) => {
+                let frame: u64 = frame.parse().expect("a frame number");
+                let ts: i64 = ts.parse().expect("a timestamp");
+                out += &format!("{frame},{camera},{}", timestamp(frame, ts));
+            }
+            _ => panic!("frames.csv line {}: {line}", k + 1),
+        }
+        out.push('\n');
+    }
+    std::fs::write(&path, out).expect("frames.csv");
+}
+
+/// `hullcut run` on the dataset `ds` at 1 cm cells, recording and reporting into `dir`.
+fn run_on(ds: &Path, dir: &Path, extra: &[&str]) -> (Output, serde_json::Value) {
+    let (rrd, report) = (dir.join("run.rrd"), dir.join("run.json"));
+    let _ = std::fs::remove_file(&report);
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let (ds, rrd, report_arg) = (p(ds), p(&rrd), p(&report));
+    let mut args = vec!["run", "--dataset", &ds, "--rrd", &rrd, "--report", &report_arg, "--cell", "0.01"];
+    args.extend_from_slice(extra);
+    let o = hullcut(&args);
+    let r = if report.exists() { json(&report) } else { serde_json::Value::Null };
+    (o, r)
+}
+
+#[test]
+fn a_corrupt_image_leaves_its_view_out_and_the_run_goes_on_and_lists_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("corrupt");
+    copy_tree(Path::new(CUT_SMALL), &ds);
+    // Frame 4: cam2's image cut short (a copy that stopped mid-write); frame 6: no camera's image
+    // is a PNG at all.
+    let cut = ds.join("cam2/000004.png");
+    let bytes = std::fs::read(&cut).expect("png");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).expect("truncate");
+    for cam in 0..6 {
+        std::fs::write(ds.join(format!("cam{cam}/000006.png")), b"not a PNG").expect("garbage");
+    }
+    let (o, r) = run_on(&ds, dir.path(), &[]);
+    // It goes on, then says so: exit 1 naming the first fault, the report listing every one.
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("frame 4, camera cam2") && text(&o).contains("000004.png"), "{}", text(&o));
+    assert!(!text(&o).contains("panicked"), "{}", text(&o));
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(8), "frame 6 left out whole: {c}");
+    assert_eq!(c["views_missing"].as_u64(), Some(1), "cam2 in frame 4: {c}");
+    let f = &r["faults"];
+    assert_eq!((f["views"].as_u64(), f["frame_sets"].as_u64()), (Some(7), Some(1)), "{f}");
+    let listed = f["listed"].as_array().expect("listed");
+    assert_eq!((listed[0]["frame"].as_u64(), listed[0]["camera"].as_str()), (Some(4), Some("cam2")), "{f}");
+    assert!(listed[1..].iter().all(|l| l["frame"] == 6), "{f}");
+    assert!(r["stopped"].is_null(), "{}", r["stopped"]);
+    assert_eq!(r["non_finite"].as_array().map(Vec::len), Some(0), "{}", r["non_finite"]);
+    assert!(r["tissue"]["failure"].is_null(), "{}", r["tissue"]);
+    let entities = hullcut_viz::rrd_entities(&dir.path().join("run.rrd")).expect("the recording reads back");
+    assert!(entities.contains("/world/tissue/surface"), "{entities:?}");
+}
+
+#[test]
+fn realtime_does_not_wait_out_a_gap_of_31_years_in_the_capture_times() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("gap");
+    copy_tree(Path::new(CUT_SMALL), &ds);
+    const YEARS_31_NS: i64 = 31 * 365 * 86_400 * 1_000_000_000;
+    retime(&ds, |frame, ts| if frame >= 5 { ts + YEARS_31_NS } else { ts });
+    let clock = std::time::Instant::now();
+    let (o, r) = run_on(&ds, dir.path(), &["--realtime"]);
+    assert!(o.status.success(), "{}", text(&o));
+    // Nine frame sets at 4 fps pace in about two seconds; the gap is skipped, not slept.
+    assert!(clock.elapsed() < std::time::Duration::from_secs(300), "{:?}", clock.elapsed());
+    let c = &r["counters"];
+    assert_eq!(c["realtime_gaps_skipped"].as_u64(), Some(1), "{c}");
+    assert_eq!(
+        c["frame_sets_processed"].as_u64().zip(c["frame_sets_dropped"].as_u64()).map(|(p, d)| p + d),
+        Some(9),
+        "{c}"
+    );
+}
+
+#[test]
+fn capture_times_at_the_end_of_i64_stop_the_replay_naming_the_frame_never_a_panic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("late");
+    copy_tree(Path::new(CUT_SMALL), &ds);
+    // A second apart, the last one second short of i64::MAX: the second pass (2.25 s on) cannot
+    // be timed from frame 7.
+    retime(&ds, |frame, _| i64::MAX - 1_000_000_000 * (9 - frame as i64));
+    let (o, r) = run_on(&ds, dir.path(), &["--repeat", "2"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(!text(&o).contains("panicked"), "{}", text(&o));
+    if r.is_null() {
+        // The dataset's reader refuses such timestamps outright, naming its file.
+        assert!(text(&o).contains("frames.csv"), "{}", text(&o));
+    } else {
+        // Read, then stopped at the frame whose time overflows; the report holds what went before.
+        let stopped = r["stopped"].as_str().expect("why it stopped");
+        assert!(stopped.contains("frame 7") && stopped.contains("cannot be moved on"), "{stopped}");
+        assert_eq!(r["counters"]["frame_sets_processed"].as_u64(), Some(16), "{}", r["counters"]);
+        assert!(text(&o).contains("frame 7"), "{}", text(&o));
+    }
+}
+
+/// The disk fills up under the recording: the run stops with the reason, the report is written
+/// and says why, and the recording written so far reads back whole (every message in it decodes).
+/// The full disk is a file-size limit (`ulimit -f`) with SIGXFSZ ignored, so writes past it fail
+/// with EFBIG as they would with ENOSPC.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_recording_that_fills_the_disk_stops_the_run_with_the_reason_and_both_files_read_back() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Unlimited first, for the sizes: the limit must fall inside the recording and above the report.
+    let (o, _) = run_cut_small(dir.path(), &["--frames", "0:4"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
+    let rrd_len = std::fs::metadata(&rrd).expect("rrd").len();
+    let report_len = std::fs::metadata(&report).expect("report").len();
+    let blocks = rrd_len / 2 / 512; // dash's `ulimit -f` counts 512-byte blocks
+    assert!(blocks * 512 > 4 * report_len, "recording {rrd_len} B, report {report_len} B: no room for a limit");
+    std::fs::remove_file(&rrd).expect("remove");
+    std::fs::remove_file(&report).expect("remove");
+
+    let script = format!(
+        "trap '' XFSZ; ulimit -f {blocks}; exec \"$0\" run --dataset \"$1\" --rrd \"$2\" --report \"$3\" --cell 0.01 \
+         --frames 0:4"
+    );
+    let o = Command::new("sh")
+        .args(["-c", &script, env!("CARGO_BIN_EXE_hullcut"), CUT_SMALL])
+        .arg(&rrd)
+        .arg(&report)
+        .output()
+        .expect("sh runs");
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(!t.contains("panicked"), "{t}");
+    assert!(t.contains("run.rrd") && t.contains("File too large"), "the reason, naming the file: {t}");
+
+    let r = json(&report);
+    let stopped = r["stopped"].as_str().unwrap_or_else(|| panic!("no `stopped` in the report: {r}"));
+    assert!(stopped.contains("File too large"), "{stopped}");
+
+    let kept = std::fs::metadata(&rrd).expect("rrd kept").len();
+    assert!(kept > 0 && kept <= blocks * 512, "{kept} bytes kept under a limit of {}", blocks * 512);
+    let entities = hullcut_viz::rrd_entities(&rrd).expect("what was written reads back");
+    assert!(!entities.is_empty(), "the recording kept nothing");
 }

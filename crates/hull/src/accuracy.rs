@@ -136,7 +136,8 @@ fn unit(k: u64) -> f64 {
 
 /// Volumetric IoU between a hull (on its leaf grid) and the solid a truth mesh bounds, from
 /// `samples` points spread uniformly over the union of their bounding boxes (deterministic).
-/// None when both are empty.
+/// None when both are empty, or when a bound is not finite (a truth vertex at infinity: nothing
+/// can be measured).
 pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) -> Option<f64> {
     let truth_box = bounds(truth.vertices.iter().copied());
     let hull_box = hull.and_then(|g| g.bounds());
@@ -145,6 +146,9 @@ pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) ->
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => return None,
     };
+    if !(lo.coords.iter().chain(hi.coords.iter()).all(|c| c.is_finite())) {
+        return None;
+    }
     let solid = Solid::new(truth);
     let (both, either) = (0..samples as u64)
         .into_par_iter()
@@ -162,21 +166,35 @@ pub fn volumetric_iou(hull: Option<&DenseGrid>, truth: &Mesh, samples: usize) ->
     (either > 0).then(|| both as f64 / either as f64)
 }
 
+/// Most points [`sample_surface`] and [`outer_surface_samples`] give: a larger surface (or a finer
+/// spacing) is sampled more coarsely, so that a mesh spanning the whole working volume, or one
+/// with a vertex far away, costs a bounded time and memory.
+pub const MAX_SURFACE_SAMPLES: usize = 1 << 20;
+
 /// Points on a mesh's surface about `spacing` apart (at least one per triangle's area share),
-/// deterministic.
+/// deterministic; at most about [`MAX_SURFACE_SAMPLES`] (the spacing widened to stay under it).
+/// No points at all when the surface's area or the spacing is not a finite positive number.
 pub fn sample_surface(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
     sample_surface_with_triangles(mesh, spacing).into_iter().map(|(p, _)| p).collect()
 }
 
 /// [`sample_surface`] with the triangle each point lies on.
 fn sample_surface_with_triangles(mesh: &Mesh, spacing: f64) -> Vec<(Point3<f64>, usize)> {
+    let area_of = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+        (b - a).cross(&(c - a)).norm() / 2.0
+    };
+    let total: f64 = mesh.triangles.iter().map(area_of).sum();
+    if !(total.is_finite() && spacing > 0.0 && spacing.is_finite()) {
+        return Vec::new();
+    }
+    let spacing = spacing.max((total / MAX_SURFACE_SAMPLES as f64).sqrt());
     let mut out = Vec::new();
     let mut counter = 0u64;
     let mut carry = 0.0;
     for (k, t) in mesh.triangles.iter().enumerate() {
         let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-        let area = (b - a).cross(&(c - a)).norm() / 2.0;
-        carry += area / (spacing * spacing);
+        carry += area_of(t) / (spacing * spacing);
         while carry >= 1.0 {
             carry -= 1.0;
             let (mut r1, mut r2) = (unit(counter), unit(counter + 1));
@@ -218,18 +236,25 @@ impl<'a> HashGrid<'a> {
         [p.x, p.y, p.z].map(|x| (x / cell).floor() as i64)
     }
 
-    /// Nearest distance, searching shells of cells outward until no closer point can exist.
+    /// Nearest distance, searching shells of cells outward until no closer point can exist. Once
+    /// the cells searched outnumber the points, the rest is a scan of every point (exact, and no
+    /// dearer than what was searched): a far point costs at most twice a scan, never a search
+    /// through millions of empty cells.
     fn nearest(&self, p: &Point3<f64>) -> f64 {
         let k = Self::key(p, self.cell);
+        let budget = self.points.len() as u64;
+        let mut searched = 0u64;
         let mut best = f64::INFINITY;
-        for r in 0i64..1000 {
+        let mut r = 0i64;
+        loop {
             for dz in -r..=r {
                 for dy in -r..=r {
-                    for dx in -r..=r {
-                        if dx.abs().max(dy.abs()).max(dz.abs()) != r {
-                            continue;
-                        }
-                        if let Some(ids) = self.map.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                    // Off the shell's faces in z and y, only its two x faces are on it (r >= 1 there).
+                    let step = if dz.abs() == r || dy.abs() == r { 1 } else { 2 * r as usize };
+                    for dx in (-r..=r).step_by(step) {
+                        searched += 1;
+                        let cell = [k[0].wrapping_add(dx), k[1].wrapping_add(dy), k[2].wrapping_add(dz)];
+                        if let Some(ids) = self.map.get(&cell) {
                             for &i in ids {
                                 best = best.min((self.points[i] - p).norm());
                             }
@@ -238,16 +263,23 @@ impl<'a> HashGrid<'a> {
                 }
             }
             if best <= r as f64 * self.cell {
-                break;
+                return best;
             }
+            if searched > budget {
+                return self.points.iter().map(|q| (q - p).norm()).fold(best, f64::min);
+            }
+            r += 1;
         }
-        best
     }
 }
 
-/// Chamfer and Hausdorff distances between two sampled surfaces; None if either is empty.
+/// Chamfer and Hausdorff distances between two sampled surfaces; None if either is empty, if a
+/// point is not finite or if `cell` (the hash grid's, metres) is not a positive length: nothing
+/// is measured then. Every nearest-point query is bounded (see `HashGrid::nearest`), however far
+/// apart the two surfaces lie.
 pub fn surface_distance(a: &[Point3<f64>], b: &[Point3<f64>], cell: f64) -> Option<SurfaceDistance> {
-    if a.is_empty() || b.is_empty() {
+    let finite = |s: &[Point3<f64>]| s.iter().all(|p| p.coords.iter().all(|c| c.is_finite()));
+    if a.is_empty() || b.is_empty() || !(cell > 0.0 && cell.is_finite()) || !finite(a) || !finite(b) {
         return None;
     }
     let directed = |from: &[Point3<f64>], to: &[Point3<f64>]| {

@@ -2,6 +2,10 @@
 
 use nalgebra::{Point2, Vector2};
 
+/// Iterations a symmetric eigendecomposition (a 3x3 covariance) may take: far more than a finite
+/// matrix needs, and a bound where rounding or a huge entry would keep it from converging.
+pub(crate) const MAX_EIGEN_ITERATIONS: usize = 1000;
+
 /// Convex hull of points (Andrew's monotone chain), counter-clockwise, without repeated or
 /// collinear points. Fewer than three distinct points give what there is.
 pub(crate) fn convex_hull(points: &[Point2<f64>]) -> Vec<Point2<f64>> {

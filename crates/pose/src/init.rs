@@ -7,10 +7,14 @@ use hullcut_dataset::label;
 use hullcut_hull::Occupancy;
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
+use crate::geometry::MAX_EIGEN_ITERATIONS;
 use crate::template::Template;
 
 /// Leaves expanded from the hull at most (a larger scalpel hull is not a scalpel).
 const MAX_LEAVES: usize = 400_000;
+/// Slots of the dense grid over the leaves' bounding box at most (leaves spread that thin are not
+/// one tool either).
+const MAX_GRID_SLOTS: usize = 1 << 26;
 /// Roll angles tried about the hull's axis when starting from nothing.
 const ROLLS: usize = 12;
 
@@ -47,11 +51,13 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
     };
     let mut leaves: Vec<[i32; 3]> = Vec::new();
     for c in occ.cells.iter().filter(|c| c.has(label::SCALPEL)) {
-        let m = (c.size / leaf).round().max(1.0) as i32;
-        let k0 = key(&(c.min + Vector3::repeat(leaf / 2.0)));
-        if leaves.len() + (m * m * m) as usize > MAX_LEAVES {
+        // Counted in floating point: a cell many leaves wide must not overflow the count.
+        let m = (c.size / leaf).round().max(1.0);
+        if !(m.is_finite() && leaves.len() as f64 + m * m * m <= MAX_LEAVES as f64) {
             return None;
         }
+        let m = m as i32;
+        let k0 = key(&(c.min + Vector3::repeat(leaf / 2.0)));
         for i in 0..m {
             for j in 0..m {
                 for k in 0..m {
@@ -72,7 +78,10 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
             hi[a] = hi[a].max(k[a]);
         }
     }
-    let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
+    let dims = [0, 1, 2].map(|a| (i64::from(hi[a]) - i64::from(lo[a]) + 1) as usize);
+    if dims.iter().try_fold(1usize, |n, &d| n.checked_mul(d)).is_none_or(|n| n > MAX_GRID_SLOTS) {
+        return None;
+    }
     let slot = |k: &[i32; 3]| {
         ((k[2] - lo[2]) as usize * dims[1] + (k[1] - lo[1]) as usize) * dims[0] + (k[0] - lo[0]) as usize
     };
@@ -118,15 +127,17 @@ pub(crate) fn summarize(occ: &Occupancy, reach: f64) -> Option<HullSummary> {
         (0..leaves.len()).filter(|&i| roots[i] == r).map(|i| centre(&leaves[i])).collect()
     };
     let mut points = component(root);
-    let mut line = principal_line(&points);
+    let mut line = principal_line(&points)?;
     // A hand holding the scalpel in its middle splits the scalpel's hull in two; two components
     // that together still form one thin tool no longer than it are one tool.
     let mut second_fraction = 0.0;
     if let Some(&(n2, r2)) = by_size.get(1) {
         let mut both = points.clone();
         both.extend(component(r2));
-        let joint = principal_line(&both);
-        if joint.thickness <= MAX_TOOL_THICKNESS && joint.span.1 - joint.span.0 <= reach * 1.2 {
+        if let Some(joint) = principal_line(&both)
+            && joint.thickness <= MAX_TOOL_THICKNESS
+            && joint.span.1 - joint.span.0 <= reach * 1.2
+        {
             points = both;
             line = joint;
             second_fraction = by_size.get(2).map_or(0.0, |s| s.0 as f64 / (largest + n2) as f64);
@@ -175,7 +186,9 @@ struct Line {
     thickness: f64,
 }
 
-fn principal_line(points: &[Point3<f64>]) -> Line {
+/// A point set's principal line; `None` where the eigendecomposition does not converge within
+/// [`MAX_EIGEN_ITERATIONS`].
+fn principal_line(points: &[Point3<f64>]) -> Option<Line> {
     let n = points.len().max(1) as f64;
     let centroid = Point3::from(points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n);
     let mut cov = Matrix3::zeros();
@@ -183,7 +196,7 @@ fn principal_line(points: &[Point3<f64>]) -> Line {
         let d = p - centroid;
         cov += d * d.transpose();
     }
-    let eig = nalgebra::SymmetricEigen::new(cov);
+    let eig = nalgebra::SymmetricEigen::try_new(cov, f64::EPSILON, MAX_EIGEN_ITERATIONS)?;
     let k = eig.eigenvalues.imax();
     let axis = eig.eigenvectors.column(k).into_owned().normalize();
     let off_axis = (eig.eigenvalues.sum() - eig.eigenvalues[k]).max(0.0) / n;
@@ -193,7 +206,7 @@ fn principal_line(points: &[Point3<f64>]) -> Line {
         lo = lo.min(s);
         hi = hi.max(s);
     }
-    Line { centroid, axis, span: (lo, hi), thickness: off_axis.sqrt() }
+    Some(Line { centroid, axis, span: (lo, hi), thickness: off_axis.sqrt() })
 }
 
 /// The template's own frame of reference: its long axis (toward the tip) and the blade normal

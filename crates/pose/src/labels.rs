@@ -29,6 +29,10 @@ use crate::geometry::{convex_hull, nearest_on_convex};
 use crate::template::Template;
 use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 
+/// The largest side of a tool a template or labeller is built for, metres (a scalpel is some
+/// 15 cm long): see [`crate::check_tool`].
+pub const MAX_TOOL_SIDE_M: f64 = 0.5;
+
 /// Thin components tried as the tool when there is no track (largest first).
 const INIT_COMPONENTS: usize = 3;
 
@@ -172,6 +176,8 @@ impl ToolLabeller {
         if tool.mesh.triangles.is_empty() {
             return Err(ToolError::Template("the tool's mesh has no triangles to draw".to_owned()));
         }
+        // The tool is filled and its distance field gridded at 1 mm: `Template::new` has bounded
+        // its size and refused non-finite numbers ([`crate::template::check_tool`]).
         // Padded by 2 cm over the margin: a cell farther than that from the tool is not near it
         // unless it is over 2 cm large, and those are told by the grid's distance.
         let field = ToolField::new(&tool_points(&tool.mesh, 0.001), 0.001, params.tool_margin_m + 0.02);

@@ -15,7 +15,12 @@
 //!   face (not edge-on, not hidden by the hand), the scalpel leaf count and the step from the last
 //!   trusted pose; a frame below the threshold is refused with a reason, the last trusted pose is
 //!   held for a bounded time. Trusted poses pass a One Euro filter on SE(3) ([`OneEuro`]).
-//! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose.
+//! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose;
+//!   [`rigid_from_matrix`]: a true pose's 4x4 matrix checked (finite, orthonormal within
+//!   [`ORTHONORMAL_TOLERANCE`], no reflection) before it is made a rotation, in a bounded number
+//!   of steps.
+//! - [`check_tool`]: a `tool.json` is refused before any template or grid is sized from it
+//!   (non-finite numbers, a tool larger than [`labels::MAX_TOOL_SIDE_M`]).
 //! - [`ToolLabeller`]: labels from geometry: the tool fitted into the hull of the foreground
 //!   (hand and tool together), drawn into every view with the hand's occlusion, so that scalpel
 //!   and hand pixels are told apart with no colour model ([`labels`]).
@@ -34,8 +39,11 @@ mod track;
 pub use filter::{OneEuro, OneEuroParams};
 pub use labels::{LabelParams, LabelStats, LabelledFrame, ToolLabeller, ToolRegion};
 pub use metrics::{PoseError, pose_error};
-pub use template::Template;
-pub use track::{BladePose, Diagnostics, PoseEstimate, Tracker, TrackerParams, ViewInput, isometry_from_matrix};
+pub use template::{Template, check_tool};
+pub use track::{
+    BladePose, Diagnostics, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Tracker, TrackerParams, ViewInput,
+    isometry_from_matrix, rigid_from_matrix,
+};
 
 /// Why a pose estimator could not be set up.
 #[derive(Debug, thiserror::Error)]

@@ -7,10 +7,14 @@ use hullcut_hull::accuracy::winding_number;
 use nalgebra::{Point2, Point3, Vector3};
 
 use crate::ToolError;
-use crate::geometry::convex_hull;
+use crate::geometry::{MAX_EIGEN_ITERATIONS, convex_hull};
+use crate::labels::MAX_TOOL_SIDE_M;
 
 /// Interior points aimed at on the blade and on the body each (the coverage term's samples).
 const INTERIOR_TARGET: usize = 48;
+/// Most interior grid steps along one side: a sliver of a blade, whose area is tiny beside its
+/// length, gets samples at most this fine along it instead of billions of them.
+const MAX_GRID_STEPS: usize = 256;
 
 /// The tool as the fit sees it, in the tool frame (metres).
 #[derive(Debug, Clone)]
@@ -39,7 +43,11 @@ impl Template {
     /// Builds the template of a tool: the blade polygon is the convex hull of `blade_outline`
     /// (or, without one, of the mesh vertices within a blade thickness of the mid-plane through
     /// the tip), projected onto the mid-plane; the body is every other mesh vertex.
+    ///
+    /// The tool is checked first ([`check_tool`]): a number that is not finite or a tool larger
+    /// than [`MAX_TOOL_SIDE_M`] is refused before anything is sized from it.
     pub fn new(tool: &ToolGeometry) -> Result<Self, ToolError> {
+        check_tool(tool)?;
         let n = tool.blade_normal.normalize();
         let plane_tol = tool.blade_thickness.max(1e-6);
         let on_blade = |p: &Point3<f64>| (p - tool.tip).dot(&n).abs() <= plane_tol;
@@ -54,7 +62,11 @@ impl Template {
         // In-plane basis: u along the edge (tip → heel reversed), w = n × u.
         let heel = tool.cutting_edge.last().copied().unwrap_or(tool.tip);
         let along = tool.tip - heel;
-        let u = (along - n * along.dot(&n)).try_normalize(1e-12).unwrap_or_else(|| n.cross(&Vector3::x()).normalize());
+        let u = (along - n * along.dot(&n))
+            .try_normalize(1e-12)
+            .or_else(|| n.cross(&Vector3::x()).try_normalize(1e-6))
+            .or_else(|| n.cross(&Vector3::y()).try_normalize(1e-6))
+            .ok_or_else(|| ToolError::Template("the blade normal spans no blade plane".to_owned()))?;
         let w = n.cross(&u);
         let to_plane = |p: &Point3<f64>| Point2::new((p - tool.tip).dot(&u), (p - tool.tip).dot(&w));
         let from_plane = |q: &Point2<f64>| tool.tip + u * q.x + w * q.y;
@@ -113,23 +125,29 @@ impl Template {
     }
 }
 
-/// A grid of points inside a convex polygon, about [`INTERIOR_TARGET`] of them.
+/// A grid of points inside a convex polygon, about [`INTERIOR_TARGET`] of them (at most
+/// [`MAX_GRID_STEPS`] a side).
 fn blade_interior(polygon: &[Point2<f64>]) -> Vec<Point2<f64>> {
     let (lo, hi) = bounds2(polygon);
     let area = polygon_area(polygon).abs();
-    let spacing = (area / INTERIOR_TARGET as f64).sqrt();
+    let extent = (hi - lo).max();
+    let spacing = (area / INTERIOR_TARGET as f64).sqrt().max(extent / MAX_GRID_STEPS as f64);
+    if !(spacing > 0.0 && spacing.is_finite()) {
+        return Vec::new();
+    }
+    // Samples at lo + (k + 1/2) spacing short of hi, counted instead of stepped (a step below the
+    // coordinates' rounding would never arrive).
+    let steps = |span: f64| ((span / spacing - 0.5).ceil().max(0.0) as usize).min(MAX_GRID_STEPS + 1);
+    let (nx, ny) = (steps(hi.x - lo.x), steps(hi.y - lo.y));
     let mut out = Vec::new();
-    let mut y = lo.y + spacing / 2.0;
-    while y < hi.y {
-        let mut x = lo.x + spacing / 2.0;
-        while x < hi.x {
-            let q = Point2::new(x, y);
+    for j in 0..ny {
+        let y = lo.y + (j as f64 + 0.5) * spacing;
+        for i in 0..nx {
+            let q = Point2::new(lo.x + (i as f64 + 0.5) * spacing, y);
             if inside_polygon(polygon, &q) {
                 out.push(q);
             }
-            x += spacing;
         }
-        y += spacing;
     }
     out
 }
@@ -148,7 +166,7 @@ fn body_interior(tool: &ToolGeometry, body: &[Point3<f64>]) -> Vec<Point3<f64>> 
     }
     let volume = (hi - lo).iter().map(|d| d.max(1e-4)).product::<f64>();
     let spacing = (volume / INTERIOR_TARGET as f64).cbrt();
-    let steps = (hi - lo).map(|d| ((d / spacing).round() as usize).max(1));
+    let steps = (hi - lo).map(|d| ((d / spacing).round() as usize).clamp(1, MAX_GRID_STEPS));
     let mut out = Vec::new();
     for i in 0..steps.x {
         for j in 0..steps.y {
@@ -207,7 +225,8 @@ pub(crate) fn inside_polygon(polygon: &[Point2<f64>], q: &Point2<f64>) -> bool {
     true
 }
 
-/// Extent along the first principal axis.
+/// Extent along the first principal axis (the bounding box's longest side where the axis cannot
+/// be found).
 fn principal_length(points: &[Point3<f64>]) -> f64 {
     let n = points.len().max(1) as f64;
     let mean = points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n;
@@ -216,7 +235,14 @@ fn principal_length(points: &[Point3<f64>]) -> f64 {
         let d = p.coords - mean;
         cov += d * d.transpose();
     }
-    let eig = nalgebra::SymmetricEigen::new(cov);
+    let Some(eig) = nalgebra::SymmetricEigen::try_new(cov, f64::EPSILON, MAX_EIGEN_ITERATIONS) else {
+        let (mut lo, mut hi) = (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN));
+        for p in points {
+            lo = lo.inf(&p.coords);
+            hi = hi.sup(&p.coords);
+        }
+        return (hi - lo).max().max(0.0);
+    };
     let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
     let (mut lo, mut hi) = (f64::MAX, f64::MIN);
     for p in points {
@@ -225,4 +251,62 @@ fn principal_length(points: &[Point3<f64>]) -> f64 {
         hi = hi.max(s);
     }
     hi - lo
+}
+
+/// Refuses a tool no template or grid can be built from: a number that is not finite, a blade
+/// normal of no length, a blade thickness that is negative or larger than the tool, or a tool
+/// (its mesh, tip, cutting edge and blade outline together) spanning more than
+/// [`MAX_TOOL_SIDE_M`]. tool.json is in metres: a file in millimetres is a thousand times too
+/// large, and one stray vertex at 1e300 would size the template's grids and samples beyond any
+/// memory. Every template and grid of the tool is built after this check.
+pub fn check_tool(tool: &ToolGeometry) -> Result<(), ToolError> {
+    let points = tool
+        .mesh
+        .vertices
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (format!("mesh vertex {k}"), p))
+        .chain(std::iter::once(("the tip".to_owned(), &tool.tip)))
+        .chain(tool.cutting_edge.iter().enumerate().map(|(k, p)| (format!("cutting_edge point {k}"), p)))
+        .chain(tool.blade_outline.iter().flatten().enumerate().map(|(k, p)| (format!("blade_outline point {k}"), p)));
+    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    let mut largest: Option<(f64, String, Point3<f64>)> = None;
+    for (what, p) in points {
+        if !p.coords.iter().all(|c| c.is_finite()) {
+            return Err(ToolError::Template(format!("{what} is [{}, {}, {}]: not a finite number", p.x, p.y, p.z)));
+        }
+        lo = lo.inf(&p.coords);
+        hi = hi.sup(&p.coords);
+        let magnitude = p.coords.amax();
+        if largest.as_ref().is_none_or(|(m, _, _)| magnitude > *m) {
+            largest = Some((magnitude, what, *p));
+        }
+    }
+    let side = (hi - lo).max();
+    if !(side.is_finite() && side <= MAX_TOOL_SIDE_M) {
+        let farthest = largest
+            .map(|(_, what, p)| {
+                format!("; its largest coordinate is {what}'s, [{:.3e}, {:.3e}, {:.3e}]", p.x, p.y, p.z)
+            })
+            .unwrap_or_default();
+        return Err(ToolError::Template(format!(
+            "the tool (mesh, tip, cutting edge, outline) spans {side:.3e} m, more than the {MAX_TOOL_SIDE_M} m a \
+             hand-held tool does \
+             (tool.json and its mesh are in metres: a file in millimetres?){farthest}"
+        )));
+    }
+    let normal = tool.blade_normal;
+    if !(normal.iter().all(|c| c.is_finite()) && normal.norm() > 1e-12) {
+        return Err(ToolError::Template(format!(
+            "blade_normal [{}, {}, {}] is not a direction",
+            normal.x, normal.y, normal.z
+        )));
+    }
+    let thickness = tool.blade_thickness;
+    if !(0.0..=MAX_TOOL_SIDE_M).contains(&thickness) {
+        return Err(ToolError::Template(format!(
+            "blade_thickness {thickness} m: must be 0 or more and at most {MAX_TOOL_SIDE_M} m"
+        )));
+    }
+    Ok(())
 }

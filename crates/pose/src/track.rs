@@ -6,7 +6,7 @@ use hullcut_dataset::label;
 use hullcut_hull::Occupancy;
 use hullcut_rig::Camera;
 use image::GrayImage;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::evidence::ViewEvidence;
 use crate::filter::{OneEuro, OneEuroParams};
@@ -474,13 +474,83 @@ impl Tracker {
     }
 }
 
-/// The rotation and translation of a 4x4 homogeneous tool → world matrix, if it is one.
+/// The rotation and translation of a 4x4 homogeneous tool → world matrix, if it is one
+/// ([`rigid_from_matrix`] says why not).
 pub fn isometry_from_matrix(m: &nalgebra::Matrix4<f64>) -> Option<Isometry3<f64>> {
-    if !m.iter().all(|c| c.is_finite()) {
-        return None;
+    rigid_from_matrix(m).ok()
+}
+
+/// How far a pose's rotation part may be from orthonormal (the largest entry of RᵀR − I) and
+/// still be taken as a rotation: rounding on writing stays far below it; a scaled, sheared or
+/// corrupted matrix does not.
+pub const ORTHONORMAL_TOLERANCE: f64 = 1e-3;
+
+/// Newton steps of the polar decomposition that makes a nearly orthonormal matrix a rotation
+/// (each squares the error: from [`ORTHONORMAL_TOLERANCE`] three reach rounding).
+const POLAR_STEPS: usize = 8;
+
+/// Why a 4x4 matrix is not a rigid tool → world pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MatrixError {
+    /// An entry is NaN or infinite.
+    #[error("entry ({row}, {col}) is {value}, not a finite number")]
+    NonFinite {
+        /// Row of the entry (0-based).
+        row: usize,
+        /// Column of the entry (0-based).
+        col: usize,
+        /// The entry.
+        value: f64,
+    },
+    /// The rotation part is not orthonormal within [`ORTHONORMAL_TOLERANCE`].
+    #[error("the rotation part is not a rotation: RᵀR differs from the identity by {deviation:.3e} (at most 1e-3)")]
+    NotOrthonormal {
+        /// Largest entry of |RᵀR − I|.
+        deviation: f64,
+    },
+    /// The rotation part mirrors space.
+    #[error("the rotation part is a reflection (determinant {determinant:.3})")]
+    Reflection {
+        /// Its determinant.
+        determinant: f64,
+    },
+}
+
+/// The rigid pose of a 4x4 homogeneous tool → world matrix: its entries finite, its rotation
+/// part orthonormal to within [`ORTHONORMAL_TOLERANCE`] and not a reflection, made exactly a
+/// rotation by a fixed number of Newton steps of the polar decomposition (no iteration that
+/// could run on without end, whatever the entries).
+pub fn rigid_from_matrix(m: &nalgebra::Matrix4<f64>) -> Result<Isometry3<f64>, MatrixError> {
+    for row in 0..4 {
+        for col in 0..4 {
+            let value = m[(row, col)];
+            if !value.is_finite() {
+                return Err(MatrixError::NonFinite { row, col, value });
+            }
+        }
     }
-    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let rot = nalgebra::Rotation3::from_matrix_eps(&r, 1e-9, 100, nalgebra::Rotation3::identity());
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let deviation = (r.transpose() * r - Matrix3::identity()).abs().max();
+    if !(deviation.is_finite() && deviation <= ORTHONORMAL_TOLERANCE) {
+        return Err(MatrixError::NotOrthonormal { deviation });
+    }
+    let determinant = r.determinant();
+    if !(determinant.is_finite() && determinant > 0.0) {
+        return Err(MatrixError::Reflection { determinant });
+    }
+    // R <- (R + R^-T) / 2 converges quadratically to the nearest rotation from a nearly
+    // orthonormal start.
+    let mut rot = r;
+    for _ in 0..POLAR_STEPS {
+        let Some(inverse) = rot.try_inverse() else { break };
+        let next = (rot + inverse.transpose()) * 0.5;
+        let change = (next - rot).abs().max();
+        rot = next;
+        if change <= 1e-15 {
+            break;
+        }
+    }
+    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot));
     let t = Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-    Some(Isometry3::from_parts(t, UnitQuaternion::from_rotation_matrix(&rot)))
+    Ok(Isometry3::from_parts(t, rotation))
 }

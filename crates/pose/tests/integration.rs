@@ -233,24 +233,109 @@ fn two_scalpel_like_components_are_refused() {
 }
 
 #[test]
-fn a_tool_file_in_millimetres_does_not_match_the_hull() {
+fn a_tool_file_in_millimetres_is_refused_and_a_tool_of_another_size_does_not_match_the_hull() {
     let scene = Scene::new(SceneConfig::new(SceneKind::Cut, 2, 33)).expect("scene");
-    let mut tool = scene.scalpel().geometry.clone();
-    let mm = |p: &mut nalgebra::Point3<f64>| *p = nalgebra::Point3::from(p.coords * 1000.0);
-    tool.mesh.vertices.iter_mut().for_each(mm);
-    tool.cutting_edge.iter_mut().for_each(mm);
-    mm(&mut tool.tip);
-    if let Some(o) = tool.blade_outline.as_mut() {
-        o.iter_mut().for_each(mm);
+    let scaled = |factor: f64| {
+        let mut tool = scene.scalpel().geometry.clone();
+        let scale = |p: &mut nalgebra::Point3<f64>| *p = nalgebra::Point3::from(p.coords * factor);
+        tool.mesh.vertices.iter_mut().for_each(scale);
+        tool.cutting_edge.iter_mut().for_each(scale);
+        scale(&mut tool.tip);
+        if let Some(o) = tool.blade_outline.as_mut() {
+            o.iter_mut().for_each(scale);
+        }
+        tool.blade_thickness *= factor;
+        tool
+    };
+    // In millimetres: the template and the geometric labeller refuse it up front, before
+    // gridding a 150 m tool at 1 mm.
+    let mm = scaled(1000.0);
+    for message in [
+        Template::new(&mm).err().map(|e| e.to_string()),
+        hullcut_pose::ToolLabeller::new(&mm, TrackerParams::default(), hullcut_pose::LabelParams::default())
+            .err()
+            .map(|e| e.to_string()),
+    ] {
+        let message = message.unwrap_or_default();
+        assert!(message.contains("in metres") && message.contains("millimetres"), "{message}");
     }
-    tool.blade_thickness *= 1000.0;
-    let steps = track(BUILTIN, SceneKind::Cut, 2, 30, 3, Some(&tool), no_edit);
+    // A tool a tenth of the scene's (1.5 cm) is a tool, but not the one in the hull: every frame
+    // is refused by the tracker.
+    let small = scaled(0.1);
+    let steps = track(BUILTIN, SceneKind::Cut, 2, 30, 3, Some(&small), no_edit);
     for s in &steps {
         let e = &s.estimate;
         assert!(!e.valid && e.pose.is_none());
         let reason = e.reason.as_deref().unwrap_or_default();
         assert!(reason.starts_with("the tool does not match the hull"), "{reason}");
     }
+}
+
+#[test]
+fn a_tool_with_a_vertex_far_out_or_not_a_number_is_refused_before_anything_is_sized_from_it() {
+    let scene = Scene::new(SceneConfig::new(SceneKind::Static, 1, 1)).expect("scene");
+    let good = scene.scalpel().geometry.clone();
+    assert!(hullcut_pose::check_tool(&good).is_ok());
+    let refused = |edit: &dyn Fn(&mut ToolGeometry)| {
+        let mut tool = good.clone();
+        edit(&mut tool);
+        // Refused at once, by the template and by the labeller alike: no grid of 1e300 m is built.
+        let clock = std::time::Instant::now();
+        let template = Template::new(&tool).err().map(|e| e.to_string()).unwrap_or_default();
+        let labeller = hullcut_pose::ToolLabeller::new(&tool, TrackerParams::default(), Default::default())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(clock.elapsed() < std::time::Duration::from_secs(5), "{template}");
+        assert_eq!(template, labeller);
+        template
+    };
+    let e = refused(&|t| t.mesh.vertices[3].x = 1e300);
+    assert!(e.contains("spans 1.000e300 m") && e.contains("mesh vertex 3"), "{e}");
+    let e = refused(&|t| t.mesh.vertices[0].y = f64::NAN);
+    assert!(e.contains("mesh vertex 0") && e.contains("not a finite number"), "{e}");
+    let e = refused(&|t| t.cutting_edge[1].z = 1e308);
+    assert!(e.contains("cutting_edge point 1"), "{e}");
+    let e = refused(&|t| t.tip.x = f64::INFINITY);
+    assert!(e.contains("the tip") && e.contains("not a finite number"), "{e}");
+    let e = refused(&|t| t.blade_normal = Vector3::zeros());
+    assert!(e.contains("blade_normal"), "{e}");
+    let e = refused(&|t| t.blade_thickness = f64::NAN);
+    assert!(e.contains("blade_thickness"), "{e}");
+}
+
+#[test]
+fn a_true_pose_that_is_not_a_rotation_is_refused_at_once() {
+    use hullcut_pose::{MatrixError, rigid_from_matrix};
+    // A rotation entry of 1e19 once made the rotation fit loop without end.
+    let mut m = Matrix4::identity();
+    m[(0, 0)] = 1e19;
+    let clock = std::time::Instant::now();
+    assert!(matches!(rigid_from_matrix(&m), Err(MatrixError::NotOrthonormal { .. })));
+    assert!(clock.elapsed() < std::time::Duration::from_secs(1));
+    assert!(isometry_from_matrix(&m).is_none());
+    // A scaled rotation, a reflection, a NaN: each named.
+    let scaled = Matrix4::identity() * 2.0;
+    assert!(matches!(rigid_from_matrix(&scaled), Err(MatrixError::NotOrthonormal { .. })));
+    let mut mirror = Matrix4::identity();
+    mirror[(2, 2)] = -1.0;
+    assert!(matches!(rigid_from_matrix(&mirror), Err(MatrixError::Reflection { .. })));
+    let mut nan = Matrix4::identity();
+    nan[(1, 2)] = f64::NAN;
+    let e = rigid_from_matrix(&nan).expect_err("a NaN");
+    assert!(matches!(e, MatrixError::NonFinite { row: 1, col: 2, .. }));
+    assert!(e.to_string().contains("(1, 2)"), "{e}");
+    // A rotation written with 1e-7 rounding is made exactly a rotation (to 1e-12, far below the
+    // rounding), keeping the translation.
+    let truth = Isometry3::new(Vector3::new(0.1, -0.2, 0.3), Vector3::new(0.4, -0.5, 0.6));
+    let mut rounded = truth.to_homogeneous();
+    rounded[(0, 1)] += 1e-7;
+    rounded[(2, 0)] -= 1e-7;
+    let back = rigid_from_matrix(&rounded).expect("a rotation");
+    let r = back.rotation.to_rotation_matrix().into_inner();
+    assert!((r.transpose() * r - nalgebra::Matrix3::identity()).abs().max() < 1e-12);
+    assert!(back.rotation.angle_to(&truth.rotation) < 1e-6);
+    assert_eq!(back.translation.vector, truth.translation.vector);
 }
 
 #[test]

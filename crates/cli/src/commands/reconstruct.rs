@@ -2,6 +2,7 @@
 
 pub(crate) mod checks;
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -11,10 +12,11 @@ use hullcut_hull::accuracy::{
     grid_iou, outer_surface_samples, sample_surface, silhouette_consistency, surface_distance, volumetric_iou,
 };
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, WorkingVolume, carve, carve_within, silhouettes};
-use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error};
+use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, pose_error, rigid_from_matrix};
+use nalgebra::Isometry3;
 use serde::Serialize;
 
-use self::checks::ViewDisagreement;
+use self::checks::{Faults, ViewDisagreement};
 use crate::backend::{Backend, Carver};
 use crate::frames::parse_frames;
 use crate::labelling::{LabelMethod, Labelling, LabellingReport};
@@ -41,6 +43,16 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// that camera alone refuted while every other view saw foreground, and names the camera that
 /// disagreed most (a bad mask or calibration shows as several times the others' count). A mask
 /// pixel outside the labels 0, 1, 2, 255 is an error naming the mask file.
+///
+/// Bad input: a camera image or mask that cannot be read (a corrupt PNG) or holds unknown labels
+/// is left out of its frame set, the frame carved from the other views (a frame set with no
+/// usable view is left out whole, its poses.jsonl line saying so); the report lists every fault
+/// and the command exits with an error at the end naming the first. An accuracy figure that
+/// cannot be measured (no hull surface; for the exact visual hull, a view entirely one label or
+/// more than 8.4 million quarter leaves) is left out, counted, and printed as
+/// n/a; a report figure that is not a finite number is written as null, named in non_finite,
+/// and is an error. An error while writing stops the frames, and the report still covers the
+/// frames before it.
 ///
 /// The blade's pose: the dataset's tool.json (the instrument's known shape) is fitted to the
 /// scalpel silhouettes (with segmented masks: the segmentation's own fit of the tool into the
@@ -80,8 +92,8 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
-    #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
-    masks: String,
+    #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
+    masks: checks::MaskSource,
     /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
@@ -92,7 +104,8 @@ pub struct Args {
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
     labels: LabelMethod,
     /// Views that must see a cell as background to carve it (k of N).
-    #[arg(long, value_name = "K", default_value_t = 1)]
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     carve_votes: usize,
     /// Drop the outer layer of leaves over a solid core (leaves whose centre lies outside the
     /// silhouettes' cone): a hull centred on the surface instead of enclosing it, closer to the
@@ -101,7 +114,7 @@ pub struct Args {
     #[arg(long)]
     trim_slivers: bool,
     /// Measure accuracy every N-th frame (it costs about a second per frame).
-    #[arg(long, value_name = "N", default_value_t = 1)]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     accuracy_every: u64,
     /// Write a JSON report.
     #[arg(long, value_name = "FILE")]
@@ -110,7 +123,7 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     rrd: Option<PathBuf>,
     /// Log images and leaves every N-th frame (meshes and scalars every frame).
-    #[arg(long, value_name = "N", default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
 }
 
@@ -124,6 +137,12 @@ struct LabelAccuracy {
     exact_hull_truth_iou_mean: Option<f64>,
     chamfer_mm_mean: Option<f64>,
     hausdorff_mm_max: Option<f64>,
+    /// Frames with truth whose IoU or surface distance could not be measured (no hull surface
+    /// for the label, a figure that is not finite): left out of the means.
+    not_measured: usize,
+    /// Frames with truth whose exact visual hull was not measurable: a view's truth mask is one
+    /// label everywhere, or the hull holds more than [`MAX_EXACT_LEAVES`] quarter leaves.
+    exact_hull_not_measurable: usize,
     #[serde(skip)]
     iou: Vec<f64>,
     #[serde(skip)]
@@ -175,6 +194,8 @@ struct Counters {
     footprint_tests: u64,
     empty_label_frames: usize,
     meshes_written: usize,
+    /// True poses in truth/poses.jsonl that are not rigid poses (not scored).
+    truth_poses_refused: u64,
 }
 
 #[derive(Debug, Serialize)]
@@ -195,7 +216,11 @@ struct Report<'a> {
     min_support: usize,
     min_views: usize,
     trim_slivers: bool,
+    /// Why the reconstruction stopped before its last frame, when something failed.
+    stopped: Option<String>,
     counters: Counters,
+    /// Camera images and frame sets that could not be used and were left out.
+    faults: Faults,
     accuracy: Vec<LabelAccuracy>,
     silhouette_consistency: Vec<Consistency>,
     view_disagreement: ViewDisagreement,
@@ -203,19 +228,19 @@ struct Report<'a> {
     labelling: Option<LabellingReport>,
     pose: PoseReport,
     timings: Timings,
+    /// Figures of this report that were not finite numbers (written as null): the command exits
+    /// with an error naming them.
+    non_finite: Vec<String>,
 }
 
 /// Runs the command.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let t_start = Instant::now();
     let mut carver = Carver::new(args.backend.open()?.as_ref())?;
-    if args.accuracy_every == 0 || args.rrd_every == 0 {
-        bail!("--accuracy-every and --rrd-every must be at least 1");
-    }
     let ds = Dataset::open(&args.dataset)?;
     let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
     checks::voxel(args.voxel, volume.aabb.extent())?;
-    let use_files = checks::masks_from_files(&ds, &args.masks)?;
+    let use_files = checks::masks_from_files(&ds, args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
     let params = HullParams {
         carve_votes: args.carve_votes,
@@ -229,7 +254,27 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     } else {
         Some(Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames, args.labels)?)
     };
-    let poses = ds.truth_poses()?.unwrap_or_default();
+    let mut counters = Counters::default();
+    // True poses, each checked: a matrix that is not a rigid pose (a NaN, a rotation entry of
+    // 1e19) scores nothing, and is counted.
+    let mut poses: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
+    for p in ds.truth_poses()?.unwrap_or_default() {
+        match rigid_from_matrix(&p.tool_to_world) {
+            Ok(iso) => {
+                poses.entry(p.frame).or_insert(iso);
+            }
+            Err(e) => {
+                if counters.truth_poses_refused == 0 {
+                    eprintln!(
+                        "warning: {}: frame {}: not a rigid pose ({e}); frames with such a true pose are not scored",
+                        ds.root().join("truth").join("poses.jsonl").display(),
+                        p.frame
+                    );
+                }
+                counters.truth_poses_refused += 1;
+            }
+        }
+    }
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
     let mut tracker = template.clone().map(|t| Tracker::new(t, TrackerParams::default()));
@@ -253,18 +298,32 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
     let pb = bar(frames.len() as u64, "carving");
     let mut t = StageTimes::default();
-    let mut counters = Counters::default();
     let mut accuracy: Vec<LabelAccuracy> =
         label::NAMED.iter().map(|&(_, name)| LabelAccuracy { label: name, ..LabelAccuracy::default() }).collect();
     let mut consistency: Vec<Consistency> =
         ds.meta().cameras.iter().map(|c| Consistency { camera: c.clone(), ..Consistency::default() }).collect();
     let mut disagreement = ViewDisagreement::new(&ds.meta().cameras);
     let mut resolution = 0;
-    for &frame in &frames {
+    let mut faults = Faults::default();
+    let mut flushed = Instant::now();
+    let mut process = |frame: u64| -> anyhow::Result<()> {
         let t_frame = Instant::now();
         let clock = Instant::now();
-        let mut set = ds.read_frame_set(frame, use_files || ds.has_masks())?;
-        checks::labels(&ds, &set)?;
+        // A camera image that cannot be used is left out of its frame set; a frame set with no
+        // usable image is left out whole, its pose line saying so.
+        let (set, frame_faults) = checks::read_frame_set(&ds, frame, use_files || ds.has_masks());
+        for fault in &frame_faults {
+            tracing::warn!("left out: {fault}");
+        }
+        faults.add(frame_faults, set.is_some());
+        let Some(mut set) = set else {
+            let mut e = no_tool_estimate(frame, ds.frame_timestamp(frame).unwrap_or(0));
+            e.reason = Some("the frame set could not be read (the report lists why)".to_owned());
+            pose_writer.write(&e)?;
+            pose_report.push(&e, None, None);
+            pb.inc(1);
+            return Ok(());
+        };
         t.read.push(clock.elapsed());
         // Masks read with the images are the truth. Segmenting moves them aside (the segmented masks
         // take their place, nothing is copied); with mask files they are what is carved.
@@ -342,14 +401,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         };
         t.pose.push(clock.elapsed());
         // The labelling's fit is timed in `segment`; its parts are not the pose stage's.
-        let part = |ms: f64| Duration::from_secs_f64(if from_labelling { 0.0 } else { ms * 1e-3 });
+        let part = |ms: f64| {
+            if from_labelling { Duration::ZERO } else { Duration::try_from_secs_f64(ms * 1e-3).unwrap_or_default() }
+        };
         t.pose_evidence.push(part(estimate.diagnostics.evidence_ms));
         t.pose_fit.push(part(estimate.diagnostics.fit_ms));
         pose_writer.write(&estimate)?;
-        let truth_iso = poses.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
+        let truth_iso = poses.get(&frame);
         if let Some(template) = &template {
             let error = |p: Option<&hullcut_pose::BladePose>| {
-                p.zip(truth_iso.as_ref()).map(|(p, truth)| pose_error(p, template, truth))
+                p.zip(truth_iso).map(|(p, truth)| pose_error(p, template, truth)).filter(finite_error)
             };
             if truth_iso.is_some() {
                 pose_report.push(&estimate, error(estimate.pose.as_ref()), error(estimate.fitted.as_ref()));
@@ -361,41 +422,30 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 
         if frame.is_multiple_of(args.accuracy_every) {
             let clock = Instant::now();
-            let pose = poses.iter().find(|p| p.frame == frame);
             let truth_masks: Vec<Option<&image::GrayImage>> =
                 if labelling.is_some() { set_aside.iter().map(Option::as_ref).collect() } else { masks.clone() };
-            // The exact visual hull: the truth masks carved at a quarter leaf, inside the cells that
-            // carving the truth masks at this leaf keeps (carving is conservative), so it costs a
-            // few times one carving instead of a whole octree four levels deeper.
-            let exact = if truth_masks.iter().any(Option::is_some) {
-                let truth_views = silhouettes(ds.rig(), &truth_masks)?;
-                let coarse = if labelling.is_some() { Some(carve(&truth_views, &params)?) } else { None };
-                let seeds = coarse.as_ref().unwrap_or(&occ);
-                let fine = HullParams { leaf_size: params.leaf_size / 4.0, ..params.clone() };
-                Some(carve_within(&truth_views, &fine, &seeds.cells)?)
-            } else {
-                None
-            };
+            let exact = exact_hull(&ds, &truth_masks, &occ, &params, labelling.is_some())?;
             for (c, view) in consistency.iter_mut().zip(&views) {
-                if let Some(iou) = view.as_ref().and_then(|v| silhouette_consistency(&occ, v)) {
+                if let Some(iou) = view.as_ref().and_then(|v| silhouette_consistency(&occ, v)).filter(|x| x.is_finite())
+                {
                     c.values.push(iou);
                 }
             }
             for (k, (l, name, grid, mesh)) in grids.iter().enumerate() {
-                let truth = truth_mesh(&ds, name, frame, tool.as_ref(), pose.map(|p| &p.tool_to_world))?;
-                score(
-                    &mut accuracy[k],
-                    grid.as_ref(),
-                    mesh.as_ref(),
-                    truth.as_ref(),
-                    exact.as_ref(),
-                    *l,
-                    occ.leaf_size,
-                );
+                let truth = truth_mesh(&ds, name, frame, tool.as_ref(), truth_iso)?;
+                let (exact, measurable) = match &exact {
+                    Exact::NoMasks => (None, true),
+                    Exact::Carved(occ) => (Some(occ), true),
+                    Exact::NotMeasurable => (None, false),
+                };
+                if truth.is_some() && !measurable {
+                    accuracy[k].exact_hull_not_measurable += 1;
+                }
+                score(&mut accuracy[k], grid.as_ref(), mesh.as_ref(), truth.as_ref(), exact, *l, occ.leaf_size);
             }
             t.accuracy.push(clock.elapsed());
             if let Some((rec, _)) = &rec {
-                hullcut_viz::set_frame(rec, frame as i64);
+                hullcut_viz::set_frame(rec, i64::try_from(frame).unwrap_or(i64::MAX));
                 for a in &accuracy {
                     if let Some(iou) = a.iou.last() {
                         hullcut_viz::log_scalar(rec, &format!("metrics/accuracy/{}_iou", a.label), *iou)?;
@@ -408,10 +458,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let last = |d: &[Duration]| d.last().map_or(0.0, |d| d.as_secs_f64() * 1e3);
             hullcut_viz::log_scalar(rec, "metrics/time/carve", last(&t.carve))?;
             hullcut_viz::log_scalar(rec, "metrics/time/surface", last(&t.surface))?;
-            if let (Some(tool), Some(pose)) = (&tool, poses.iter().find(|p| p.frame == frame)) {
-                log_tool(rec, "truth", tool, &pose.tool_to_world)?;
+            if let (Some(tool), Some(truth)) = (&tool, truth_iso) {
+                log_tool(rec, "truth", tool, &truth.to_homogeneous())?;
             }
-            if let (Some(template), Some(truth)) = (&template, &truth_iso) {
+            if let (Some(template), Some(truth)) = (&template, truth_iso) {
                 log_blade(rec, "truth", &hullcut_pose::BladePose::new(template, *truth))?;
             }
             match estimate.pose.as_ref().filter(|p| p.is_finite()) {
@@ -421,16 +471,34 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             hullcut_viz::log_scalar(rec, "metrics/pose/confidence", estimate.confidence)?;
             hullcut_viz::log_scalar(rec, "metrics/pose/valid", f64::from(u8::from(estimate.valid)))?;
             hullcut_viz::log_scalar(rec, "metrics/time/pose", t.pose.last().map_or(0.0, |d| d.as_secs_f64() * 1e3))?;
+            // A recording that cannot be written (a full disk) shows only when flushed.
+            if flushed.elapsed() >= FLUSH_EVERY {
+                hullcut_viz::flush(rec).context("writing the recording")?;
+                flushed = Instant::now();
+            }
         }
         t.total.push(t_frame.elapsed());
         pb.inc(1);
+        Ok(())
+    };
+    // The first error stops the frames; everything before it is flushed and reported.
+    let mut stopped = None;
+    for &frame in &frames {
+        if let Err(e) = process(frame) {
+            stopped = Some(e.context(format!("stopped at frame {frame}")));
+            break;
+        }
     }
     pb.finish_and_clear();
-    pose_writer.finish()?;
+    let stopped = [
+        stopped,
+        pose_writer.finish().err(),
+        rec.as_ref().and_then(|(rec, _)| hullcut_viz::flush(rec).err().map(anyhow::Error::new)),
+    ]
+    .into_iter()
+    .flatten()
+    .next();
     pose_report.finish();
-    if let Some((rec, _)) = &rec {
-        hullcut_viz::flush(rec)?;
-    }
     for a in &mut accuracy {
         a.frames = a.iou.len();
         let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
@@ -456,14 +524,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     );
     for a in accuracy.iter().filter(|a| a.frames > 0) {
         println!(
-            "  {:8} IoU {:.3} with the truth (the exact visual hull reaches {:.3}; IoU with it {:.3}), Chamfer {:.2} mm, Hausdorff {:.2} mm over {} frames",
+            "  {:8} IoU {} with the truth (the exact visual hull reaches {}; IoU with it {}), Chamfer {} mm, Hausdorff {} mm over {} frames{}",
             a.label,
-            a.iou_mean.unwrap_or(f64::NAN),
-            a.exact_hull_truth_iou_mean.unwrap_or(f64::NAN),
-            a.exact_hull_iou_mean.unwrap_or(f64::NAN),
-            a.chamfer_mm_mean.unwrap_or(f64::NAN),
-            a.hausdorff_mm_max.unwrap_or(f64::NAN),
-            a.frames
+            figure(a.iou_mean, 3),
+            figure(a.exact_hull_truth_iou_mean, 3),
+            figure(a.exact_hull_iou_mean, 3),
+            figure(a.chamfer_mm_mean, 2),
+            figure(a.hausdorff_mm_max, 2),
+            a.frames,
+            if a.exact_hull_not_measurable > 0 {
+                format!(
+                    " ({} frame(s) with no exact visual hull to compare: see the report)",
+                    a.exact_hull_not_measurable
+                )
+            } else {
+                String::new()
+            }
         );
     }
     println!("{}", pose_report.summary());
@@ -471,8 +547,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(line) = disagreement.summary() {
         println!("{line}");
     }
+    let (faults_any, faults_summary) = (faults.any(), faults.summary());
+    let mut non_finite = Vec::new();
     if let Some(path) = &args.report {
-        let report = Report {
+        let mut report = Report {
             schema_version: SCHEMA_VERSION,
             kind: "reconstruction",
             provenance: Provenance::current(),
@@ -488,7 +566,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             min_support: params.min_support,
             min_views: params.min_views,
             trim_slivers: params.trim_slivers,
+            stopped: stopped.as_ref().map(|e| format!("{e:#}")),
             counters,
+            faults,
             accuracy,
             silhouette_consistency: consistency,
             view_disagreement: disagreement,
@@ -505,10 +585,80 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 accuracy: StageTiming::from_durations(&t.accuracy),
                 total: StageTiming::from_durations(&[t_start.elapsed()]),
             },
+            non_finite: Vec::new(),
         };
+        non_finite = checks::non_finite_fields(&report);
+        report.non_finite.clone_from(&non_finite);
         write_json(path, &report)?;
     }
+    if let Some(e) = stopped {
+        let kept = if args.report.is_some() { " (the outputs and the report hold the frames before it)" } else { "" };
+        return Err(e.context(format!("reconstruction stopped{kept}")));
+    }
+    if !non_finite.is_empty() {
+        bail!("figures that are not finite numbers (written as null in the report): {}", non_finite.join(", "));
+    }
+    if faults_any {
+        bail!("{faults_summary}");
+    }
     Ok(())
+}
+
+/// How often a recording is flushed, to find a sink that cannot write (a full disk).
+const FLUSH_EVERY: Duration = Duration::from_secs(2);
+
+/// Leaves of a quarter of the voxel the exact visual hull may carve at most: over this (a hull
+/// the size of the working volume) it is not measurable, counted, not carved for minutes.
+pub const MAX_EXACT_LEAVES: f64 = 8_388_608.0;
+
+/// The exact visual hull of a frame, or why it was not carved.
+enum Exact {
+    /// No truth masks: nothing to compare.
+    NoMasks,
+    /// Not measurable: a view's truth mask is one label everywhere (that view bounds nothing),
+    /// or the hull holds more than [`MAX_EXACT_LEAVES`] quarter leaves.
+    NotMeasurable,
+    /// The truth masks carved at a quarter leaf.
+    Carved(Occupancy),
+}
+
+/// The exact visual hull: the truth masks carved at a quarter leaf, inside the cells that carving
+/// the truth masks at this leaf keeps (carving is conservative), so it costs a few times one
+/// carving instead of a whole octree four levels deeper; not measured when a truth mask is
+/// all hand or all scalpel, or beyond [`MAX_EXACT_LEAVES`].
+fn exact_hull(
+    ds: &Dataset,
+    truth_masks: &[Option<&image::GrayImage>],
+    occ: &Occupancy,
+    params: &HullParams,
+    segmented: bool,
+) -> anyhow::Result<Exact> {
+    if truth_masks.iter().all(Option::is_none) {
+        return Ok(Exact::NoMasks);
+    }
+    let one_label = |m: &image::GrayImage| label::NAMED.iter().any(|&(l, _)| m.as_raw().iter().all(|&p| p == l));
+    if truth_masks.iter().flatten().any(|m| one_label(m)) {
+        return Ok(Exact::NotMeasurable);
+    }
+    let truth_views = silhouettes(ds.rig(), truth_masks)?;
+    let coarse = if segmented { Some(carve(&truth_views, params)?) } else { None };
+    let seeds = coarse.as_ref().unwrap_or(occ);
+    let fine = HullParams { leaf_size: params.leaf_size / 4.0, ..params.clone() };
+    let leaves: f64 = seeds.cells.iter().map(|c| (c.size / fine.leaf_size).powi(3)).sum();
+    if !(leaves.is_finite() && leaves <= MAX_EXACT_LEAVES) {
+        return Ok(Exact::NotMeasurable);
+    }
+    Ok(Exact::Carved(carve_within(&truth_views, &fine, &seeds.cells)?))
+}
+
+/// Whether a pose error is a number in every field (a NaN is not measured, not an error of 0).
+fn finite_error(e: &hullcut_pose::PoseError) -> bool {
+    e.normal_deg.is_finite() && e.edge_mm.is_finite() && e.tip_mm.is_finite()
+}
+
+/// A figure for the terminal: `n/a` when it was not measured.
+fn figure(value: Option<f64>, decimals: usize) -> String {
+    value.filter(|v| v.is_finite()).map_or_else(|| "n/a".to_owned(), |v| format!("{v:.decimals$}"))
 }
 
 #[derive(Debug, Default)]
@@ -531,20 +681,23 @@ fn truth_mesh(
     name: &str,
     frame: u64,
     tool: Option<&hullcut_dataset::ToolGeometry>,
-    pose: Option<&nalgebra::Matrix4<f64>>,
+    pose: Option<&Isometry3<f64>>,
 ) -> anyhow::Result<Option<Mesh>> {
     if let Some(mesh) = ds.read_truth_mesh(name, frame)? {
         return Ok(Some(mesh));
     }
     Ok(match (name, tool, pose) {
         ("scalpel", Some(tool), Some(pose)) => Some(Mesh {
-            vertices: tool.mesh.vertices.iter().map(|p| pose.transform_point(p)).collect(),
+            vertices: tool.mesh.vertices.iter().map(|p| pose * p).collect(),
             triangles: tool.mesh.triangles.clone(),
         }),
         _ => None,
     })
 }
 
+/// Scores one label of one frame against its truth. A figure that cannot be measured (no hull
+/// surface, a truth mesh with a vertex at infinity) or comes out not finite is left out and
+/// counted in `not_measured`, never averaged in as NaN.
 fn score(
     acc: &mut LabelAccuracy,
     grid: Option<&DenseGrid>,
@@ -556,29 +709,37 @@ fn score(
 ) {
     let Some(truth) = truth else { return };
     const SAMPLES: usize = 8000;
-    if let Some(iou) = volumetric_iou(grid, truth, SAMPLES) {
-        acc.iou.push(iou);
+    let finite = |v: &f64| v.is_finite();
+    let mut missed = false;
+    match volumetric_iou(grid, truth, SAMPLES).filter(finite) {
+        Some(iou) => acc.iou.push(iou),
+        None => missed = true,
     }
     if let Some(exact) = exact {
         let exact_grid = DenseGrid::from_occupancy(exact, Some(l));
         if let (Some(g), Some(e)) = (grid, exact_grid.as_ref())
-            && let Some(iou) = grid_iou(g, e, SAMPLES)
+            && let Some(iou) = grid_iou(g, e, SAMPLES).filter(finite)
         {
             acc.exact.push(iou);
         }
-        if let Some(iou) = volumetric_iou(exact_grid.as_ref(), truth, SAMPLES) {
+        if let Some(iou) = volumetric_iou(exact_grid.as_ref(), truth, SAMPLES).filter(finite) {
             acc.exact_truth.push(iou);
         }
     }
-    if let Some(mesh) = mesh {
+    let distance = mesh.and_then(|mesh| {
         let spacing = leaf;
         let ours = sample_surface(mesh, spacing);
         let theirs = outer_surface_samples(truth, spacing);
-        if let Some(d) = surface_distance(&ours, &theirs, 2.0 * leaf) {
+        surface_distance(&ours, &theirs, 2.0 * leaf)
+    });
+    match distance.filter(|d| d.chamfer.is_finite() && d.hausdorff.is_finite()) {
+        Some(d) => {
             acc.chamfer.push(d.chamfer * 1e3);
             acc.hausdorff.push(d.hausdorff * 1e3);
         }
+        None => missed = true,
     }
+    acc.not_measured += usize::from(missed);
 }
 
 /// Logs one frame set's images and masks and hull leaves (every `every`-th frame) and hull
@@ -594,7 +755,7 @@ pub(crate) fn log_hull(
     every: u64,
     mesh_every: u64,
 ) -> anyhow::Result<()> {
-    hullcut_viz::set_frame(rec, frame as i64);
+    hullcut_viz::set_frame(rec, i64::try_from(frame).unwrap_or(i64::MAX));
     hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
     let colours = |l: u8| if l == label::HAND { [70, 130, 255, 255] } else { [255, 200, 40, 255] };
     if frame.is_multiple_of(every) {

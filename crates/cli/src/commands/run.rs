@@ -4,6 +4,7 @@ mod snapshot;
 pub(crate) mod stages;
 pub(crate) mod tissue;
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -12,14 +13,15 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use hullcut_dataset::Dataset;
 use hullcut_hull::HullParams;
-use hullcut_pose::{Template, isometry_from_matrix, pose_error};
+use hullcut_pose::{PoseError, Template, pose_error, rigid_from_matrix};
 use hullcut_sim::{HybridParams, HybridSteps};
 use hullcut_synth::{SceneConfig, SceneKind, synthesize};
+use nalgebra::Isometry3;
 use serde::Serialize;
 
 use self::stages::{Policy, StageTimes, Work};
 use crate::backend::{Backend, Carver};
-use crate::commands::reconstruct::checks;
+use crate::commands::reconstruct::checks::{self, Faults};
 use crate::frames::parse_frames;
 use crate::labelling::{LabelMethod, Labelling};
 use crate::logging::{CameraLogger, log_tool};
@@ -44,7 +46,17 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// hull pushes it aside where it presses on it). Untrusted
 /// poses never cut, and a sweep never bridges a refused frame. Without --realtime every frame is
 /// processed (a full queue blocks the reader); with --realtime the reader keeps to the capture
-/// timestamps and a full queue drops its oldest frame set, counted in the report.
+/// timestamps and a full queue drops its oldest frame set, counted in the report; it waits at
+/// most 5 s between two frame sets: a longer gap in the capture times (or one backwards) is not
+/// waited out but counted (counters.realtime_gaps_skipped).
+///
+/// Bad input: a camera image that cannot be read (a corrupt PNG, a camera whose files stop
+/// mid-recording) or a mask with unknown labels leaves that view out of its frame set (the whole
+/// frame set when no view is left); the run goes on, the report lists every fault (faults), and
+/// the run exits with an error at the end saying so. A stage that fails or a recording that
+/// cannot be written (a full disk) stops the run with the reason; the recording and the report
+/// still hold every frame set processed before. A report figure that is not a finite number is
+/// written as null, named in the report's non_finite, and makes the run exit with an error.
 ///
 /// The tissue: --tissue organ (the built-in two-lobed liver-like organ, 15 x 10 x 6 cm, resting on
 /// the table at z = 0 under the tool) or a PLY/OBJ mesh in world metres; --cell sets its lattice
@@ -92,16 +104,16 @@ pub struct Args {
     #[arg(long, value_name = "NAME|MESH", default_value = "organ")]
     tissue: String,
     /// Lattice spacing of the tissue, metres.
-    #[arg(long, value_name = "METRES", default_value_t = 0.005)]
+    #[arg(long, value_name = "METRES", default_value_t = 0.005, value_parser = super::positive)]
     cell: f64,
     /// The hybrid model: lattice cells within this distance of the blade's sweep (and cut cells
     /// and their neighbours) run TLED, the others FLSM, matched to the material; cells return to
     /// FLSM once the blade has left and they have come to rest. Without it every cell is TLED.
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", value_parser = non_negative)]
     operational_radius: Option<f64>,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
-    #[arg(long, value_name = "auto|files|segment", default_value = "auto")]
-    masks: String,
+    #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
+    masks: checks::MaskSource,
     /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
@@ -125,21 +137,22 @@ pub struct Args {
     /// Replay the frame sets this many times, each pass's capture times following the last
     /// pass's (a long run from a short recording: memory over 10 minutes). Later passes log on
     /// the `frame` timeline after the first; snapshots come from the first pass only.
-    #[arg(long, value_name = "N", default_value_t = 1)]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     repeat: u64,
     /// Frame sets of the built-in scene (at 30 fps).
-    #[arg(long, value_name = "N", default_value_t = 180)]
+    #[arg(long, value_name = "N", default_value_t = 180, value_parser = clap::value_parser!(u64).range(1..))]
     scene_frames: u64,
     /// Seed of the built-in scene.
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
     /// Frame sets each queue between stages holds.
-    #[arg(long, value_name = "N", default_value_t = 4)]
+    #[arg(long, value_name = "N", default_value_t = 4,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     queue: usize,
     /// Log images (JPEG), masks, hull leaves and meshes and the lattice nodes every N-th frame; the
     /// blade, the swept surface and the scalars every frame; the tissue surface whenever it has
     /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged).
-    #[arg(long, value_name = "N", default_value_t = 5)]
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
     /// Write a JSON report.
     #[arg(long, value_name = "FILE")]
@@ -155,7 +168,7 @@ pub struct Args {
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
     snapshot_frames: Option<Vec<u64>>,
     /// Snapshot every N-th frame (when --snapshot-frames is not given).
-    #[arg(long, value_name = "N", default_value_t = 30)]
+    #[arg(long, value_name = "N", default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..))]
     snapshot_every: u64,
     /// The camera the organ snapshot is drawn through (default: the rig's first).
     #[arg(long, value_name = "NAME")]
@@ -171,12 +184,18 @@ struct Counters {
     frame_sets_processed: u64,
     /// Dropped by the --realtime policy (queue full: the oldest frame set goes).
     frame_sets_dropped: u64,
+    /// Gaps in the capture times over 5 s (or backwards) that --realtime did not wait out.
+    realtime_gaps_skipped: u64,
+    /// True poses in truth/poses.jsonl that are not rigid poses (not scored).
+    truth_poses_refused: u64,
     poses_trusted: u64,
     poses_refused: u64,
     poses_held: u64,
     sweeps: u64,
     /// Trusted poses that did not sweep because the frame before was refused.
     sweeps_skipped_after_refusal: u64,
+    /// Sweeps too large for the collision test's bounds (a step of metres), not cut.
+    sweeps_refused: u64,
     edges_cut: u64,
     /// Frame sets after which the hand's hull was pressing on the tissue, and the most lattice
     /// nodes it pushed at once.
@@ -257,13 +276,18 @@ struct Report {
     queue: usize,
     /// Stopped by Ctrl-C before the last frame set (everything read until then was processed).
     interrupted: bool,
+    /// Why the run stopped before its end, when something failed (null when it did not).
+    stopped: Option<String>,
     wall_s: f64,
     /// Frame sets processed per second of wall time, start-up (rendering, the tissue's set-up)
     /// excluded.
     sustained_fps: f64,
     capture_fps: f64,
     counters: Counters,
-    tissue: TissueReport,
+    /// Camera images and frame sets that could not be used and were left out.
+    faults: Faults,
+    /// The tissue at the end (null when its stage failed).
+    tissue: Option<TissueReport>,
     /// Resident memory at every full minute of the run and at its end (Linux; empty elsewhere).
     memory: Vec<MemorySample>,
     /// How the segmented masks were labelled (null with mask files).
@@ -272,6 +296,9 @@ struct Report {
     timings: Timings,
     /// Entities logged to the recording.
     entities: Vec<String>,
+    /// Figures of this report that were not finite numbers (written as null): the run exits
+    /// with an error naming them.
+    non_finite: Vec<String>,
 }
 
 /// How often the run samples its memory.
@@ -343,17 +370,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         })
         .context("installing the Ctrl-C handler")?;
     }
-    if args.queue == 0 || args.rrd_every == 0 || args.snapshot_every == 0 {
-        bail!("--queue, --rrd-every and --snapshot-every must be at least 1");
-    }
-    if let Some(r) = args.operational_radius
-        && !(r.is_finite() && r >= 0.0)
-    {
-        bail!("--operational-radius {r}: must be a length in metres, 0 or more");
-    }
-    if !(args.cell.is_finite() && args.cell > 0.0) {
-        bail!("--cell {}: must be a positive length in metres", args.cell);
-    }
     let sink = match (&args.rrd, args.spawn, &args.connect) {
         (Some(path), _, _) => hullcut_viz::Sink::File(path.clone()),
         (None, true, _) => {
@@ -377,9 +393,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let (dataset_path, seed) = match &args.dataset {
         Some(path) => (path.clone(), None),
         None => {
-            if args.scene_frames == 0 {
-                bail!("--scene-frames must be at least 1");
-            }
             scene_dir = tempfile::tempdir().context("creating a temporary folder for the built-in scene")?;
             let path = scene_dir.path().join("scene");
             let mut config = SceneConfig::new(SceneKind::Resect, args.seed, args.scene_frames);
@@ -395,14 +408,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
     };
     let ds = Arc::new(Dataset::open(&dataset_path)?);
-    let use_files = checks::masks_from_files(&ds, &args.masks)?;
+    let use_files = checks::masks_from_files(&ds, args.masks)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
     let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
     if frames.is_empty() {
         bail!("{}: no frame sets in {}..{}", dataset_path.display(), range.start, range.end);
-    }
-    if args.repeat == 0 {
-        bail!("--repeat must be at least 1");
     }
     // A pass spans its frames' numbers and one frame period more, so the next pass's first frame
     // set follows the last one's as the next frame would.
@@ -412,7 +422,27 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let tool = ds.tool()?;
     let template =
         tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
-    let truth = ds.truth_poses()?.unwrap_or_default();
+    // True poses, each checked: a matrix that is not a rigid pose (a NaN, a rotation entry of
+    // 1e19) is not scored, and counted.
+    let mut truth: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
+    let mut truth_refused = 0u64;
+    for p in ds.truth_poses()?.unwrap_or_default() {
+        match rigid_from_matrix(&p.tool_to_world) {
+            Ok(iso) => {
+                truth.entry(p.frame).or_insert(iso);
+            }
+            Err(e) => {
+                if truth_refused == 0 {
+                    eprintln!(
+                        "warning: {}: frame {}: not a rigid pose ({e}); frames with such a true pose are not scored",
+                        ds.root().join("truth").join("poses.jsonl").display(),
+                        p.frame
+                    );
+                }
+                truth_refused += 1;
+            }
+        }
+    }
     let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;
     checks::voxel(args.voxel, volume.aabb.extent())?;
     let hull = HullParams {
@@ -489,35 +519,40 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         stop: Arc::clone(&stop),
     })?;
 
-    let total = frames.len() as u64 * args.repeat;
+    let total = (frames.len() as u64).saturating_mul(args.repeat);
     let pb = bar(total, "running");
     let mut memory = Vec::new();
     let mut next_sample = MEMORY_SAMPLE;
-    let mut counters = Counters::default();
+    let mut counters = Counters { truth_poses_refused: truth_refused, ..Counters::default() };
     let mut pose_report = PoseReport::new(template.is_some());
     let mut times = StageTimes::default();
     let mut logging = Vec::new();
     let mut latency = Vec::new();
     let mut surface_log = tissue::SurfaceLog::default();
     let mut tled_cells: Vec<usize> = Vec::new();
-    for work in pipeline.output.iter() {
+    let mut flushed = Instant::now();
+    // The first error while logging or writing stops the run; what was processed until then is
+    // flushed and reported.
+    let mut consume = |work: Work| -> anyhow::Result<()> {
         let clock = Instant::now();
         counters.frame_sets_processed += 1;
         counters.views_missing += work.set.views.iter().filter(|v| v.is_none()).count() as u64;
         let Work { frame, pass, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
         // Where this frame set goes on the `frame` timeline (later passes follow the first).
-        let shown = frame + pass * pass_frames;
+        let shown = frame.saturating_add(pass.saturating_mul(pass_frames));
         times.extend(&t);
-        let truth_iso = truth.iter().find(|p| p.frame == frame).and_then(|p| isometry_from_matrix(&p.tool_to_world));
-        match (&template, &estimate) {
-            (Some(template), Some(e)) => {
-                let error = |p: Option<&hullcut_pose::BladePose>| {
-                    p.zip(truth_iso.as_ref()).map(|(p, truth)| pose_error(p, template, truth))
-                };
-                pose_report.push(e, error(e.pose.as_ref()), error(e.fitted.as_ref()));
-            }
-            (None, Some(e)) => pose_report.push(e, None, None),
-            _ => {}
+        let truth_iso = truth.get(&frame);
+        // A pose's error against the truth; none where there is no truth or a figure is not
+        // finite (not measured, never a NaN in the report).
+        let error = |p: Option<&hullcut_pose::BladePose>| -> Option<PoseError> {
+            let measured = match (&template, p, truth_iso) {
+                (Some(template), Some(p), Some(truth)) => Some(pose_error(p, template, truth)),
+                _ => None,
+            };
+            measured.filter(finite_error)
+        };
+        if let Some(e) = &estimate {
+            pose_report.push(e, error(e.pose.as_ref()), error(e.fitted.as_ref()));
         }
         if let Some(e) = &estimate {
             if e.valid {
@@ -530,13 +565,19 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some(step) = &step {
             counters.sweeps += u64::from(step.swept.is_some());
             counters.sweeps_skipped_after_refusal += u64::from(step.sweep_skipped);
+            if let Some(reason) = &step.sweep_refused {
+                if counters.sweeps_refused == 0 {
+                    tracing::warn!("frame {frame}: a sweep was not cut: {reason}");
+                }
+                counters.sweeps_refused += 1;
+            }
             counters.edges_cut += step.cut.map_or(0, |c| c.new_edges as u64);
             counters.frames_with_contact += u64::from(step.contacts > 0);
             counters.max_contact_nodes = counters.max_contact_nodes.max(step.contacts as u64);
             tled_cells.push(step.tled_cells);
         }
         // rerun: everything on the frame and capture-time timelines.
-        hullcut_viz::set_frame(&rec, shown as i64);
+        hullcut_viz::set_frame(&rec, i64::try_from(shown).unwrap_or(i64::MAX));
         hullcut_viz::set_capture_time_ns(&rec, set.timestamp_ns);
         if let Some(occ) = &occ {
             crate::commands::reconstruct::log_hull(
@@ -550,10 +591,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 args.rrd_every,
             )?;
         }
-        if let (Some(tool), Some(p)) = (&tool, truth.iter().find(|p| p.frame == frame)) {
-            log_tool(&rec, "truth", tool, &p.tool_to_world)?;
+        if let (Some(tool), Some(iso)) = (&tool, truth_iso) {
+            log_tool(&rec, "truth", tool, &iso.to_homogeneous())?;
         }
-        if let (Some(template), Some(iso)) = (&template, &truth_iso) {
+        if let (Some(template), Some(iso)) = (&template, truth_iso) {
             log_blade(&rec, "truth", &hullcut_pose::BladePose::new(template, *iso))?;
         }
         if let Some(e) = &estimate {
@@ -562,8 +603,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 None => hullcut_viz::log_clear(&rec, "world/tool/estimate")?,
             }
             hullcut_viz::log_scalar(&rec, "metrics/pose/confidence", e.confidence)?;
-            if let (Some(template), Some(p), Some(iso)) = (&template, e.pose.as_ref(), &truth_iso) {
-                let err = pose_error(p, template, iso);
+            if let Some(err) = error(e.pose.as_ref()) {
                 hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_normal_deg", err.normal_deg)?;
                 hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_tip_mm", err.tip_mm)?;
             }
@@ -582,6 +622,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         for (name, ms) in t.last_ms() {
             hullcut_viz::log_scalar(&rec, &format!("metrics/time/{name}"), ms)?;
         }
+        // A file sink that cannot write (a full disk) shows only when flushed: flush now and
+        // then, and stop with its reason rather than log into nothing.
+        if let hullcut_viz::Sink::File(path) = &sink
+            && flushed.elapsed() >= FLUSH_EVERY
+        {
+            hullcut_viz::flush(&rec).with_context(|| format!("writing the recording {}", path.display()))?;
+            flushed = Instant::now();
+        }
         logging.push(clock.elapsed());
         latency.push(started.elapsed());
         if t0.elapsed() >= next_sample {
@@ -589,21 +637,38 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             next_sample += MEMORY_SAMPLE;
         }
         pb.inc(1);
+        Ok(())
+    };
+    let mut stopped: Option<anyhow::Error> = None;
+    for work in pipeline.output.iter() {
+        if let Err(e) = consume(work) {
+            stopped = Some(e.context("stopped while logging the frame sets"));
+            break;
+        }
     }
     pb.finish_and_clear();
     let wall = t0.elapsed();
     memory.extend(MemorySample::now(wall, counters.frame_sets_processed));
-    let outcome = pipeline.join()?;
-    let interrupted = stop.load(Ordering::SeqCst) && outcome.read < total;
-    counters.frame_sets_read = outcome.read;
+    let outcome = pipeline.join();
+    let error = stopped.or(outcome.error);
+    let interrupted = stop.load(Ordering::SeqCst) && outcome.read.read < total;
+    counters.frame_sets_read = outcome.read.read;
     counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
+    counters.realtime_gaps_skipped = outcome.read.gaps_skipped;
     counters.snapshots_written = snapshots.as_ref().map_or(0, |s| s.written);
     counters.tissue_surfaces_logged = surface_log.logged;
     counters.tissue_surfaces_unchanged = surface_log.skipped;
     pose_report.finish();
-    hullcut_viz::flush(&rec)?;
-    let sim = &outcome.sim;
-    let topology = sim.topology();
+    // What was logged stays readable whatever stopped the run.
+    let error = match (error, hullcut_viz::flush(&rec)) {
+        (Some(e), _) => Some(e),
+        (None, Err(e)) => Some(anyhow::Error::new(e).context(format!("writing the recording ({sink})"))),
+        (None, Ok(())) => None,
+    };
+    let faults = outcome.read.faults;
+    let (faults_any, faults_summary) = (faults.any(), faults.summary());
+    let processed = counters.frame_sets_processed;
+    let sim = outcome.sim.as_ref();
     let sustained_fps = counters.frame_sets_processed as f64 / wall.as_secs_f64().max(1e-9);
     println!(
         "{} frame sets in {:.2} s ({sustained_fps:.1} fps sustained; captured at {:.1} fps), {} dropped",
@@ -612,6 +677,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ds.meta().fps,
         counters.frame_sets_dropped
     );
+    if counters.realtime_gaps_skipped > 0 {
+        println!(
+            "--realtime: {} gap(s) in the capture times over {} s (or backwards) not waited out",
+            counters.realtime_gaps_skipped,
+            stages::MAX_REALTIME_GAP_S
+        );
+    }
     match memory.as_slice() {
         [] => {}
         [last] => println!("memory: {:.0} MiB resident at the end (peak {:.0} MiB)", last.rss_mib, last.peak_rss_mib),
@@ -621,18 +693,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ),
     }
     println!("{}", pose_report.summary());
-    println!(
-        "tissue: {} sweeps cut {} lattice edges; {} piece(s), {} cell copies, {} virtual nodes{}",
-        counters.sweeps,
-        counters.edges_cut,
-        topology.pieces,
-        topology.copies.len(),
-        topology.virtual_of.len(),
-        outcome.failure.as_ref().map_or(String::new(), |f| format!("; STOPPED: {f}"))
-    );
+    if let Some(sim) = sim {
+        let topology = sim.topology();
+        println!(
+            "tissue: {} sweeps cut {} lattice edges; {} piece(s), {} cell copies, {} virtual nodes{}",
+            counters.sweeps,
+            counters.edges_cut,
+            topology.pieces,
+            topology.copies.len(),
+            topology.virtual_of.len(),
+            outcome.failure.as_ref().map_or(String::new(), |f| format!("; STOPPED: {f}"))
+        );
+    }
     let timing = |d: &[Duration]| StageTiming::from_durations(d);
+    let mut non_finite = Vec::new();
     if let Some(path) = &args.report {
-        let report = Report {
+        let mut report = Report {
             schema_version: SCHEMA_VERSION,
             kind: "run",
             provenance: Provenance::current(),
@@ -650,34 +726,39 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             realtime: args.realtime,
             queue: args.queue,
             interrupted,
+            stopped: error.as_ref().map(|e| format!("{e:#}")),
             wall_s: wall.as_secs_f64(),
             sustained_fps,
             capture_fps: ds.meta().fps,
             counters,
+            faults,
             memory,
-            tissue: TissueReport {
-                source: args.tissue.clone(),
-                cell_m: args.cell,
-                nodes: sim.lattice().node_count(),
-                cells: sim.lattice().cells.len(),
-                fixed_nodes: sim.fixed().iter().filter(|&&f| f).count(),
-                dt_s: sim.dt(),
-                dt_critical_s: sim.dt_critical(),
-                pieces: topology.pieces,
-                copies: topology.copies.len(),
-                virtual_nodes: topology.virtual_of.len(),
-                copies_dropped: sim.dropped_copies(),
-                inverted_cells: sim.inverted_cells(),
-                kinetic_energy_j: sim.kinetic_energy(),
-                simulated_s: sim.time(),
-                failure: outcome.failure.clone(),
-                operational_radius_m: args.operational_radius,
-                hybrid: sim.hybrid_steps(),
-                tled_cells_mean: tled_cells.iter().sum::<usize>() as f64 / tled_cells.len().max(1) as f64,
-                tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),
-                region_changes: sim.region_changes(),
-                gpu: sim.gpu_stats().cloned(),
-            },
+            tissue: sim.map(|sim| {
+                let topology = sim.topology();
+                TissueReport {
+                    source: args.tissue.clone(),
+                    cell_m: args.cell,
+                    nodes: sim.lattice().node_count(),
+                    cells: sim.lattice().cells.len(),
+                    fixed_nodes: sim.fixed().iter().filter(|&&f| f).count(),
+                    dt_s: sim.dt(),
+                    dt_critical_s: sim.dt_critical(),
+                    pieces: topology.pieces,
+                    copies: topology.copies.len(),
+                    virtual_nodes: topology.virtual_of.len(),
+                    copies_dropped: sim.dropped_copies(),
+                    inverted_cells: sim.inverted_cells(),
+                    kinetic_energy_j: sim.kinetic_energy(),
+                    simulated_s: sim.time(),
+                    failure: outcome.failure.clone(),
+                    operational_radius_m: args.operational_radius,
+                    hybrid: sim.hybrid_steps(),
+                    tled_cells_mean: tled_cells.iter().sum::<usize>() as f64 / tled_cells.len().max(1) as f64,
+                    tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),
+                    region_changes: sim.region_changes(),
+                    gpu: sim.gpu_stats().cloned(),
+                }
+            }),
             labelling: outcome.labelling.clone(),
             pose: pose_report,
             timings: Timings {
@@ -696,8 +777,25 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 latency: timing(&latency),
             },
             entities: ENTITIES.iter().map(|s| (*s).to_owned()).collect(),
+            non_finite: Vec::new(),
         };
+        non_finite = checks::non_finite_fields(&report);
+        report.non_finite.clone_from(&non_finite);
         write_json(path, &report)?;
+    } else if let Some(sim) = sim {
+        // Without a report the essential figures are still checked.
+        let figures = [
+            ("tissue.kinetic_energy_j", sim.kinetic_energy()),
+            ("tissue.simulated_s", sim.time()),
+            ("tissue.dt_s", sim.dt()),
+            ("sustained_fps", sustained_fps),
+        ];
+        non_finite.extend(figures.iter().filter(|(_, v)| !v.is_finite()).map(|(name, _)| (*name).to_owned()));
+    }
+    if let Some(e) = error {
+        let kept =
+            if args.report.is_some() { "the recording and the report hold them" } else { "the recording holds them" };
+        return Err(e.context(format!("the run stopped after {processed} frame set(s) ({kept})")));
     }
     if let Some(f) = outcome.failure {
         bail!("the tissue simulation stopped: {f}");
@@ -705,15 +803,37 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if interrupted {
         bail!(
             "interrupted after {} of {} frame sets (the recording and the report hold them all)",
-            outcome.read,
+            outcome.read.read,
             frames.len()
         );
     }
+    if !non_finite.is_empty() {
+        bail!("figures that are not finite numbers (written as null in the report): {}", non_finite.join(", "));
+    }
+    if faults_any {
+        bail!("{faults_summary}");
+    }
     Ok(())
+}
+
+/// How often a run flushes a file recording, to find a sink that cannot write (a full disk).
+const FLUSH_EVERY: Duration = Duration::from_secs(2);
+
+/// Whether a pose error is a number in every field (a NaN is not measured, not an error of 0).
+fn finite_error(e: &PoseError) -> bool {
+    e.normal_deg.is_finite() && e.edge_mm.is_finite() && e.tip_mm.is_finite()
 }
 
 /// The `rerun` executable on PATH, if any.
 fn which_rerun() -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path).map(|d| d.join("rerun")).find(|p| p.is_file())
+}
+
+/// A length in metres, 0 or more (`--operational-radius`).
+fn non_negative(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{}` is not a length in metres, 0 or more", crate::report::shorten(s, 80))),
+    }
 }

@@ -333,3 +333,44 @@ fn a_camera_turned_by_half_a_degree_is_named_and_costs_a_sliver() {
         }
     }
 }
+
+#[test]
+fn accuracy_of_an_all_scalpel_hull_is_measured_exactly_and_promptly_and_a_far_vertex_measures_nothing() {
+    use hullcut_hull::accuracy::{MAX_SURFACE_SAMPLES, sample_surface, surface_distance, volumetric_iou};
+    let (rig, masks) = clean_masks();
+    // Every view all scalpel: the hull is the whole workspace, its surface up to 35 cm from the
+    // sphere's. The nearest-point search once went through millions of empty cells per point here.
+    let full: Vec<Option<GrayImage>> = masks
+        .iter()
+        .map(|m| Some(GrayImage::from_pixel(m.width(), m.height(), image::Luma([label::SCALPEL]))))
+        .collect();
+    let occ = carve_masks(rig, &full, 1);
+    let grid = DenseGrid::from_occupancy(&occ, Some(label::SCALPEL)).expect("the whole workspace");
+    let hull = sample_surface(&grid.surface(), LEAF);
+    let truth = sample_surface(&super::sphere().mesh, LEAF);
+    let d = surface_distance(&hull, &truth, 2.0 * LEAF).expect("both sampled");
+    // The same figures by brute force (the bounded search is exact, not an estimate).
+    let directed = |from: &[Point3<f64>], to: &[Point3<f64>]| {
+        let d: Vec<f64> =
+            from.iter().map(|p| to.iter().map(|q| (q - p).norm()).fold(f64::INFINITY, f64::min)).collect();
+        (d.iter().sum::<f64>() / d.len() as f64, d.iter().copied().fold(0.0, f64::max))
+    };
+    let ((ab, ab_max), (ba, ba_max)) = (directed(&hull, &truth), directed(&truth, &hull));
+    // Sums of the same distances in another order: equal to rounding.
+    assert!((d.chamfer - (ab + ba) / 2.0).abs() < 1e-9, "{d:?} against {}", (ab + ba) / 2.0);
+    assert!((d.hausdorff - ab_max.max(ba_max)).abs() < 1e-12, "{d:?}");
+    assert!(d.hausdorff > 0.1, "the sphere lies deep inside the workspace: {d:?}");
+
+    // A vertex at 1e300: sampled no finer than the sample cap allows; at infinity, nothing.
+    let mut far = super::sphere().mesh;
+    far.vertices[0].x = 1e300;
+    assert!(sample_surface(&far, LEAF).len() <= MAX_SURFACE_SAMPLES + far.triangles.len());
+    far.vertices[0] = Point3::new(f64::INFINITY, 0.0, 0.0);
+    assert!(sample_surface(&far, LEAF).is_empty());
+    assert!(volumetric_iou(Some(&grid), &far, 1000).is_none());
+    // Nothing measured from a point that is not a number or a grid cell of no size.
+    let mut nan = truth.clone();
+    nan[0].y = f64::NAN;
+    assert!(surface_distance(&hull, &nan, 2.0 * LEAF).is_none());
+    assert!(surface_distance(&hull, &truth, 0.0).is_none());
+}

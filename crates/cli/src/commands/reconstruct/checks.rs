@@ -1,7 +1,9 @@
-//! Input checks of `hullcut reconstruct` and the per-camera disagreement it reports.
+//! Input checks of `hullcut reconstruct` and `hullcut run` (frame sets read past a bad camera
+//! image, reports checked for numbers that are not finite) and the per-camera disagreement
+//! reconstruct reports.
 
 use anyhow::bail;
-use hullcut_dataset::{Dataset, FrameSet, label};
+use hullcut_dataset::{Dataset, FrameSet, View, label};
 use hullcut_hull::CarveStats;
 use serde::Serialize;
 
@@ -16,38 +18,494 @@ pub(crate) fn voxel(voxel: f64, extent: f64) -> anyhow::Result<()> {
 }
 
 /// Whether masks come from the dataset's files (else segmented): `--masks auto|files|segment`.
-pub(crate) fn masks_from_files(ds: &Dataset, masks: &str) -> anyhow::Result<bool> {
+pub(crate) fn masks_from_files(ds: &Dataset, masks: MaskSource) -> anyhow::Result<bool> {
     Ok(match masks {
-        "files" if !ds.has_masks() => bail!("--masks files: {} has no masks/", ds.root().display()),
-        "files" => true,
-        "segment" => false,
-        "auto" => ds.has_masks(),
-        other => bail!("--masks {other}: expected auto, files or segment"),
+        MaskSource::Files if !ds.has_masks() => bail!("--masks files: {} has no masks/", ds.root().display()),
+        MaskSource::Files => true,
+        MaskSource::Segment => false,
+        MaskSource::Auto => ds.has_masks(),
     })
 }
 
-/// Every mask of the frame set holds only the labels carving knows (0, 1, 2, 255); anything else
-/// (a mask saved with other values, a palette PNG's indices) is an error naming the file.
-pub(crate) fn labels(ds: &Dataset, set: &FrameSet) -> anyhow::Result<()> {
+/// Where a command's masks come from (`--masks`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub(crate) enum MaskSource {
+    /// The mask files under masks/ when the dataset has them, else segmented from the images.
+    #[default]
+    Auto,
+    /// The mask files under masks/ (an error when there are none).
+    Files,
+    /// Segmented from the images (the mask files, if any, are the truth to compare with).
+    Segment,
+}
+
+/// A view's mask holds only the labels carving knows (0, 1, 2, 255); anything else (a mask saved
+/// with other values, a palette PNG's indices) is an error naming the file, the camera and the
+/// frame.
+pub(crate) fn view_labels(ds: &Dataset, frame: u64, view: &View) -> anyhow::Result<()> {
     let bad = |v: &u8| ![label::BACKGROUND, label::HAND, label::SCALPEL, label::UNKNOWN].contains(v);
-    for view in set.views.iter().flatten() {
-        let Some(mask) = &view.mask else { continue };
-        let raw = mask.as_raw();
-        let Some(first) = raw.iter().position(bad) else { continue };
-        let w = mask.width() as usize;
-        bail!(
-            "{}: label mask of camera `{}`, frame {}: pixel ({}, {}) holds {} ({} pixels outside the labels \
-             0 background, 1 hand, 2 scalpel, 255 unknown)",
-            ds.mask_path(set.frame, view.camera)?.display(),
-            ds.rig().cameras[view.camera].name,
-            set.frame,
-            first % w,
-            first / w,
-            raw[first],
-            raw.iter().filter(|v| bad(v)).count()
-        );
+    let Some(mask) = &view.mask else { return Ok(()) };
+    let raw = mask.as_raw();
+    let Some(first) = raw.iter().position(bad) else { return Ok(()) };
+    let w = (mask.width() as usize).max(1);
+    bail!(
+        "{}: label mask of camera `{}`, frame {}: pixel ({}, {}) holds {} ({} pixels outside the labels \
+         0 background, 1 hand, 2 scalpel, 255 unknown)",
+        ds.mask_path(frame, view.camera)?.display(),
+        camera_name(ds, view.camera),
+        frame,
+        first % w,
+        first / w,
+        raw[first],
+        raw.iter().filter(|v| bad(v)).count()
+    );
+}
+
+/// The rig's name of camera `camera` (its index where the rig has no such camera).
+pub(crate) fn camera_name(ds: &Dataset, camera: usize) -> String {
+    ds.rig().cameras.get(camera).map_or_else(|| format!("camera {camera}"), |c| c.name.clone())
+}
+
+/// A camera image (or a whole frame set) that could not be used: unreadable (a corrupt or
+/// truncated PNG, a camera whose files stop mid-recording), or a mask with labels carving does
+/// not know.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct ViewFault {
+    /// The frame.
+    pub frame: u64,
+    /// The camera; null when the frame set as a whole could not be read.
+    pub camera: Option<String>,
+    /// Why, naming the file.
+    pub reason: String,
+}
+
+impl std::fmt::Display for ViewFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.camera {
+            Some(camera) => write!(f, "frame {}, camera {camera}: {}", self.frame, self.reason),
+            None => write!(f, "frame {}: {}", self.frame, self.reason),
+        }
     }
-    Ok(())
+}
+
+/// Faults listed in a report at most (the count goes on past them).
+pub(crate) const MAX_LISTED_FAULTS: usize = 100;
+
+/// The faults of a run: every one counted, the first [`MAX_LISTED_FAULTS`] listed.
+#[derive(Debug, Default, Serialize)]
+pub(crate) struct Faults {
+    /// Camera images left out (unreadable, or with unknown labels).
+    pub views: u64,
+    /// Frame sets left out whole (no camera's image could be used).
+    pub frame_sets: u64,
+    /// The first faults, in order.
+    pub listed: Vec<ViewFault>,
+}
+
+impl Faults {
+    /// Counts and lists one read's faults; `used` tells whether the frame set went on.
+    pub(crate) fn add(&mut self, faults: Vec<ViewFault>, used: bool) {
+        if !used && !faults.is_empty() {
+            self.frame_sets += 1;
+        }
+        for fault in faults {
+            self.views += u64::from(fault.camera.is_some());
+            if self.listed.len() < MAX_LISTED_FAULTS {
+                self.listed.push(fault);
+            }
+        }
+    }
+
+    /// Whether anything was left out.
+    pub(crate) fn any(&self) -> bool {
+        self.views > 0 || self.frame_sets > 0
+    }
+
+    /// One sentence for the terminal and the exit error, with the first fault.
+    pub(crate) fn summary(&self) -> String {
+        let first = self.listed.first().map_or_else(String::new, |f| format!(" (the first: {f})"));
+        format!(
+            "{} camera image(s) and {} whole frame set(s) could not be used and were left out{first}; the report lists them",
+            self.views, self.frame_sets
+        )
+    }
+}
+
+/// Reads frame set `frame` (masks when `with_masks`), going on without a camera whose image or
+/// mask cannot be read or holds labels carving does not know: that view is missing from the
+/// frame set and each such camera is a fault. `None` when no camera's image could be used, or
+/// the frame set could not be read at all (its faults say why).
+pub(crate) fn read_frame_set(ds: &Dataset, frame: u64, with_masks: bool) -> (Option<FrameSet>, Vec<ViewFault>) {
+    let fault =
+        |camera: Option<usize>, reason: String| ViewFault { frame, camera: camera.map(|c| camera_name(ds, c)), reason };
+    let mut faults = Vec::new();
+    let views = match ds.read_frame_set(frame, with_masks) {
+        Ok(set) => set.views,
+        Err(whole) => {
+            // View by view, keeping the cameras that read.
+            let mut views = Vec::with_capacity(ds.rig().len());
+            for camera in 0..ds.rig().len() {
+                let Some(timestamp_ns) = ds.timestamp(frame, camera) else {
+                    views.push(None);
+                    continue;
+                };
+                let read = ds.read_image(frame, camera).and_then(|image| {
+                    let mask = if with_masks { Some(ds.read_mask(frame, camera)?) } else { None };
+                    Ok(View { camera, timestamp_ns, image, mask })
+                });
+                match read {
+                    Ok(view) => views.push(Some(view)),
+                    Err(e) => {
+                        faults.push(fault(Some(camera), e.to_string()));
+                        views.push(None);
+                    }
+                }
+            }
+            if faults.is_empty() {
+                // Not a camera's fault (the frame set itself): nothing of it is used.
+                return (None, vec![fault(None, whole.to_string())]);
+            }
+            views
+        }
+    };
+    let views: Vec<Option<View>> = views
+        .into_iter()
+        .map(|v| {
+            let view = v?;
+            match view_labels(ds, frame, &view) {
+                Ok(()) => Some(view),
+                Err(e) => {
+                    faults.push(fault(Some(view.camera), format!("{e:#}")));
+                    None
+                }
+            }
+        })
+        .collect();
+    if views.iter().all(Option::is_none) && !faults.is_empty() {
+        return (None, faults);
+    }
+    let timestamp_ns = FrameSet::median_timestamp(&views);
+    (Some(FrameSet { frame, timestamp_ns, views }), faults)
+}
+
+/// Paths of the numbers in a report that are not finite (`tissue.kinetic_energy_j`,
+/// `memory[3].rss_mib`): serde_json writes them as null, which reads as "not measured". A
+/// report is checked with this before it is written, so that a NaN is said, not hidden.
+pub(crate) fn non_finite_fields(value: &impl Serialize) -> Vec<String> {
+    let mut finder = NonFinite::default();
+    // The finder's own methods never fail; a value whose Serialize fails is named as such.
+    if value.serialize(&mut finder).is_err() {
+        finder.found.push("(the report could not be walked)".to_owned());
+    }
+    finder.found
+}
+
+/// One step of a path into a report.
+#[derive(Debug)]
+enum Step {
+    Key(String),
+    Index(usize),
+}
+
+/// A serializer that writes nothing and notes where a float is not finite.
+#[derive(Debug, Default)]
+struct NonFinite {
+    path: Vec<Step>,
+    /// The key of the map entry whose value comes next.
+    key: Option<String>,
+    found: Vec<String>,
+}
+
+impl NonFinite {
+    fn float(&mut self, v: f64) -> Result<(), std::fmt::Error> {
+        if !v.is_finite() {
+            let mut path = String::new();
+            for step in &self.path {
+                match step {
+                    Step::Key(k) if path.is_empty() => path.push_str(k),
+                    Step::Key(k) => {
+                        path.push('.');
+                        path.push_str(k);
+                    }
+                    Step::Index(i) => path.push_str(&format!("[{i}]")),
+                }
+            }
+            self.found.push(if path.is_empty() { "(the value)".to_owned() } else { path });
+        }
+        Ok(())
+    }
+
+    fn under<T: ?Sized + Serialize>(&mut self, step: Step, value: &T) -> Result<(), std::fmt::Error> {
+        self.path.push(step);
+        let result = value.serialize(&mut *self);
+        self.path.pop();
+        result
+    }
+
+    /// Moves the innermost sequence index on by one.
+    fn next_index(&mut self) {
+        if let Some(Step::Index(i)) = self.path.last_mut() {
+            *i += 1;
+        }
+    }
+}
+
+impl serde::Serializer for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    type SerializeSeq = Self;
+    type SerializeTuple = Self;
+    type SerializeTupleStruct = Self;
+    type SerializeTupleVariant = Self;
+    type SerializeMap = Self;
+    type SerializeStruct = Self;
+    type SerializeStructVariant = Self;
+
+    fn serialize_bool(self, _: bool) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_i8(self, _: i8) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_i16(self, _: i16) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_i32(self, _: i32) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_i64(self, _: i64) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_i128(self, _: i128) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_u8(self, _: u8) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_u16(self, _: u16) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_u32(self, _: u32) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_u64(self, _: u64) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_u128(self, _: u128) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_f32(self, v: f32) -> Result<(), Self::Error> {
+        self.float(f64::from(v))
+    }
+    fn serialize_f64(self, v: f64) -> Result<(), Self::Error> {
+        self.float(v)
+    }
+    fn serialize_char(self, _: char) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_str(self, _: &str) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_bytes(self, _: &[u8]) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_none(self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_some<T>(self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(self)
+    }
+    fn serialize_unit(self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_unit_struct(self, _: &'static str) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_unit_variant(self, _: &'static str, _: u32, _: &'static str) -> Result<(), Self::Error> {
+        Ok(())
+    }
+    fn serialize_newtype_struct<T>(self, _: &'static str, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(self)
+    }
+    fn serialize_newtype_variant<T>(
+        self,
+        _: &'static str,
+        _: u32,
+        variant: &'static str,
+        value: &T,
+    ) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        self.under(Step::Key(variant.to_owned()), value)
+    }
+    fn serialize_seq(self, _: Option<usize>) -> Result<Self, Self::Error> {
+        self.path.push(Step::Index(0));
+        Ok(self)
+    }
+    fn serialize_tuple(self, _: usize) -> Result<Self, Self::Error> {
+        self.path.push(Step::Index(0));
+        Ok(self)
+    }
+    fn serialize_tuple_struct(self, _: &'static str, _: usize) -> Result<Self, Self::Error> {
+        self.path.push(Step::Index(0));
+        Ok(self)
+    }
+    fn serialize_tuple_variant(
+        self,
+        _: &'static str,
+        _: u32,
+        variant: &'static str,
+        _: usize,
+    ) -> Result<Self, Self::Error> {
+        self.path.push(Step::Key(variant.to_owned()));
+        self.path.push(Step::Index(0));
+        Ok(self)
+    }
+    fn serialize_map(self, _: Option<usize>) -> Result<Self, Self::Error> {
+        Ok(self)
+    }
+    fn serialize_struct(self, _: &'static str, _: usize) -> Result<Self, Self::Error> {
+        Ok(self)
+    }
+    fn serialize_struct_variant(
+        self,
+        _: &'static str,
+        _: u32,
+        variant: &'static str,
+        _: usize,
+    ) -> Result<Self, Self::Error> {
+        self.path.push(Step::Key(variant.to_owned()));
+        Ok(self)
+    }
+}
+
+impl serde::ser::SerializeSeq for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_element<T>(&mut self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(&mut **self)?;
+        self.next_index();
+        Ok(())
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        self.path.pop();
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeTuple for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_element<T>(&mut self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(&mut **self)?;
+        self.next_index();
+        Ok(())
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        self.path.pop();
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeTupleStruct for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_field<T>(&mut self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(&mut **self)?;
+        self.next_index();
+        Ok(())
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        self.path.pop();
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeTupleVariant for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_field<T>(&mut self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        value.serialize(&mut **self)?;
+        self.next_index();
+        Ok(())
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        self.path.pop();
+        self.path.pop();
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeMap for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_key<T>(&mut self, key: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        // A key as its JSON text, without the quotes of a string.
+        let text = serde_json::to_string(key).unwrap_or_else(|_| "?".to_owned());
+        self.key = Some(text.trim_matches('"').to_owned());
+        Ok(())
+    }
+    fn serialize_value<T>(&mut self, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        let key = self.key.take().unwrap_or_else(|| "?".to_owned());
+        self.under(Step::Key(key), value)
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeStruct for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_field<T>(&mut self, key: &'static str, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        self.under(Step::Key(key.to_owned()), value)
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}
+
+impl serde::ser::SerializeStructVariant for &mut NonFinite {
+    type Ok = ();
+    type Error = std::fmt::Error;
+    fn serialize_field<T>(&mut self, key: &'static str, value: &T) -> Result<(), Self::Error>
+    where
+        T: ?Sized + Serialize,
+    {
+        self.under(Step::Key(key.to_owned()), value)
+    }
+    fn end(self) -> Result<(), Self::Error> {
+        self.path.pop();
+        Ok(())
+    }
 }
 
 /// Lone refutations of one camera, summed over frames.
@@ -114,5 +572,76 @@ impl ViewDisagreement {
             "  views: {name} disagreed most ({n} cells it alone refuted, {ratio}; a view with a bad mask or \
              calibration stands out at several times)"
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+
+    #[derive(Serialize)]
+    struct Inner {
+        fine: f64,
+        energy: f64,
+    }
+
+    #[derive(Serialize)]
+    enum Kind {
+        Pair(f64, f32),
+    }
+
+    #[derive(Serialize)]
+    struct Report {
+        name: &'static str,
+        fps: f64,
+        mean: Option<f64>,
+        inner: Inner,
+        samples: Vec<[f64; 2]>,
+        by_label: BTreeMap<String, f64>,
+        kind: Kind,
+    }
+
+    #[test]
+    fn every_number_that_is_not_finite_is_named_by_its_path() {
+        let report = Report {
+            name: "run",
+            fps: 12.0,
+            mean: Some(f64::NAN),
+            inner: Inner { fine: 1.0, energy: f64::INFINITY },
+            samples: vec![[1.0, 2.0], [3.0, f64::NEG_INFINITY]],
+            by_label: BTreeMap::from([("hand".to_owned(), 0.5), ("scalpel".to_owned(), f64::NAN)]),
+            kind: Kind::Pair(f64::NAN, 1.0),
+        };
+        assert_eq!(
+            non_finite_fields(&report),
+            ["mean", "inner.energy", "samples[1][1]", "by_label.scalpel", "kind.Pair[0]"]
+        );
+        // serde_json would write them all as null, the same as "not measured".
+        let json = serde_json::to_value(&report).expect("JSON");
+        assert!(json["mean"].is_null() && json["inner"]["energy"].is_null());
+        let clean = Inner { fine: 1.0, energy: 2.0 };
+        assert!(non_finite_fields(&clean).is_empty());
+    }
+
+    #[test]
+    fn faults_are_counted_past_the_listed_ones_and_summed_up_with_the_first() {
+        let mut faults = Faults::default();
+        let fault = |frame: u64, camera: Option<&str>| ViewFault {
+            frame,
+            camera: camera.map(str::to_owned),
+            reason: format!("cam/{frame:06}.png: truncated"),
+        };
+        faults.add(vec![fault(4, Some("cam2"))], true);
+        faults.add(vec![fault(6, None)], false);
+        for frame in 0..(MAX_LISTED_FAULTS as u64 + 10) {
+            faults.add(vec![fault(frame, Some("cam0"))], true);
+        }
+        assert_eq!((faults.views, faults.frame_sets), (MAX_LISTED_FAULTS as u64 + 11, 1));
+        assert_eq!(faults.listed.len(), MAX_LISTED_FAULTS);
+        let summary = faults.summary();
+        assert!(summary.contains("frame 4, camera cam2: cam/000004.png: truncated"), "{summary}");
+        assert!(Faults::default().summary().contains("0 camera image(s)") && !Faults::default().any());
     }
 }

@@ -48,6 +48,9 @@ pub struct TissueStep {
     pub swept: Option<SweptSurface>,
     /// A trusted pose that did not sweep because the frame before it was refused.
     pub sweep_skipped: bool,
+    /// Why a sweep between two trusted poses was not cut (a template edge or a step too large
+    /// for the collision test's bounds, [`MAX_SWEEP_CELLS`]).
+    pub sweep_refused: Option<String>,
     /// What cutting with `swept` did.
     pub cut: Option<CutOutcome>,
     /// The pieces' closed surfaces, deformed (world metres).
@@ -72,16 +75,29 @@ pub struct Sweeper {
     refused_since: bool,
 }
 
+/// Lattice-cell-sized hash cells a swept surface may cover, summed over its triangles' bounding
+/// boxes: the cut's collision test visits every one of them, so a sweep beyond this (a cutting
+/// edge or a pose metres away, a step of metres) is refused and counted, never cut.
+pub const MAX_SWEEP_CELLS: u64 = 1 << 22;
+
+/// Points of the template's cutting edge a sweep takes at most (each is swept on up to a
+/// thousand rows).
+pub const MAX_EDGE_POINTS: usize = 4096;
+
 impl Sweeper {
     /// The step a frame set's pose starts: its swept surface (rows at most half a `cell` apart, at
-    /// most 0.05 rad of turn), or whether a sweep was skipped after a refusal.
+    /// most 0.05 rad of turn), or whether a sweep was skipped after a refusal, or refused for its
+    /// size ([`MAX_SWEEP_CELLS`], [`MAX_EDGE_POINTS`]).
     pub fn next(&mut self, estimate: Option<&PoseEstimate>, template: Option<&Template>, cell: f64) -> TissueStep {
         let mut step = TissueStep::default();
         let trusted = estimate.filter(|e| e.valid).and_then(|e| e.pose.as_ref()).map(|p| p.tool_to_world);
         match (trusted, template) {
             (Some(now), Some(template)) => {
                 if let Some(before) = self.previous {
-                    step.swept = SweptSurface::between(&template.edge, &before, &now, cell / 2.0, 0.05);
+                    match sweep(template, &before, &now, cell) {
+                        Ok(swept) => step.swept = swept,
+                        Err(reason) => step.sweep_refused = Some(reason),
+                    }
                 } else if self.refused_since {
                     step.sweep_skipped = true;
                 }
@@ -95,6 +111,45 @@ impl Sweeper {
         }
         step
     }
+}
+
+/// The blade's cutting edge swept from `before` to `now`, refused when its collision test would
+/// visit more than [`MAX_SWEEP_CELLS`] cells of `cell` metres (counted with checked arithmetic,
+/// a number that is not finite refused) or the edge has more than [`MAX_EDGE_POINTS`] points.
+fn sweep(
+    template: &Template,
+    before: &Isometry3<f64>,
+    now: &Isometry3<f64>,
+    cell: f64,
+) -> Result<Option<SweptSurface>, String> {
+    if template.edge.len() > MAX_EDGE_POINTS {
+        return Err(format!(
+            "the cutting edge has {} points, more than the {MAX_EDGE_POINTS} a sweep takes",
+            template.edge.len()
+        ));
+    }
+    let Some(swept) = SweptSurface::between(&template.edge, before, now, cell / 2.0, 0.05) else { return Ok(None) };
+    let mut total: u64 = 0;
+    for t in 0..swept.triangles.len() {
+        let corners = swept.triangle(t);
+        let mut cells: u64 = 1;
+        for a in 0..3 {
+            let (lo, hi) =
+                corners.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| (lo.min(p[a]), hi.max(p[a])));
+            let span = (hi / cell).floor() - (lo / cell).floor() + 1.0;
+            if !(1.0..=MAX_SWEEP_CELLS as f64).contains(&span) {
+                return Err(format!("the swept blade spans {:.3e} m along axis {a}: not a blade's step", hi - lo));
+            }
+            cells = cells.saturating_mul(span as u64);
+        }
+        total = total.saturating_add(cells);
+        if total > MAX_SWEEP_CELLS {
+            return Err(format!(
+                "the swept blade covers more than {MAX_SWEEP_CELLS} lattice cells' worth of boxes (a step of metres?)"
+            ));
+        }
+    }
+    Ok(Some(swept))
 }
 
 /// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
@@ -111,14 +166,17 @@ pub fn build(
     let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
         (Body::Organ, Box::new(organ_sdf))
     } else {
-        let mesh = TriMesh::load(name).with_context(|| format!("--tissue {name}"))?;
+        let mesh = TriMesh::load(name).context("--tissue")?;
         // Inside where the generalized winding number exceeds one half (robust to holes); the
         // magnitude is not a distance, so the cut faces' placement near the surface is approximate
         // to a fraction of a cell.
         let tree = WindingTree::new(&mesh);
-        (Body::Mesh(mesh), Box::new(move |p: &Point3<f64>| (0.5 - tree.winding_number(p).abs()) * cell))
+        (
+            Body::Mesh(mesh, Some(name.into())),
+            Box::new(move |p: &Point3<f64>| (0.5 - tree.winding_number(p).abs()) * cell),
+        )
     };
-    let voxelized = voxelize(&body, cell, &VoxelizeParams::default()).with_context(|| format!("--tissue {name}"))?;
+    let voxelized = voxelize(&body, cell, &VoxelizeParams::default()).context("--tissue")?;
     let lattice = voxelized.lattice;
     let floor = lattice.rest.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
     let fixed = move |p: &Point3<f64>| p.z < floor + 0.25 * cell;
@@ -196,7 +254,7 @@ impl Tissue {
         let range = |a: usize| {
             let first = ((f64::from(lo[a]) - margin - grid.origin[a]) / grid.leaf).floor().max(0.0) as usize;
             let last = ((f64::from(hi[a]) + margin - grid.origin[a]) / grid.leaf).ceil().max(0.0) as usize;
-            (first.min(grid.dims[a]), (last + 1).min(grid.dims[a]))
+            (first.min(grid.dims[a]), last.saturating_add(1).min(grid.dims[a]))
         };
         let r = [range(0), range(1), range(2)];
         let dims = r.map(|(a, b)| b.saturating_sub(a));
@@ -345,5 +403,33 @@ mod tests {
         assert!((lo - (0.03 + span.0)).abs() < 1e-9 && (hi - (0.04 + span.1)).abs() < 1e-9, "{lo} {hi}");
         // Without a template (no tool.json) nothing ever sweeps.
         assert!(s.next(Some(&estimate(&t, true, 0.05)), None, 0.005).swept.is_none());
+    }
+
+    #[test]
+    fn a_sweep_too_large_to_test_is_refused_not_allocated() {
+        // A cutting-edge point at 1e308 (tool.json refuses it; a template changed after is caught
+        // here too): the sweep's boxes are not even countable.
+        let mut far = template();
+        far.edge[1].x = 1e308;
+        let mut s = Sweeper::default();
+        s.next(Some(&estimate(&far, true, 0.0)), Some(&far), 0.005);
+        let step = s.next(Some(&estimate(&far, true, 0.01)), Some(&far), 0.005);
+        assert!(step.swept.is_none());
+        let reason = step.sweep_refused.unwrap_or_default();
+        assert!(reason.contains("not a blade's step"), "{reason}");
+        // A trusted step of 100 km: a thousand rows (the most a sweep has) of boxes each some
+        // 20,000 cells long, over the 4 million cells a sweep may cover.
+        let t = template();
+        let mut s = Sweeper::default();
+        s.next(Some(&estimate(&t, true, 0.0)), Some(&t), 0.005);
+        let step = s.next(Some(&estimate(&t, true, 1.0e5)), Some(&t), 0.005);
+        assert!(step.swept.is_none() && step.sweep_refused.is_some(), "{:?}", step.sweep_refused);
+        // An edge of too many points.
+        let mut long = template();
+        long.edge = (0..=MAX_EDGE_POINTS).map(|k| Point3::new(k as f64 * 1e-6, 0.0, 0.0)).collect();
+        let mut s = Sweeper::default();
+        s.next(Some(&estimate(&long, true, 0.0)), Some(&long), 0.005);
+        let step = s.next(Some(&estimate(&long, true, 0.01)), Some(&long), 0.005);
+        assert!(step.sweep_refused.is_some_and(|r| r.contains("points")));
     }
 }
