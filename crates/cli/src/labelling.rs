@@ -158,6 +158,17 @@ pub(crate) struct Labelled {
     pub stats: Option<LabelStats>,
 }
 
+/// What one view's foreground mask holds.
+#[derive(Debug, Clone, Copy)]
+struct MaskCounts {
+    /// Pixels not background.
+    foreground: usize,
+    /// Pixels that may be cast shadows ([`SHADOW_LIKE`]).
+    shadow: u64,
+    /// Pixels of the image.
+    pixels: usize,
+}
+
 /// Labels frame sets (see the module docs).
 pub(crate) struct Labelling {
     method: LabelMethod,
@@ -265,10 +276,21 @@ impl Labelling {
         let mut fg = std::mem::take(&mut self.masks);
         self.segmenter.segment_frame_set_into(set, &mut fg).with_context(|| format!("segmenting frame {frame}"))?;
         let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
-        let shadow_pixels: u64 =
-            fg.iter().flatten().map(|m| m.iter().filter(|&&p| p == SHADOW_LIKE).count() as u64).sum();
+        // One pass over each mask: its foreground and possible shadow pixels.
+        let counts: Vec<Option<MaskCounts>> = fg
+            .iter()
+            .map(|m| {
+                m.as_ref().map(|m| {
+                    let (foreground, shadow) = m.iter().fold((0, 0), |(n, s), &p| {
+                        (n + usize::from(p != label::BACKGROUND), s + u64::from(p == SHADOW_LIKE))
+                    });
+                    MaskCounts { foreground, shadow, pixels: m.width() as usize * m.height() as usize }
+                })
+            })
+            .collect();
+        let shadow_pixels: u64 = counts.iter().flatten().map(|c| c.shadow).sum();
         self.counters.shadow_pixels += shadow_pixels;
-        let degraded = self.degraded_views(&fg);
+        let degraded = self.degraded_views(&counts);
         self.counters.degraded_views += degraded.iter().filter(|&&d| d).count() as u64;
         if self.tool.is_none() && shadow_pixels == 0 && !degraded.contains(&true) {
             // No tool: the colours learned from the masked frames.
@@ -379,9 +401,11 @@ impl Labelling {
         if self.method != LabelMethod::Both || self.colours.is_none() {
             return Ok(None);
         }
-        let (tool, counters) = (self.tool.take(), self.counters.clone());
+        // Without the tool, and with no history of usual foregrounds (this frame set is an old
+        // one: the views' usual has moved on since).
+        let (tool, counters, history) = (self.tool.take(), self.counters.clone(), std::mem::take(&mut self.history));
         let labelled = self.label(set, carver);
-        self.tool = tool;
+        (self.tool, self.history) = (tool, history);
         self.counters = LabelCounters { relabelled: counters.relabelled + 1, ..counters };
         labelled.map(Some)
     }
@@ -391,17 +415,16 @@ impl Labelling {
     /// [`DEGRADED_MIN_FRACTION`] of the image): someone walking behind the table, a light switched
     /// on. A degraded frame set does not count towards the usual, until the change has lasted
     /// half the history: then it is the scene's new usual (a person who stays, a light left on).
-    fn degraded_views(&mut self, fg: &[Option<GrayImage>]) -> Vec<bool> {
-        self.history.resize_with(fg.len(), std::collections::VecDeque::new);
-        fg.iter()
+    fn degraded_views(&mut self, counts: &[Option<MaskCounts>]) -> Vec<bool> {
+        self.history.resize_with(counts.len(), std::collections::VecDeque::new);
+        counts
+            .iter()
             .zip(&mut self.history)
-            .map(|(mask, history)| {
-                let Some(mask) = mask else { return false };
-                let count = mask.iter().filter(|&&p| p != label::BACKGROUND).count();
+            .map(|(counts, history)| {
+                let Some(MaskCounts { foreground: count, pixels, .. }) = *counts else { return false };
+                let floor = DEGRADED_MIN_FRACTION * pixels as f64;
                 let mut usual: Vec<usize> = history.iter().map(|&(c, _)| c).collect();
                 usual.sort_unstable();
-                let pixels = mask.width() as usize * mask.height() as usize;
-                let floor = DEGRADED_MIN_FRACTION * pixels as f64;
                 let degraded = usual.len() >= DEGRADED_HISTORY / 2
                     && count as f64 > DEGRADED_JUMP * (usual[usual.len() / 2] as f64).max(floor);
                 // A change that lasts half the history is the scene's new usual.

@@ -4,18 +4,24 @@ use std::path::Path;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Version of the report layout (docs/reports.md).
 pub const SCHEMA_VERSION: u32 = 1;
 
+/// Git commit the binary was built from (build.rs), as reports and `--version` give it.
+pub const GIT_HASH: &str = env!("HULLCUT_GIT_HASH");
+
+/// `hullcut --version`: the package version and the git commit reports carry.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (", env!("HULLCUT_GIT_HASH"), ")");
+
 /// Where a report came from, so a run can be reproduced.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Provenance {
     /// hullcut's version.
-    pub hullcut_version: &'static str,
-    /// Git commit the binary was built from.
-    pub git_hash: &'static str,
+    pub hullcut_version: String,
+    /// Git commit the binary was built from ([`GIT_HASH`]).
+    pub git_hash: String,
     /// The command line.
     pub command_line: Vec<String>,
 }
@@ -24,15 +30,15 @@ impl Provenance {
     /// Provenance of this process.
     pub fn current() -> Self {
         Self {
-            hullcut_version: env!("CARGO_PKG_VERSION"),
-            git_hash: env!("HULLCUT_GIT_HASH"),
-            command_line: std::env::args().collect(),
+            hullcut_version: env!("CARGO_PKG_VERSION").to_owned(),
+            git_hash: GIT_HASH.to_owned(),
+            command_line: std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect(),
         }
     }
 }
 
 /// Timing statistics of one stage, milliseconds.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct StageTiming {
     /// Number of times the stage ran.
     pub count: usize,
@@ -85,6 +91,15 @@ pub fn shorten(s: &str, max: usize) -> String {
     format!("{head}… ({n} characters)")
 }
 
+/// Serializes `value` to JSON, reads it back as `T` and serializes that again (tests): the two
+/// texts are equal when every field survives the round trip.
+#[cfg(test)]
+pub(crate) fn json_round_trip<T: Serialize + serde::de::DeserializeOwned>(value: &T) -> (String, String) {
+    let text = serde_json::to_string_pretty(value).expect("serializes");
+    let back: T = serde_json::from_str(&text).unwrap_or_else(|e| panic!("reads back: {e}\n{text}"));
+    (text, serde_json::to_string_pretty(&back).expect("serializes again"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,5 +112,21 @@ mod tests {
         assert!((t.mean_ms - 10.5).abs() < 1e-9);
         assert_eq!((t.p50_ms, t.p95_ms, t.max_ms), (10.0, 19.0, 20.0));
         assert_eq!(StageTiming::from_durations(&[]).count, 0);
+    }
+
+    #[test]
+    fn provenance_and_timings_round_trip() {
+        let p = Provenance::current();
+        assert_eq!(p.git_hash, GIT_HASH);
+        let (version, hash) = (env!("CARGO_PKG_VERSION"), GIT_HASH);
+        assert_eq!(VERSION, format!("{version} ({hash})"));
+        let text = serde_json::to_string(&p).expect("serializes");
+        assert_eq!(serde_json::from_str::<Provenance>(&text).expect("reads back"), p);
+        // Milliseconds that JSON writes and reads exactly (sums of powers of two).
+        let t = StageTiming { count: 3, mean_ms: 14.5, p50_ms: 2.25, p95_ms: 40.0, max_ms: 40.0 };
+        let text = serde_json::to_string(&t).expect("serializes");
+        assert_eq!(serde_json::from_str::<StageTiming>(&text).expect("reads back"), t);
+        let (first, again) = json_round_trip(&t);
+        assert_eq!(first, again);
     }
 }

@@ -16,6 +16,20 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// A CSV file read with the csv crate: its header and rows, every row as wide as the header.
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let header: Vec<String> = reader.headers().expect("a header").iter().map(str::to_owned).collect();
+    let rows: Vec<Vec<String>> = reader
+        .records()
+        .map(|r| r.unwrap_or_else(|e| panic!("{}: {e}", path.display())).iter().map(str::to_owned).collect())
+        .collect();
+    for (k, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), header.len(), "{} row {}: {row:?} under {header:?}", path.display(), k + 1);
+    }
+    (header, rows)
+}
+
 /// `tools/stereo-sample.sh` lays out OpenCV's stereo photos as a calibration tree.
 fn stereo_tree(dir: &Path) -> PathBuf {
     assert!(Path::new(SAMPLES).join("left01.jpg").exists(), "opencv-doc photos missing: run tools/setup.sh");
@@ -104,10 +118,88 @@ fn usage_errors_exit_2_and_failures_exit_1() {
     ]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("/nonexistent/dir"), "{}", stderr(&o));
+    // A value outside what a flag takes is bad usage too, and the message names the flag.
     let o =
         hullcut(&["calibrate", "--images", "/tmp", "--pattern", "9by6", "--square", "0.02", "--out", "/tmp/x.yaml"]);
-    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--pattern"), "{}", stderr(&o));
+    let o = hullcut(&["calibrate", "--images", "/tmp", "--pattern", "9x6", "--square", "0", "--out", "/tmp/x.yaml"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--square"), "{}", stderr(&o));
+}
+
+/// Flags that take one of a fixed set of values list them in `--help` and when refusing another
+/// (exit 2, bad usage); numbers outside a flag's range are bad usage too.
+#[test]
+fn a_value_a_flag_does_not_take_is_bad_usage_and_the_values_are_listed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("x");
+    let out = out.to_str().expect("utf-8");
+    let o = hullcut(&["synth", "--help"]);
+    assert!(o.status.success());
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(help.contains("resect") && help.contains("cut, static, hard, resect"), "{help}");
+    let o = hullcut(&["synth", "--out", out, "--scene", "bogus"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("cut, static, hard, resect"), "{}", stderr(&o));
+    let reconstruct = ["reconstruct", "--dataset", CUT_SMALL, "--out", out];
+    let run = ["run", "--dataset", CUT_SMALL];
+    for command in [&reconstruct[..], &run[..]] {
+        let o = hullcut(&[command, &["--masks", "bogus"]].concat());
+        assert_eq!(o.status.code(), Some(2), "{command:?}: {}", stderr(&o));
+        let e = stderr(&o);
+        assert!(e.contains("bogus") && e.contains("auto, files, segment"), "{command:?}: {e}");
+        // The short help lists the values (the long one may describe each).
+        let o = hullcut(&[command[0], "-h"]);
+        assert!(String::from_utf8_lossy(&o.stdout).contains("auto, files, segment"), "{} -h", command[0]);
+    }
+    for (args, flag) in [
+        (&["run", "--dataset", CUT_SMALL, "--queue", "0"][..], "--queue"),
+        (&["run", "--dataset", CUT_SMALL, "--repeat", "0"][..], "--repeat"),
+        (&["synth", "--out", out, "--frames", "0"][..], "--frames"),
+        (&["synth", "--out", out, "--fps=-30"][..], "--fps"),
+        (&["segment", "--dataset", CUT_SMALL, "--rrd-every", "0"][..], "--rrd-every"),
+        (&["rig", "default", "--out", out, "--rig", "lab9"][..], "--rig"),
+        (&["import-videos", "--rig", "r.yaml", "--out", out, "--video", "cam0"][..], "--video"),
+    ] {
+        let o = hullcut(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(flag), "{args:?}: {}", stderr(&o));
+    }
+    assert!(!dir.path().join("x").exists(), "nothing written on bad usage");
+}
+
+/// A value given whole on the command line (here 100,000 characters) is cut where an error
+/// repeats it, saying how much was left out.
+#[test]
+fn a_long_bad_value_is_not_echoed_whole() {
+    let long = format!("/nonexistent/{}", "r".repeat(100_000));
+    let o = hullcut(&["rig", "show", &long]);
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.len() < 2_000 && e.starts_with("error: /nonexistent/rrr") && e.contains("more chars)"), "{e:.2000}");
+    let o = hullcut(&["synth", "--out", "/nonexistent/x", "--scene", &long]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.len() < 2_000 && e.contains("more chars)") && e.contains("cut, static, hard, resect"), "{e:.2000}");
+}
+
+/// `hullcut --version` gives the git commit that reports carry.
+#[test]
+fn the_version_names_the_commit_reports_carry() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let report = dir.path().join("sim.json");
+    let scenario = scenario("hex-stretch.toml");
+    let o = hullcut(&["sim", "--scenario", &scenario, "--report", report.to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("JSON");
+    let version = json["hullcut_version"].as_str().expect("version");
+    let hash = json["git_hash"].as_str().expect("hash");
+    assert!(!hash.is_empty());
+    let o = hullcut(&["--version"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), format!("hullcut {version} ({hash})\n"));
 }
 
 #[test]
@@ -258,44 +350,59 @@ fn bench_sim_quick_writes_tables_and_charts() {
     let dir = tempfile::tempdir().expect("tempdir");
     let o = hullcut(&["bench", "sim", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // Every table reads back with the csv crate, every row as wide as its header (a GPU's name
+    // holds commas: it is quoted).
+    for name in ["scaling", "ratio", "stability", "kernels", "collision", "backends"] {
+        let (_, rows) = read_csv(&dir.path().join(format!("{name}.csv")));
+        assert!(rows.len() >= 2, "{name}.csv: {rows:?}");
+    }
     for name in ["scaling", "ratio", "stability"] {
-        let csv = std::fs::read_to_string(dir.path().join(format!("{name}.csv"))).expect("csv");
-        assert!(csv.lines().count() >= 3, "{name}.csv: {csv}");
         let png = std::fs::read(dir.path().join(format!("{name}.png"))).expect("png");
         assert!(png.starts_with(b"\x89PNG"), "{name}.png is a PNG");
     }
     // The all-TLED reference has zero error against itself, and at ratio 0.4 FLSM matched to the
     // material is closer to it than the seed's FLSM settings.
-    let ratio = std::fs::read_to_string(dir.path().join("ratio.csv")).expect("csv");
-    let rows: Vec<Vec<&str>> = ratio.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let (_, rows) = read_csv(&dir.path().join("ratio.csv"));
     assert!(rows[0][..2] == ["1", "matched"] && rows[0][4] == "0.000000", "{:?}", rows[0]);
     let rms = |settings: &str| -> f64 {
         let row = rows.iter().find(|r| r[0] == "0.4" && r[1] == settings).expect("a ratio 0.4 row");
         row[4].parse().expect("rms")
     };
-    assert!(rms("matched") < rms("seed"), "{ratio}");
+    assert!(rms("matched") < rms("seed"), "{rows:?}");
     // Kernel throughput on one and two threads.
-    let kernels = std::fs::read_to_string(dir.path().join("kernels.csv")).expect("kernels.csv");
+    let (_, kernels) = read_csv(&dir.path().join("kernels.csv"));
     for kernel in ["tled_internal_forces", "tled_step", "flsm_step"] {
         for threads in ["1", "2"] {
             let row = kernels
-                .lines()
-                .map(|l| l.split(',').collect::<Vec<_>>())
+                .iter()
                 .find(|r| r[0] == kernel && r[1] == threads)
-                .unwrap_or_else(|| panic!("{kernel} on {threads} threads: {kernels}"));
+                .unwrap_or_else(|| panic!("{kernel} on {threads} threads: {kernels:?}"));
             assert!(row[5].parse::<f64>().expect("rate") > 0.0, "{row:?}");
         }
     }
     // CPU against GPU: both lines where there is an adapter (always in CI: lavapipe).
-    let backends = std::fs::read_to_string(dir.path().join("backends.csv")).expect("backends.csv");
-    let rows: Vec<Vec<&str>> = backends.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let (header, rows) = read_csv(&dir.path().join("backends.csv"));
+    assert_eq!(header[1], "device");
     let on = |b: &str| rows.iter().filter(|r| r[0] == b).count();
-    assert_eq!(on("cpu"), 2, "{backends}");
+    assert_eq!(on("cpu"), 2, "{rows:?}");
     if std::env::var_os("CI").is_some() || on("gpu") > 0 {
-        assert_eq!(on("gpu"), 2, "{backends}");
+        assert_eq!(on("gpu"), 2, "{rows:?}");
     }
-    assert!(rows.iter().all(|r| r[6].parse::<f64>().expect("rate") > 0.0), "{backends}");
+    assert!(rows.iter().all(|r| r[6].parse::<f64>().expect("rate") > 0.0), "{rows:?}");
     assert!(std::fs::read(dir.path().join("backends.png")).expect("png").starts_with(b"\x89PNG"));
+}
+
+/// The benchmark tables committed under docs/bench read back with the csv crate, every row as
+/// wide as its header.
+#[test]
+fn the_committed_benchmark_tables_read_back_as_csv() {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/bench"));
+    let tables: Vec<PathBuf> = walk(root).into_iter().filter(|p| p.extension().is_some_and(|e| e == "csv")).collect();
+    assert!(tables.len() >= 10, "{tables:?}");
+    for table in tables {
+        let (header, rows) = read_csv(&table);
+        assert!(header.len() >= 2 && !rows.is_empty(), "{}", table.display());
+    }
 }
 
 #[test]
@@ -344,17 +451,16 @@ fn bench_hull_quick_compares_octree_and_dense_grid() {
         assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
     }
     // Robustness: the clean classic hull against itself is 1; noise and fewer cameras only lower it.
-    let csv = std::fs::read_to_string(dir.path().join("hull_robustness.csv")).expect("csv");
-    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let (_, rows) = read_csv(&dir.path().join("hull_robustness.csv"));
     let iou = |experiment: &str, votes: &str| -> Vec<f64> {
         rows.iter().filter(|r| r[0] == experiment && r[1] == votes).map(|r| r[6].parse().expect("iou")).collect()
     };
     let noise = iou("noise", "1");
-    assert_eq!(noise.len(), 5, "{csv}");
-    assert_eq!(noise[0], 1.0, "{csv}");
+    assert_eq!(noise.len(), 5, "{rows:?}");
+    assert_eq!(noise[0], 1.0, "{rows:?}");
     assert!(noise.windows(2).all(|w| w[1] <= w[0]), "{noise:?}");
     let cameras = iou("cameras", "1");
-    assert_eq!((cameras.len(), cameras[4]), (5, 1.0), "{csv}");
+    assert_eq!((cameras.len(), cameras[4]), (5, 1.0), "{rows:?}");
     assert!(cameras.windows(2).all(|w| w[1] >= w[0]), "{cameras:?}");
 }
 
@@ -505,6 +611,7 @@ fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report
     assert_eq!(bad.status.code(), Some(1));
     assert!(stderr(&bad).contains("20:30") && stderr(&bad).contains("9 frames"), "{}", stderr(&bad));
     let bad = hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&out), "--masks", "magic"]);
+    assert_eq!(bad.status.code(), Some(2), "{}", stderr(&bad));
     assert!(stderr(&bad).contains("magic"));
 }
 
@@ -765,10 +872,8 @@ fn bench_pose_quick_writes_errors_refusals_and_charts() {
     let dir = tempfile::tempdir().expect("tempdir");
     let o = hullcut(&["bench", "pose", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let csv = std::fs::read_to_string(dir.path().join("pose.csv")).expect("csv");
-    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
-    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let (header, rows) = read_csv(&dir.path().join("pose.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).expect(name);
     for r in &rows {
         // Truth masks, six views: never a trusted pose off by 5° or 5 mm.
         assert_eq!(r[col("trusted_wrong")], "0", "{r:?}");
@@ -802,4 +907,98 @@ fn gpu_info_names_the_adapter_it_would_use_or_says_there_is_none() {
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(err.contains("no-such-adapter-xyz") || err.contains("no GPU adapter"), "{err}");
+}
+
+#[test]
+fn reconstruct_of_masks_all_scalpel_says_what_it_cannot_measure_and_ends_promptly() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    // Frame 0's masks are scalpel in every pixel of every view: the hull is the whole working
+    // volume, its exact visual hull unbounded by any view, its surface up to 30 cm from the tool.
+    for cam in 0..6 {
+        let path = ds.join(format!("masks/cam{cam}/000000.png"));
+        let mask = image::open(&path).expect("mask").into_luma8();
+        image::GrayImage::from_pixel(mask.width(), mask.height(), image::Luma([2])).save(&path).expect("save");
+    }
+    let (out, report) = (dir.path().join("rec"), dir.path().join("rec.json"));
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let clock = std::time::Instant::now();
+    let o = hullcut(&[
+        "reconstruct",
+        "--dataset",
+        &path(&ds),
+        "--out",
+        &path(&out),
+        "--frames",
+        "1",
+        "--masks",
+        "files",
+        "--workspace=-0.2,-0.2,0,0.2,0.2,0.4",
+        "--voxel",
+        "0.00625",
+        "--report",
+        &path(&report),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(clock.elapsed() < std::time::Duration::from_secs(300), "{:?}", clock.elapsed());
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    let accuracy = r["accuracy"].as_array().expect("accuracy");
+    let of = |label: &str| accuracy.iter().find(|a| a["label"] == label).expect(label).clone();
+    let (scalpel, hand) = (of("scalpel"), of("hand"));
+    for a in [&scalpel, &hand] {
+        assert_eq!(a["exact_hull_not_measurable"], 1, "{a}");
+        assert!(a["exact_hull_iou_mean"].is_null() && a["exact_hull_truth_iou_mean"].is_null(), "{a}");
+    }
+    // The scalpel's hull is measured against the tool, however far its surface lies.
+    assert!(scalpel["chamfer_mm_mean"].as_f64().is_some_and(f64::is_finite), "{scalpel}");
+    // No hand was carved: its IoU is 0, its surface distance not measured (n/a, never NaN).
+    assert_eq!(hand["iou_mean"].as_f64(), Some(0.0), "{hand}");
+    assert_eq!(hand["not_measured"], 1, "{hand}");
+    assert!(hand["chamfer_mm_mean"].is_null(), "{hand}");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("Chamfer n/a") && !stdout.contains("NaN"), "{stdout}");
+    assert_eq!(r["non_finite"].as_array().map(Vec::len), Some(0), "{}", r["non_finite"]);
+}
+
+#[test]
+fn reconstruct_goes_on_past_a_corrupt_image_and_lists_it_in_its_report() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = cut_small_copy(dir.path());
+    // Frame 1: cam1's image cut short; frame 2: every camera's image garbage.
+    let cut = ds.join("cam1/000001.png");
+    let bytes = std::fs::read(&cut).expect("png");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).expect("truncate");
+    for cam in 0..6 {
+        std::fs::write(ds.join(format!("cam{cam}/000002.png")), b"not a PNG").expect("garbage");
+    }
+    let (out, report) = (dir.path().join("rec"), dir.path().join("rec.json"));
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let o = hullcut(&[
+        "reconstruct",
+        "--dataset",
+        &path(&ds),
+        "--out",
+        &path(&out),
+        "--frames",
+        "0:4",
+        "--masks",
+        "files",
+        "--accuracy-every",
+        "100",
+        "--report",
+        &path(&report),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("frame 1, camera cam1") && stderr(&o).contains("000001.png"), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    assert_eq!(r["counters"]["frame_sets"], 3, "frame 2 left out whole: {}", r["counters"]);
+    let f = &r["faults"];
+    assert_eq!((f["views"].as_u64(), f["frame_sets"].as_u64()), (Some(7), Some(1)), "{f}");
+    assert!(r["stopped"].is_null(), "{}", r["stopped"]);
+    // One pose line per frame still: frame 2's says why it has no pose.
+    let lines = pose_lines(&out);
+    assert_eq!(lines.len(), 4);
+    assert_eq!(lines[2]["valid"], false);
+    assert!(lines[2]["reason"].as_str().expect("reason").contains("could not be read"), "{}", lines[2]);
+    assert!(out.join("hull/scalpel/000001.ply").is_file() && out.join("hull/scalpel/000003.ply").is_file());
 }

@@ -1,10 +1,9 @@
 //! `hullcut bench`: speed against accuracy, as CSV and PNG charts.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context as _;
+use anyhow::{Context as _, bail};
 use hullcut_sim::{Lattice, Material, Scenario, Simulation, Tled, TledParams, stability};
 use nalgebra::{Point3, Vector3};
 
@@ -141,10 +140,42 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(super) fn write(path: &Path, text: &str) -> anyhow::Result<()> {
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    println!("wrote {}", path.display());
-    Ok(())
+/// A CSV table: a header and rows of as many fields, written with the csv crate (a field that
+/// holds a comma, a quote or a line break, such as a GPU's name, is quoted), so every row reads
+/// back with the header's field count.
+#[derive(Debug)]
+pub(super) struct Table {
+    header: Vec<&'static str>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    /// An empty table with these columns.
+    pub(super) fn new(header: &[&'static str]) -> Self {
+        Self { header: header.to_vec(), rows: Vec::new() }
+    }
+
+    /// Appends a row: as many fields as the header ([`Table::write`] refuses the table otherwise).
+    pub(super) fn row(&mut self, fields: impl IntoIterator<Item = String>) {
+        self.rows.push(fields.into_iter().collect());
+    }
+
+    /// Writes the table to `path` and says so.
+    pub(super) fn write(&self, path: &Path) -> anyhow::Result<()> {
+        let width = self.header.len();
+        if let Some((k, row)) = self.rows.iter().enumerate().find(|(_, r)| r.len() != width) {
+            bail!("{}: row {} has {} fields, the header {width}", path.display(), k + 1, row.len());
+        }
+        let context = || format!("writing {}", path.display());
+        let mut w = csv::Writer::from_path(path).with_context(context)?;
+        w.write_record(&self.header).with_context(context)?;
+        for row in &self.rows {
+            w.write_record(row).with_context(context)?;
+        }
+        w.flush().with_context(context)?;
+        println!("wrote {}", path.display());
+        Ok(())
+    }
 }
 
 /// Wall seconds per simulated second of `sim`, over at least `min_wall` seconds of running.
@@ -194,7 +225,7 @@ fn kernels(out: &Path, quick: bool) -> anyhow::Result<()> {
         }
         calls as f64 / t0.elapsed().as_secs_f64()
     };
-    let mut csv = String::from("kernel,threads,nodes,cells,ms_per_call,million_per_s\n");
+    let mut table = Table::new(&["kernel", "threads", "nodes", "cells", "ms_per_call", "million_per_s"]);
     let mut single = std::collections::HashMap::new();
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("a thread pool")?;
@@ -229,13 +260,14 @@ fn kernels(out: &Path, quick: bool) -> anyhow::Result<()> {
         })?;
         for (kernel, calls_per_s, items) in rows {
             let per_s = calls_per_s * items / 1e6;
-            let _ = writeln!(
-                csv,
-                "{kernel},{threads},{},{},{:.4},{per_s:.2}",
-                lattice.node_count(),
-                lattice.cells.len(),
-                1e3 / calls_per_s
-            );
+            table.row([
+                kernel.to_owned(),
+                threads.to_string(),
+                lattice.node_count().to_string(),
+                lattice.cells.len().to_string(),
+                format!("{:.4}", 1e3 / calls_per_s),
+                format!("{per_s:.2}"),
+            ]);
             if threads == 1 {
                 single.insert(kernel, per_s);
             } else {
@@ -244,13 +276,13 @@ fn kernels(out: &Path, quick: bool) -> anyhow::Result<()> {
             }
         }
     }
-    write(&out.join("kernels.csv"), &csv)
+    table.write(&out.join("kernels.csv"))
 }
 
 fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
     let sizes: &[usize] = if quick { &[4, 6] } else { &[8, 12, 16, 20, 25, 30] };
     let models = [("TLED", 1.0), ("FLSM", 0.0), ("hybrid 0.4", 0.4)];
-    let mut csv = String::from("model,nodes,cells,dt_s,wall_s_per_simulated_s,realtime_factor\n");
+    let mut table = Table::new(&["model", "nodes", "cells", "dt_s", "wall_s_per_simulated_s", "realtime_factor"]);
     let mut series: Vec<Series> =
         models.iter().map(|(m, _)| Series { label: (*m).to_owned(), points: Vec::new() }).collect();
     let pb = bar((sizes.len() * models.len()) as u64, "scaling");
@@ -259,14 +291,20 @@ fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
             let mut sim = Simulation::from_scenario(&block(n, *r)?)?;
             let c = cost(&mut sim, if quick { 0.05 } else { 0.5 }, if quick { 5 } else { 2000 })?;
             let nodes = sim.lattice.node_count();
-            let _ =
-                writeln!(csv, "{model},{nodes},{},{:.6e},{c:.6e},{:.4}", sim.lattice.cells.len(), sim.dt(), 1.0 / c);
+            table.row([
+                (*model).to_owned(),
+                nodes.to_string(),
+                sim.lattice.cells.len().to_string(),
+                format!("{:.6e}", sim.dt()),
+                format!("{c:.6e}"),
+                format!("{:.4}", 1.0 / c),
+            ]);
             series[mi].points.push((nodes as f64, c));
             pb.inc(1);
         }
     }
     pb.finish_and_clear();
-    write(&out.join("scaling.csv"), &csv)?;
+    table.write(&out.join("scaling.csv"))?;
     line_chart(
         &out.join("scaling.png"),
         "Simulation cost against lattice size (liver material, 5 mm cells; below 1 = real time)",
@@ -294,7 +332,16 @@ fn backends(out: &Path, quick: bool) -> anyhow::Result<()> {
     if let Some(g) = &gpu {
         lines.push(Series { label: format!("GPU ({})", g.summary.info.name), points: Vec::new() });
     }
-    let mut csv = String::from("backend,device,nodes,cells,steps,wall_s,element_steps_per_s,realtime_factor\n");
+    let mut table = Table::new(&[
+        "backend",
+        "device",
+        "nodes",
+        "cells",
+        "steps",
+        "wall_s",
+        "element_steps_per_s",
+        "realtime_factor",
+    ]);
     let pb = bar((sizes.len() * lines.len()) as u64, "backends");
     let (batch, min_wall) = if quick { (10, 0.02) } else { (100, 1.0) };
     for &n in sizes {
@@ -321,13 +368,22 @@ fn backends(out: &Path, quick: bool) -> anyhow::Result<()> {
             let realtime = steps as f64 * sim.dt() / wall;
             let backend = if li == 0 { "cpu" } else { "gpu" };
             let nodes = sim.lattice.node_count();
-            let _ = writeln!(csv, "{backend},{device},{nodes},{cells},{steps},{wall:.4},{rate:.4e},{realtime:.4}");
+            table.row([
+                backend.to_owned(),
+                device,
+                nodes.to_string(),
+                cells.to_string(),
+                steps.to_string(),
+                format!("{wall:.4}"),
+                format!("{rate:.4e}"),
+                format!("{realtime:.4}"),
+            ]);
             line.points.push((cells as f64, rate));
             pb.inc(1);
         }
     }
     pb.finish_and_clear();
-    write(&out.join("backends.csv"), &csv)?;
+    table.write(&out.join("backends.csv"))?;
     line_chart(
         &out.join("backends.png"),
         "TLED whole steps: CPU against GPU (liver material, 5 mm cells, clamped block under gravity)",
@@ -365,7 +421,8 @@ fn collision(out: &Path) -> anyhow::Result<()> {
         let z = hi.z + 0.002 - 0.015 * (2.0 * s).min(1.0);
         nalgebra::Isometry3::translation(x, 0.5 * (lo.y + hi.y), z)
     };
-    let mut csv = String::from("frame,nodes,hash_ms,cut_ms,triangles,pairs_tested,edges_cut,cells_cut\n");
+    let mut table =
+        Table::new(&["frame", "nodes", "hash_ms", "cut_ms", "triangles", "pairs_tested", "edges_cut", "cells_cut"]);
     let mut total = Vec::new();
     for f in 1..=frames {
         let t0 = Instant::now();
@@ -377,17 +434,18 @@ fn collision(out: &Path) -> anyhow::Result<()> {
         let cuts = hullcut_sim::cut_edges(lattice, positions, &hash, &surface);
         let cut_ms = t1.elapsed().as_secs_f64() * 1e3;
         total.push(hash_ms + cut_ms);
-        let _ = writeln!(
-            csv,
-            "{f},{},{hash_ms:.4},{cut_ms:.4},{},{},{},{}",
-            lattice.node_count(),
-            surface.triangles.len(),
-            cuts.pairs_tested,
-            cuts.edges.len(),
-            cuts.cells.len()
-        );
+        table.row([
+            f.to_string(),
+            lattice.node_count().to_string(),
+            format!("{hash_ms:.4}"),
+            format!("{cut_ms:.4}"),
+            surface.triangles.len().to_string(),
+            cuts.pairs_tested.to_string(),
+            cuts.edges.len().to_string(),
+            cuts.cells.len().to_string(),
+        ]);
     }
-    write(&out.join("collision.csv"), &csv)?;
+    table.write(&out.join("collision.csv"))?;
     total.sort_by(f64::total_cmp);
     println!(
         "collision: {} nodes, hash + swept-surface cut {:.3} ms per frame (median), {:.3} ms (max)",
@@ -424,7 +482,8 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
         .chain([0.8, 0.4, 0.0].iter().map(|&r| (r, "seed", SEED)))
         .collect();
     let mut reference: Option<Vec<Vector3<f32>>> = None;
-    let mut csv = String::from("ratio,settings,nodes,tled_cells,rms_error_mm,max_error_mm,ms_per_60hz_frame\n");
+    let mut table =
+        Table::new(&["ratio", "settings", "nodes", "tled_cells", "rms_error_mm", "max_error_mm", "ms_per_60hz_frame"]);
     let mut series = Vec::new();
     let mut reference_ms = f64::NAN;
     let pb = bar(runs.len() as u64, "ratio");
@@ -441,12 +500,15 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
         let errors: Vec<f64> = u.iter().zip(reference.iter()).map(|(a, b)| f64::from((a - b).norm()) * 1e3).collect();
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
         let max = errors.iter().copied().fold(0.0, f64::max);
-        let _ = writeln!(
-            csv,
-            "{r},{settings},{},{},{rms:.6},{max:.6},{ms_per_frame:.4}",
-            sim.lattice.node_count(),
-            sim.tled_cells()
-        );
+        table.row([
+            r.to_string(),
+            settings.to_owned(),
+            sim.lattice.node_count().to_string(),
+            sim.tled_cells().to_string(),
+            format!("{rms:.6}"),
+            format!("{max:.6}"),
+            format!("{ms_per_frame:.4}"),
+        ]);
         // The all-TLED run is the reference (zero error by definition): it is in the CSV and the
         // chart's title, not on the log axis.
         if r < 1.0 {
@@ -458,7 +520,7 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    write(&out.join("ratio.csv"), &csv)?;
+    table.write(&out.join("ratio.csv"))?;
     line_chart(
         &out.join("ratio.png"),
         &format!("Hybrid TLED/FLSM on the built-in organ (all-TLED reference: {reference_ms:.2} ms per frame)"),
@@ -474,9 +536,15 @@ fn ratio(out: &Path, quick: bool) -> anyhow::Result<()> {
 fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
     let nus = if quick { vec![0.3, 0.49] } else { vec![0.25, 0.3, 0.35, 0.4, 0.45, 0.48, 0.49] };
     let (n, steps, iters) = if quick { (3, 400, 4) } else { (6, 3000, 10) };
-    let mut csv = String::from(
-        "nu,cells_per_side,l_over_c_s,estimate_s,measured_edge_s,estimate_over_l_over_c,measured_over_l_over_c\n",
-    );
+    let mut table = Table::new(&[
+        "nu",
+        "cells_per_side",
+        "l_over_c_s",
+        "estimate_s",
+        "measured_edge_s",
+        "estimate_over_l_over_c",
+        "measured_over_l_over_c",
+    ]);
     let mut est_s = Series { label: "estimate 2/ω_max (power iteration)".into(), points: Vec::new() };
     let mut meas_s = Series { label: "measured edge (bisection)".into(), points: Vec::new() };
     let mut lc_s = Series { label: "L/c".into(), points: Vec::new() };
@@ -501,14 +569,22 @@ fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
         }
         let edge = 0.5 * (lo + hi);
         let lc = h / material.wave_speed();
-        let _ = writeln!(csv, "{nu},{n},{lc:.6e},{est:.6e},{edge:.6e},{:.4},{:.4}", est / lc, edge / lc);
+        table.row([
+            nu.to_string(),
+            n.to_string(),
+            format!("{lc:.6e}"),
+            format!("{est:.6e}"),
+            format!("{edge:.6e}"),
+            format!("{:.4}", est / lc),
+            format!("{:.4}", edge / lc),
+        ]);
         est_s.points.push((nu, est / lc));
         meas_s.points.push((nu, edge / lc));
         lc_s.points.push((nu, 1.0));
         pb.inc(1);
     }
     pb.finish_and_clear();
-    write(&out.join("stability.csv"), &csv)?;
+    table.write(&out.join("stability.csv"))?;
     line_chart(
         &out.join("stability.png"),
         "Explicit stability limit of the TLED lattice (free block)",
@@ -519,4 +595,33 @@ fn stability_edge(out: &Path, quick: bool) -> anyhow::Result<()> {
     )?;
     println!("wrote {}", out.join("stability.png").display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_table_quotes_what_it_must_and_reads_back_as_wide_as_its_header() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("backends.csv");
+        let mut table = Table::new(&["backend", "device", "element_steps_per_s"]);
+        // Device names as wgpu gives them hold commas (lavapipe's does).
+        let lavapipe = "llvmpipe (LLVM 15.0.6, 256 bits)";
+        let odd = "CPU \"rayon\", 2 threads\non two lines";
+        table.row(["gpu".to_owned(), lavapipe.to_owned(), "1.5e6".to_owned()]);
+        table.row(["cpu".to_owned(), odd.to_owned(), "2".to_owned()]);
+        table.write(&path).expect("written");
+        let mut reader = csv::Reader::from_path(&path).expect("reads");
+        let width = reader.headers().expect("a header").len();
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("a row")).collect();
+        assert_eq!((width, rows.len()), (3, 2));
+        assert!(rows.iter().all(|r| r.len() == width), "{rows:?}");
+        assert_eq!((&rows[0][1], &rows[1][1]), (lavapipe, odd));
+        // A row of another width is refused, not written.
+        let mut bad = Table::new(&["a", "b"]);
+        bad.row(["1".to_owned()]);
+        assert!(bad.write(&dir.path().join("bad.csv")).is_err());
+        assert!(!dir.path().join("bad.csv").exists());
+    }
 }

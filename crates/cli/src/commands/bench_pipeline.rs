@@ -2,7 +2,6 @@
 //! frame sets already in memory, stage by stage, at the paper's organ size and finer, beside the
 //! seed paper's Table II; decoding the images is timed on its own.
 
-use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -14,6 +13,7 @@ use hullcut_sim::HybridParams;
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
 use image::GrayImage;
 
+use super::bench::Table;
 use super::run::stages::{MAX_ADVANCE_S, StageTimes};
 use super::run::tissue::{self, Sweeper};
 use crate::chart::{Scale, Series, line_chart};
@@ -91,10 +91,24 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     let template = Template::new(&scene.scalpel().geometry)?;
     let stages =
         ["carve", "surface", "pose", "collide", "cut_topology", "cut_surface", "contact", "deform", "tissue_surface"];
-    let mut csv = String::from("voxel_mm,cell_mm,model,nodes,frames,stage,mean_ms,p95_ms\n");
-    let mut summary = String::from(
-        "voxel_mm,cell_mm,model,nodes,frames,total_mean_ms,total_p95_ms,fps,decode_mean_ms,tip_mm_mean,normal_deg_mean,trusted,pieces,tled_cells_mean\n",
-    );
+    let mut stage_table =
+        Table::new(&["voxel_mm", "cell_mm", "model", "nodes", "frames", "stage", "mean_ms", "p95_ms"]);
+    let mut summary = Table::new(&[
+        "voxel_mm",
+        "cell_mm",
+        "model",
+        "nodes",
+        "frames",
+        "total_mean_ms",
+        "total_p95_ms",
+        "fps",
+        "decode_mean_ms",
+        "tip_mm_mean",
+        "normal_deg_mean",
+        "trusted",
+        "pieces",
+        "tled_cells_mean",
+    ]);
     let mut series: Vec<Series> = Vec::new();
     for config in &configs {
         let hull = crate::volume::hull_params(&scene.config().rig, config.voxel)?;
@@ -149,7 +163,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 tips.push(e.tip_mm);
                 normals.push(e.normal_deg);
             }
-            let seconds = last_ts.map_or(0.0, |t: i64| ((ts - t) as f64 * 1e-9).clamp(0.0, MAX_ADVANCE_S));
+            let seconds = last_ts.map_or(0.0, |t: i64| (ts.saturating_sub(t) as f64 * 1e-9).clamp(0.0, MAX_ADVANCE_S));
             last_ts = Some(ts);
             let mut step = sweeper.next(Some(&estimate), Some(&template), config.cell);
             sim.step(&mut step, seconds, hand.as_ref(), &mut times).with_context(|| format!("frame {f}"))?;
@@ -162,14 +176,16 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let total = StageTiming::from_durations(&totals);
         let row = |name: &str, d: &[Duration]| {
             let t = StageTiming::from_durations(d);
-            format!(
-                "{:.3},{},{},{nodes},{count},{name},{:.3},{:.3}\n",
-                config.voxel * 1e3,
-                config.cell * 1e3,
-                config.model(),
-                t.mean_ms,
-                t.p95_ms
-            )
+            [
+                format!("{:.3}", config.voxel * 1e3),
+                (config.cell * 1e3).to_string(),
+                config.model().to_owned(),
+                nodes.to_string(),
+                count.to_string(),
+                name.to_owned(),
+                format!("{:.3}", t.mean_ms),
+                format!("{:.3}", t.p95_ms),
+            ]
         };
         let fields = [
             &times.carve,
@@ -183,24 +199,26 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             &times.tissue_surface,
         ];
         for (name, d) in stages.iter().zip(fields) {
-            csv += &row(name, d);
+            stage_table.row(row(name, d));
         }
-        csv += &row("total", &totals);
+        stage_table.row(row("total", &totals));
         let fps = 1e3 / total.mean_ms;
-        writeln!(
-            summary,
-            "{:.3},{},{},{nodes},{count},{:.3},{:.3},{fps:.2},{:.3},{:.3},{:.3},{trusted},{},{:.1}",
-            config.voxel * 1e3,
-            config.cell * 1e3,
-            config.model(),
-            total.mean_ms,
-            total.p95_ms,
-            decode.mean_ms,
-            mean(&tips),
-            mean(&normals),
-            sim.sim.pieces(),
-            mean(&tled_cells)
-        )?;
+        summary.row([
+            format!("{:.3}", config.voxel * 1e3),
+            (config.cell * 1e3).to_string(),
+            config.model().to_owned(),
+            nodes.to_string(),
+            count.to_string(),
+            format!("{:.3}", total.mean_ms),
+            format!("{:.3}", total.p95_ms),
+            format!("{fps:.2}"),
+            format!("{:.3}", decode.mean_ms),
+            format!("{:.3}", mean(&tips)),
+            format!("{:.3}", mean(&normals)),
+            trusted.to_string(),
+            sim.sim.pieces().to_string(),
+            format!("{:.1}", mean(&tled_cells)),
+        ]);
         println!(
             "voxel {:.2} mm, cell {} mm, {} ({nodes} nodes, {:.0} TLED cells mean): deformation {:.1} ms; {:.1} ms per frame set (p95 {:.1}), {fps:.1} fps; tip {:.2} mm; {} piece(s)",
             config.voxel * 1e3,
@@ -252,13 +270,13 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             }
         }
     }
-    let mut seed = String::from("stage,seed_ms\n");
+    let mut seed = Table::new(&["stage", "seed_ms"]);
     for (stage, ms) in SEED_TABLE_II {
-        writeln!(seed, "{stage},{ms}")?;
+        seed.row([stage.to_owned(), ms.to_owned()]);
     }
-    write(&out.join("pipeline_stages.csv"), &csv)?;
-    write(&out.join("pipeline.csv"), &summary)?;
-    write(&out.join("pipeline_seed_table2.csv"), &seed)?;
+    stage_table.write(&out.join("pipeline_stages.csv"))?;
+    summary.write(&out.join("pipeline.csv"))?;
+    seed.write(&out.join("pipeline_seed_table2.csv"))?;
     println!("decoding six PNG images per frame set: {:.1} ms mean (timed apart from the loop)", decode.mean_ms);
     line_chart(
         &out.join("pipeline.png"),
@@ -269,11 +287,5 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         &series,
     )?;
     println!("wrote {}", out.join("pipeline.png").display());
-    Ok(())
-}
-
-fn write(path: &Path, text: &str) -> anyhow::Result<()> {
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    println!("wrote {}", path.display());
     Ok(())
 }

@@ -11,6 +11,7 @@ use hullcut_pose::{PoseError, Template, Tracker, TrackerParams, ViewInput, isome
 use hullcut_synth::{Scene, SceneConfig, SceneKind};
 use image::GrayImage;
 
+use super::bench::Table;
 use super::bench_hull::salt_and_pepper;
 use crate::chart::{Scale, Series, line_chart};
 use crate::progress::bar;
@@ -122,28 +123,44 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
     ];
     let extent = crate::volume::BENCH_SIDE_M;
     let default_leaf = extent / 128.0;
-    let mut csv = String::from(
-        "experiment,scene,leaf_mm,cameras,noise,frames,invalid_rate,trusted_wrong,normal_deg_mean,normal_deg_p95,\
-         tip_mm_mean,tip_mm_p95,pose_ms_mean,pose_ms_p50,hull_ms_mean\n",
-    );
+    let mut table = Table::new(&[
+        "experiment",
+        "scene",
+        "leaf_mm",
+        "cameras",
+        "noise",
+        "frames",
+        "invalid_rate",
+        "trusted_wrong",
+        "normal_deg_mean",
+        "normal_deg_p95",
+        "tip_mm_mean",
+        "tip_mm_p95",
+        "pose_ms_mean",
+        "pose_ms_p50",
+        "hull_ms_mean",
+    ]);
     let mut row = |experiment: &str, clip: &Clip, leaf: f64, cameras: usize, noise: f64, r: &Run| {
         let mut sorted = r.pose_ms.clone();
         sorted.sort_by(f64::total_cmp);
         let p50 = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
-        csv.push_str(&format!(
-            "{experiment},{},{:.3},{cameras},{noise},{},{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.3},{p50:.3},{:.3}\n",
-            clip.name,
-            leaf * 1e3,
-            r.frames,
-            r.invalid_rate(),
-            r.wrong,
-            mean(&r.normal),
-            p95(&r.normal),
-            mean(&r.tip),
-            p95(&r.tip),
-            mean(&r.pose_ms),
-            mean(&r.hull_ms),
-        ));
+        table.row([
+            experiment.to_owned(),
+            clip.name.to_owned(),
+            format!("{:.3}", leaf * 1e3),
+            cameras.to_string(),
+            noise.to_string(),
+            r.frames.to_string(),
+            format!("{:.4}", r.invalid_rate()),
+            r.wrong.to_string(),
+            format!("{:.4}", mean(&r.normal)),
+            format!("{:.4}", p95(&r.normal)),
+            format!("{:.4}", mean(&r.tip)),
+            format!("{:.4}", p95(&r.tip)),
+            format!("{:.3}", mean(&r.pose_ms)),
+            format!("{p50:.3}"),
+            format!("{:.3}", mean(&r.hull_ms)),
+        ]);
         tracing::info!(experiment, scene = clip.name, leaf, cameras, noise, "pose bench");
     };
     let keep = |_: usize, m: &GrayImage| m.clone();
@@ -202,7 +219,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             .collect()
     };
     let path = out.join("pose.csv");
-    std::fs::write(&path, &csv).with_context(|| format!("writing {}", path.display()))?;
+    table.write(&path)?;
     let charts: [Chart; 5] = [
         (
             "pose_leaf.png",

@@ -2,7 +2,6 @@
 //! recordings of several rigs and looks, one of each seeded random: pooled IoU per label against
 //! milliseconds per frame set.
 
-use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -13,6 +12,7 @@ use hullcut_hull::HullParams;
 use hullcut_rig::RigPreset;
 use hullcut_synth::{Appearance, Scene, SceneConfig, SceneKind, ToolKind, synthesize};
 
+use super::bench::Table;
 use crate::backend::Carver;
 use crate::chart::{Scale, Series, scatter_chart};
 use crate::labelling::{LabelMethod, Labelling};
@@ -28,12 +28,7 @@ struct Setup {
 
 impl Setup {
     fn name(&self) -> String {
-        let rig = match self.rig {
-            RigPreset::Default => "default".to_owned(),
-            RigPreset::Lab8 => "lab8".to_owned(),
-            RigPreset::Random(s) => format!("random:{s}"),
-        };
-        format!("{rig} {} {}", self.look, self.tool.name())
+        format!("{} {} {}", self.rig.name(), self.look, self.tool.name())
     }
 }
 
@@ -147,38 +142,53 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
 }
 
 fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
-    let mut csv = String::from(
-        "recording,cameras,width,height,method,frame_sets_scored,ms_mean,ms_p50,ms_p95,foreground_ms_mean,\
-         hand_iou,scalpel_iou,foreground_iou,scalpel_precision,scalpel_recall,by_geometry,by_colour,untrusted_fit,unknown\n",
-    );
+    let mut table = Table::new(&[
+        "recording",
+        "cameras",
+        "width",
+        "height",
+        "method",
+        "frame_sets_scored",
+        "ms_mean",
+        "ms_p50",
+        "ms_p95",
+        "foreground_ms_mean",
+        "hand_iou",
+        "scalpel_iou",
+        "foreground_iou",
+        "scalpel_precision",
+        "scalpel_recall",
+        "by_geometry",
+        "by_colour",
+        "untrusted_fit",
+        "unknown",
+    ]);
     let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for r in rows {
         let [hand, scalpel, fg] = &r.scores;
-        writeln!(
-            csv,
-            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{}",
-            r.setup,
-            r.cameras,
-            r.width,
-            r.height,
-            r.method.name(),
-            r.scored,
-            r.timing.mean_ms,
-            r.timing.p50_ms,
-            r.timing.p95_ms,
-            r.foreground_ms,
+        table.row([
+            r.setup.clone(),
+            r.cameras.to_string(),
+            r.width.to_string(),
+            r.height.to_string(),
+            r.method.name().to_owned(),
+            r.scored.to_string(),
+            format!("{:.3}", r.timing.mean_ms),
+            format!("{:.3}", r.timing.p50_ms),
+            format!("{:.3}", r.timing.p95_ms),
+            format!("{:.3}", r.foreground_ms),
             f(hand.iou_pooled),
             f(scalpel.iou_pooled),
             f(fg.iou_pooled),
             f(scalpel.precision),
             f(scalpel.recall),
-            r.counts[0],
-            r.counts[1],
-            r.counts[2],
-            r.counts[3]
-        )?;
+            r.counts[0].to_string(),
+            r.counts[1].to_string(),
+            r.counts[2].to_string(),
+            r.counts[3].to_string(),
+        ]);
     }
-    super::bench::write(&out.join("segment.csv"), &csv)?;
+    table.write(&out.join("segment.csv"))?;
     for (k, label) in ["hand", "scalpel"].iter().enumerate() {
         let series: Vec<Series> = METHODS
             .iter()

@@ -8,7 +8,7 @@ use hullcut_calib::{
     CalibParams, CalibReport, Calibration, Observations, Pattern, calibrate, detect_all, discover_images,
     read_rgb_undistorted,
 };
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
@@ -30,11 +30,11 @@ pub struct Args {
     /// Folder with one sub-folder of images per camera.
     #[arg(long, value_name = "DIR")]
     images: PathBuf,
-    /// Inner corners of the chessboard, COLSxROWS (as OpenCV counts them), e.g. 9x6.
-    #[arg(long, value_name = "COLSxROWS")]
+    /// Inner corners of the chessboard, COLSxROWS (as OpenCV counts them, 2 to 100 each), e.g. 9x6.
+    #[arg(long, value_name = "COLSxROWS", value_parser = pattern_parser)]
     pattern: String,
-    /// Side of one chessboard square, metres.
-    #[arg(long, value_name = "METRES")]
+    /// Side of one chessboard square, metres (above 0).
+    #[arg(long, value_name = "METRES", value_parser = super::positive)]
     square: f64,
     /// Where to write the rig (rig.yaml).
     #[arg(long, value_name = "FILE")]
@@ -55,7 +55,19 @@ pub struct Args {
     fix_intrinsics: bool,
 }
 
-#[derive(Debug, Serialize)]
+/// Most inner corners along one side of a board that `--pattern` takes.
+const MAX_CORNERS_PER_SIDE: u32 = 100;
+
+/// `--pattern`: COLSxROWS inner corners, 2 to [`MAX_CORNERS_PER_SIDE`] each; anything else is bad
+/// usage.
+fn pattern_parser(s: &str) -> Result<String, String> {
+    match Pattern::parse(s, 1.0) {
+        Some(p) if p.cols <= MAX_CORNERS_PER_SIDE && p.rows <= MAX_CORNERS_PER_SIDE => Ok(s.trim().to_owned()),
+        _ => Err(format!("expected COLSxROWS inner corners, 2 to {MAX_CORNERS_PER_SIDE} each (e.g. 9x6)")),
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
 struct Timings {
     detect: StageTiming,
     calibrate: StageTiming,
@@ -79,8 +91,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let Some(pattern) = Pattern::parse(&args.pattern, args.square) else {
         bail!(
-            "--pattern {:?} / --square {}: expected COLSxROWS of at least 2x2 inner corners and a positive square size in metres",
-            args.pattern,
+            "--pattern {} / --square {}: expected COLSxROWS of at least 2x2 inner corners and a positive square size in metres",
+            crate::report::shorten(&args.pattern, 40),
             args.square
         );
     };
@@ -218,4 +230,25 @@ fn log_rrd(path: &Path, root: &Path, obs: &Observations, cal: &Calibration) -> a
     pb.finish_and_clear();
     hullcut_viz::flush(&rec)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pattern_is_cols_x_rows_within_bounds() {
+        assert_eq!(pattern_parser("9x6").as_deref(), Ok("9x6"));
+        for bad in ["9by6", "1x6", "9x", "101x6", "100000x100000", ""] {
+            assert!(pattern_parser(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn timings_round_trip_through_json() {
+        let t = StageTiming { count: 2, mean_ms: 3.5, p50_ms: 3.0, p95_ms: 4.0, max_ms: 4.0 };
+        let timings = Timings { detect: t.clone(), calibrate: t.clone(), total: t };
+        let (first, again) = crate::report::json_round_trip(&timings);
+        assert_eq!(first, again);
+    }
 }

@@ -38,8 +38,8 @@ pub struct CalibrationArgs {
     /// A folder of per-camera OpenCV FileStorage files.
     #[arg(long, value_name = "DIR")]
     opencv_dir: Option<PathBuf>,
-    /// Metres per unit of the source's translations.
-    #[arg(long, value_name = "M", default_value_t = 1.0)]
+    /// Metres per unit of the source's translations (above 0).
+    #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = super::positive)]
     scale: f64,
     /// The rig file to write.
     #[arg(long, value_name = "rig.yaml")]
@@ -82,22 +82,22 @@ pub struct VideosArgs {
     #[arg(long, value_name = "rig.yaml")]
     rig: PathBuf,
     /// A camera's video, NAME=FILE (once per camera).
-    #[arg(long = "video", value_name = "NAME=FILE")]
-    videos: Vec<String>,
+    #[arg(long = "video", value_name = "NAME=FILE", value_parser = name_and_file)]
+    videos: Vec<(String, PathBuf)>,
     /// A folder of videos named by camera (cam0.mp4, cam1.mp4, ...).
     #[arg(long, value_name = "DIR", conflicts_with = "videos")]
     videos_dir: Option<PathBuf>,
     /// A camera's time offset, NAME=SECONDS, added to its media time.
-    #[arg(long = "offset", value_name = "NAME=SECONDS")]
-    offsets: Vec<String>,
+    #[arg(long = "offset", value_name = "NAME=SECONDS", value_parser = name_and_seconds)]
+    offsets: Vec<(String, f64)>,
     /// Frame rate (default: the first video's).
-    #[arg(long, value_name = "FPS")]
+    #[arg(long, value_name = "FPS", value_parser = super::positive)]
     fps: Option<f64>,
     /// Time of media time 0, nanoseconds since the epoch.
     #[arg(long, value_name = "NS", default_value_t = 0)]
     start_ns: i64,
-    /// Stop after N frame sets.
-    #[arg(long, value_name = "N")]
+    /// Stop after N frame sets (at least 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     max_frames: Option<u64>,
     /// The dataset folder to write (refused if it exists, unless --force).
     #[arg(long, value_name = "DIR")]
@@ -110,10 +110,23 @@ pub struct VideosArgs {
     report: Option<PathBuf>,
 }
 
-fn split_pair<'a>(flag: &str, s: &'a str) -> anyhow::Result<(&'a str, &'a str)> {
-    s.split_once('=')
-        .filter(|(k, v)| !k.is_empty() && !v.is_empty())
-        .with_context(|| format!("{flag} {}: expected NAME=VALUE", crate::report::shorten(s, 60)))
+/// `NAME=VALUE`, both parts non-empty.
+fn name_value(s: &str) -> Result<(&str, &str), String> {
+    s.split_once('=').filter(|(k, v)| !k.is_empty() && !v.is_empty()).ok_or_else(|| "expected NAME=VALUE".to_owned())
+}
+
+/// `--video NAME=FILE`: a camera's name and its video (anything else is bad usage).
+fn name_and_file(s: &str) -> Result<(String, PathBuf), String> {
+    let (name, file) = name_value(s)?;
+    Ok((name.to_owned(), PathBuf::from(file)))
+}
+
+/// `--offset NAME=SECONDS`: a camera's name and its time offset, a finite number of seconds.
+fn name_and_seconds(s: &str) -> Result<(String, f64), String> {
+    let (name, value) = name_value(s)?;
+    let seconds = value.trim().parse::<f64>().ok().filter(|v| v.is_finite());
+    let seconds = seconds.ok_or("expected NAME=SECONDS, SECONDS a finite number")?;
+    Ok((name.to_owned(), seconds))
 }
 
 #[derive(Debug, Serialize)]
@@ -132,9 +145,8 @@ struct Report<'a> {
 pub fn videos(args: &VideosArgs) -> anyhow::Result<()> {
     let rig = Rig::load(&args.rig)?;
     let mut inputs: Vec<VideoInput> = Vec::new();
-    for v in &args.videos {
-        let (camera, path) = split_pair("--video", v)?;
-        inputs.push(VideoInput { camera: camera.to_owned(), path: PathBuf::from(path), offset_s: 0.0 });
+    for (camera, path) in &args.videos {
+        inputs.push(VideoInput { camera: camera.clone(), path: path.clone(), offset_s: 0.0 });
     }
     if let Some(dir) = &args.videos_dir {
         let entries = std::fs::read_dir(dir).with_context(|| format!("listing {}", dir.display()))?;
@@ -149,13 +161,11 @@ pub fn videos(args: &VideosArgs) -> anyhow::Result<()> {
     if inputs.is_empty() {
         bail!("no videos: give --video NAME=FILE per camera, or --videos-dir DIR with files named by camera");
     }
-    for o in &args.offsets {
-        let (camera, seconds) = split_pair("--offset", o)?;
-        let seconds: f64 = seconds.parse().with_context(|| format!("--offset {o}: not a number of seconds"))?;
-        let Some(input) = inputs.iter_mut().find(|i| i.camera == camera) else {
-            bail!("--offset {o}: no video for camera `{camera}`");
+    for (camera, seconds) in &args.offsets {
+        let Some(input) = inputs.iter_mut().find(|i| &i.camera == camera) else {
+            bail!("--offset {camera}={seconds}: no video for camera `{camera}`");
         };
-        input.offset_s = seconds;
+        input.offset_s = *seconds;
     }
     let name = args.out.file_name().map_or_else(|| "imported".to_owned(), |n| n.to_string_lossy().into_owned());
     let params = ImportParams {
@@ -207,4 +217,21 @@ pub fn videos(args: &VideosArgs) -> anyhow::Result<()> {
         write_json(path, &report)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn name_value_flags_are_checked_when_parsed() {
+        assert_eq!(name_and_file("cam0=a.mp4"), Ok(("cam0".to_owned(), PathBuf::from("a.mp4"))));
+        assert_eq!(name_and_seconds("cam3=-0.012"), Ok(("cam3".to_owned(), -0.012)));
+        for bad in ["cam0", "=a.mp4", "cam0="] {
+            assert!(name_and_file(bad).is_err(), "{bad}");
+        }
+        for bad in ["cam3=soon", "cam3=NaN", "cam3=inf", "cam3"] {
+            assert!(name_and_seconds(bad).is_err(), "{bad}");
+        }
+    }
 }

@@ -39,8 +39,8 @@ enum RigCommand {
         /// The folder to write the COLMAP model into.
         #[arg(long, value_name = "DIR")]
         colmap: PathBuf,
-        /// Metres per unit of the model's translations.
-        #[arg(long, value_name = "M", default_value_t = 1.0)]
+        /// Metres per unit of the model's translations (above 0).
+        #[arg(long, value_name = "M", default_value_t = 1.0, value_parser = super::positive)]
         scale: f64,
     },
     /// Write a built-in rig of the synthetic scenes: `default` (six 640x480 cameras on a ring,
@@ -49,15 +49,15 @@ enum RigCommand {
     ///
     /// Writes: OUT (rig.yaml).
     Default {
-        /// Which rig.
-        #[arg(long, value_name = "NAME", default_value = "default")]
-        rig: String,
+        /// Which rig: default, lab8 or random:SEED.
+        #[arg(long, value_name = "NAME", default_value = "default", value_parser = preset_parser)]
+        rig: RigPreset,
         /// Where to write it.
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Resample the cameras' images by this factor (0.5 gives 320x240 cameras with the same
         /// fields of view).
-        #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
+        #[arg(long, value_name = "FACTOR", default_value_t = 1.0, value_parser = super::positive)]
         scale: f64,
     },
 }
@@ -80,22 +80,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             Ok(())
         }
         RigCommand::Export { file, colmap, scale } => {
-            if !(*scale > 0.0 && scale.is_finite()) {
-                bail!("--scale must be a positive number of metres per unit, got {scale}");
-            }
             let rig = load_rig(file)?;
             hullcut_rig::colmap::write_colmap(&rig, colmap, *scale)?;
             println!("wrote {} (COLMAP text model, {} cameras)", colmap.display(), rig.len());
             Ok(())
         }
         RigCommand::Default { rig, out, scale } => {
-            if !(*scale > 0.0 && scale.is_finite()) {
-                bail!("--scale must be a positive number, got {scale}");
-            }
-            let Some(preset) = RigPreset::parse(rig) else {
-                bail!("--rig {rig}: not a built-in rig ({})", RigPreset::NAMES);
-            };
-            let mut rig = preset.rig();
+            let mut rig = rig.rig();
             for camera in &mut rig.cameras {
                 *camera = camera.scaled(*scale);
             }
@@ -104,6 +95,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// `rig default --rig`: a built-in rig's name (anything else is bad usage).
+fn preset_parser(s: &str) -> Result<RigPreset, String> {
+    RigPreset::parse(s).ok_or_else(|| format!("not a built-in rig ({})", RigPreset::NAMES))
 }
 
 /// A rig by built-in name (default, lab8, random:SEED) or from a rig.yaml file.

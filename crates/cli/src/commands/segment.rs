@@ -7,7 +7,7 @@ use anyhow::Context as _;
 use hullcut_capture::segment::{IouAccumulator, SegmentationReport};
 use hullcut_dataset::{Dataset, FrameSet};
 use image::GrayImage;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
 use crate::frames::parse_frames;
@@ -54,7 +54,7 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     rrd: Option<PathBuf>,
     /// Log every N-th frame to the .rrd.
-    #[arg(long, value_name = "N", default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
     /// Frames whose masks/ seed the learned colours (comma-separated).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
@@ -92,7 +92,7 @@ struct Report {
     timings: Timings,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Timings {
     /// Labelling one frame set: foreground, hull, the tool's fit and drawing (all cameras).
     segment: StageTiming,
@@ -120,9 +120,6 @@ struct Timings {
 /// Runs the command.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    if args.rrd_every == 0 {
-        anyhow::bail!("--rrd-every must be at least 1");
-    }
     let ds = Dataset::open(&args.dataset)?;
     let range = parse_frames(args.frames.as_deref(), ds.meta().frame_count)?;
     let volume = crate::volume::resolve(args.workspace, Some(&ds), ds.rig())?;

@@ -3,10 +3,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use hullcut_dataset::Dataset;
 use hullcut_synth::{Appearance, SceneConfig, SceneKind, ToolKind, synthesize};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::logging::{CameraLogger, log_tool};
 use crate::progress::bar;
@@ -35,23 +36,23 @@ pub struct Args {
     /// Output dataset folder (refused if it exists, unless --force).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Number of frame sets.
-    #[arg(long, value_name = "N", default_value_t = 120)]
+    /// Number of frame sets (at least 1).
+    #[arg(long, value_name = "N", default_value_t = 120, value_parser = clap::value_parser!(u64).range(1..))]
     frames: u64,
     /// Seed for the trajectory, timing jitter, drops and noise.
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
-    /// Scene: cut, static, hard or resect.
-    #[arg(long, value_name = "NAME", default_value = "cut", value_parser = parse_scene)]
+    /// The scene (see above; `resect` is `hullcut run`'s built-in scene).
+    #[arg(long, value_name = "NAME", default_value = "cut", value_parser = scene_parser())]
     scene: SceneKind,
-    /// Frame rate, frames per second.
-    #[arg(long, value_name = "FPS", default_value_t = 30.0)]
+    /// Frame rate, frames per second (above 0).
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = super::positive)]
     fps: f64,
     /// The rig: default, lab8, random:SEED, or a rig.yaml file.
     #[arg(long, value_name = "NAME|rig.yaml", default_value = "default")]
     rig: String,
-    /// The scalpel: standard or pointed (written to tool.json).
-    #[arg(long, value_name = "NAME", default_value = "standard", value_parser = parse_tool)]
+    /// The scalpel (written to tool.json).
+    #[arg(long, value_name = "NAME", default_value = "standard", value_parser = tool_parser())]
     tool: ToolKind,
     /// The look: classic, purple-nitrile, latex, skin-light, skin-medium, skin-dark, random:SEED.
     #[arg(long, value_name = "NAME", default_value = "classic", value_parser = parse_appearance)]
@@ -75,20 +76,21 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     rrd: Option<PathBuf>,
     /// Log images and masks every N-th frame to the .rrd (poses every frame).
-    #[arg(long, value_name = "N", default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
 }
 
-#[derive(Debug, Serialize)]
-struct Report<'a> {
+/// The report (docs/reports.md, `kind: "synth"`).
+#[derive(Debug, Serialize, Deserialize)]
+struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
-    scene: &'a str,
-    rig: &'a str,
-    tool: &'a str,
-    appearance: &'a str,
+    scene: String,
+    rig: String,
+    tool: String,
+    appearance: String,
     seed: u64,
     fps: f64,
     frames: u64,
@@ -104,18 +106,16 @@ struct Report<'a> {
     frame_sets_per_s: f64,
 }
 
-fn parse_scene(s: &str) -> Result<SceneKind, String> {
-    SceneKind::from_name(s).ok_or_else(|| {
-        let names: Vec<&str> = SceneKind::ALL.iter().map(|(_, n)| *n).collect();
-        format!("unknown scene (known: {})", names.join(", "))
-    })
+/// `--scene`: a name of [`SceneKind::ALL`], which clap lists in `--help` and when refusing another.
+fn scene_parser() -> impl TypedValueParser<Value = SceneKind> {
+    PossibleValuesParser::new(SceneKind::ALL.map(|(_, name)| name))
+        .try_map(|name| SceneKind::from_name(&name).ok_or_else(|| format!("unknown scene {name}")))
 }
 
-fn parse_tool(s: &str) -> Result<ToolKind, String> {
-    ToolKind::from_name(s).ok_or_else(|| {
-        let names: Vec<&str> = ToolKind::ALL.iter().map(|(_, n)| *n).collect();
-        format!("unknown tool (known: {})", names.join(", "))
-    })
+/// `--tool`: a name of [`ToolKind::ALL`], listed as `--scene`'s are.
+fn tool_parser() -> impl TypedValueParser<Value = ToolKind> {
+    PossibleValuesParser::new(ToolKind::ALL.map(|(_, name)| name))
+        .try_map(|name| ToolKind::from_name(&name).ok_or_else(|| format!("unknown tool {name}")))
 }
 
 fn parse_appearance(s: &str) -> Result<Appearance, String> {
@@ -125,12 +125,6 @@ fn parse_appearance(s: &str) -> Result<Appearance, String> {
 /// Runs the command.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let kind = args.scene;
-    if args.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
-    if args.rrd_every == 0 {
-        bail!("--rrd-every must be at least 1");
-    }
     let mut config = SceneConfig::new(kind, args.seed, args.frames);
     config.fps = args.fps;
     config.tool = args.tool;
@@ -165,12 +159,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let duration = args.frames as f64 / args.fps;
         let report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "synth",
+            kind: "synth".to_owned(),
             provenance: Provenance::current(),
-            scene: kind.name(),
-            rig: &args.rig,
-            tool: args.tool.name(),
-            appearance: &args.appearance.name,
+            scene: kind.name().to_owned(),
+            rig: args.rig.clone(),
+            tool: args.tool.name().to_owned(),
+            appearance: args.appearance.name.clone(),
             seed: args.seed,
             fps: args.fps,
             frames: args.frames,
@@ -220,4 +214,41 @@ fn log_dataset(dataset: &std::path::Path, rrd: &std::path::Path, every: u64) -> 
     pb.finish_and_clear();
     hullcut_viz::flush(&rec)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_report_round_trips_through_json() {
+        let report = Report {
+            schema_version: SCHEMA_VERSION,
+            kind: "synth".to_owned(),
+            provenance: Provenance::current(),
+            scene: "resect".to_owned(),
+            rig: "random:7".to_owned(),
+            tool: "pointed".to_owned(),
+            appearance: "purple-nitrile".to_owned(),
+            seed: 7,
+            fps: 30.0,
+            frames: 4,
+            cameras: 6,
+            out: "/tmp/a \"quoted\", odd path".to_owned(),
+            views: 22,
+            dropped_views: 2,
+            mean_scalpel_pixels_per_view: 812.5,
+            mean_hand_pixels_per_view: 20_480.25,
+            peak_tip_speed_m_s: 0.5,
+            skipped_triangles: 0,
+            seconds: 1.75,
+            frame_sets_per_s: 2.5,
+        };
+        let (first, again) = crate::report::json_round_trip(&report);
+        assert_eq!(first, again);
+        let value: serde_json::Value = serde_json::from_str(&first).expect("JSON");
+        // The provenance is flattened into the report's top level, as docs/reports.md lists it.
+        assert_eq!(value["git_hash"], crate::report::GIT_HASH);
+        assert_eq!(value["scene"], "resect");
+    }
 }
