@@ -200,9 +200,11 @@ def classify(result: dict, report: Path | None, file_name: str) -> tuple[str, st
     return f"refused ({named})", first[:300]
 
 
-def cases_for(dataset: Path, scenarios: list[Path]) -> list[tuple[Path, str]]:
+def cases_for(dataset: Path, scenarios: list[Path], colmap: Path) -> list[tuple[Path, str]]:
     """(file to mutate, kind) pairs: every reader's inputs."""
     targets = [
+        (colmap / "cameras.txt", "text"),
+        (colmap / "images.txt", "text"),
         (dataset / "rig.yaml", "text"),
         (dataset / "dataset.toml", "text"),
         (dataset / "frames.csv", "text"),
@@ -222,6 +224,9 @@ def commands(target: Path, work: Path, dataset: Path) -> list[tuple[str, list[st
     out = work / "out"
     if target.suffix == ".toml" and target.parent.name == "scenarios":
         return [("sim", ["sim", "--scenario", str(target), "--report", str(report)], report)]
+    if target.parent.name == "colmap":
+        return [("import colmap", ["import-calibration", "--colmap", str(target.parent), "--out", str(work / "r.yaml")],
+                 None)]
     if target.name == "rig.yaml":
         cmds = [("rig show", ["rig", "show", str(target)], None)]
     else:
@@ -234,6 +239,11 @@ def commands(target: Path, work: Path, dataset: Path) -> list[tuple[str, list[st
             report,
         )
     )
+    if target.parent.parent.name == "dataset" and target.suffix == ".png" or target.name == "rig.yaml":
+        cmds.append(
+            ("segment", ["segment", "--dataset", str(dataset), "--frames", "0:3", "--out", str(work / "seg"),
+                         "--report", str(report)], report)
+        )
     cmds.append(
         (
             "run",
@@ -257,17 +267,21 @@ def main() -> int:
 
     rng = random.Random(args.seed)
     runner = Runner(args.bin.resolve(), args.timeout, args.memory_gib)
-    scenarios = sorted(SCENARIOS.glob("*.toml"))
     records = []
     with tempfile.TemporaryDirectory(prefix="hullcut-campaign-") as tmp:
         tmp = Path(tmp)
+        colmap_model = tmp / "colmap-model"
+        subprocess.run([str(runner.binary), "rig", "export", str(DATASET / "rig.yaml"), "--colmap", str(colmap_model)],
+                       check=True, stdout=subprocess.DEVNULL)
         for case in range(args.cases):
             work = tmp / f"case{case}"
             dataset = work / "dataset"
             shutil.copytree(DATASET, dataset)
             scen_dir = work / "scenarios"
             shutil.copytree(SCENARIOS, scen_dir)
-            targets = cases_for(dataset, sorted(scen_dir.glob("*.toml")))
+            colmap = work / "colmap"
+            shutil.copytree(colmap_model, colmap)
+            targets = cases_for(dataset, sorted(scen_dir.glob("*.toml")), colmap)
             target, kind = rng.choice(targets)
             data = target.read_bytes()
             new, how = {"text": mutate_text, "png": mutate_png, "ply": mutate_ply}[kind](data, rng)

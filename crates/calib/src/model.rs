@@ -3,7 +3,7 @@
 use nalgebra::{Point2, Point3};
 
 /// A chessboard calibration pattern, counted by inner corners as OpenCV does.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pattern {
     /// Inner corners along a row.
     pub cols: u32,

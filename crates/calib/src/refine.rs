@@ -33,7 +33,7 @@ impl Default for RefineParams {
 }
 
 /// How the refinement went.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineSummary {
     /// Iterations taken.
     pub iterations: usize,

@@ -1,12 +1,12 @@
 //! The calibration report: accuracy per camera, per camera pair and per image.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::Pattern;
 use crate::refine::RefineSummary;
 
 /// One camera's result.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CameraReport {
     /// Camera name.
     pub name: String,
@@ -39,7 +39,7 @@ pub struct CameraReport {
 }
 
 /// Two cameras that saw the board at the same time.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PairReport {
     /// First camera.
     pub a: String,
@@ -54,7 +54,7 @@ pub struct PairReport {
 }
 
 /// One image.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ImageReport {
     /// Camera name.
     pub camera: String,
@@ -69,7 +69,7 @@ pub struct ImageReport {
 }
 
 /// A spanning-tree edge by camera names.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TreeEdgeReport {
     /// Camera nearer the root.
     pub parent: String,
@@ -80,7 +80,7 @@ pub struct TreeEdgeReport {
 }
 
 /// Everything a calibration measured.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CalibReport {
     /// The board.
     pub pattern: Pattern,

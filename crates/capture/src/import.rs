@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use hullcut_dataset::{DatasetMeta, DatasetWriter, FORMAT_VERSION, MAX_FRAME_COUNT};
 use hullcut_rig::Rig;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::CaptureError;
 use crate::source::{Capture, CaptureParams, Clock, SourceConfig, SourceSpec};
@@ -46,7 +46,7 @@ pub struct ImportParams {
 }
 
 /// What [`import_videos`] wrote and could not pair.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ImportSummary {
     /// The dataset.
     pub path: PathBuf,

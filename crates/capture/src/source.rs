@@ -18,7 +18,7 @@ use crossbeam_channel::{Receiver, Sender, TrySendError};
 use opencv::core::Mat;
 use opencv::prelude::*;
 use opencv::videoio;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::convert::mat_to_rgb;
 use crate::error::{CaptureError, Context as _};
@@ -70,7 +70,7 @@ pub enum Clock {
 }
 
 /// The clock a source actually uses once opened (what [`Clock::Auto`] resolved to).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ClockKind {
     /// `CAP_PROP_POS_MSEC`.
@@ -332,7 +332,7 @@ pub enum SourceEvent {
 }
 
 /// What a source thread does when the channel is full.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum QueuePolicy {
     /// Wait until the consumer takes a frame (replay: nothing is lost, the reader slows down).
@@ -358,7 +358,7 @@ impl Default for CaptureParams {
 }
 
 /// Per-camera counters of a running or finished [`Capture`].
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct CaptureStats {
     /// Frames each camera's thread decoded.
     pub frames_decoded: Vec<u64>,

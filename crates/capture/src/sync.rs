@@ -17,7 +17,7 @@ use std::collections::VecDeque;
 
 use hullcut_dataset::{FrameSet, View};
 use image::RgbImage;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::CaptureError;
 
@@ -78,7 +78,7 @@ impl Default for SyncParams {
 }
 
 /// Counters of a [`Synchronizer`], for reports. Per-camera vectors are in rig order.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SyncStats {
     /// Number of cameras.
     pub cameras: usize,

@@ -6,10 +6,10 @@ use anyhow::Context as _;
 use hullcut_gpu::{AdapterChoice, Gpu};
 use hullcut_hull::gpu::GpuCarver;
 use hullcut_hull::{HullError, HullParams, Occupancy, Silhouette, carve};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Where the compute runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     /// The CPU, on rayon's threads.

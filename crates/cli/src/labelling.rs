@@ -16,7 +16,7 @@ use hullcut_hull::shadow::{cover, keep_supported};
 use hullcut_hull::{HullParams, Occupancy, Silhouette, silhouettes};
 use hullcut_pose::{LabelParams, LabelStats, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput};
 use image::GrayImage;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
 
@@ -50,7 +50,7 @@ const EXPLAINED: u8 = 254;
 const SHADOW_DEPTH: f64 = 0.8;
 
 /// Which evidence labels the foreground (`--labels`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub(crate) enum LabelMethod {
     /// The fitted tool's geometry, sharpened by the learned colours near the tool, and the colours
@@ -76,7 +76,7 @@ impl LabelMethod {
 }
 
 /// Where a frame set's labels came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub(crate) enum LabelSource {
     /// The fitted tool drawn into the views.
@@ -91,7 +91,7 @@ pub(crate) enum LabelSource {
 }
 
 /// Counts per label source, and what was learned.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub(crate) struct LabelCounters {
     /// Frame sets labelled by the tool's geometry.
     pub geometry: u64,
@@ -119,7 +119,7 @@ pub(crate) struct LabelCounters {
 }
 
 /// What the labelling of a run did, for its report.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct LabellingReport {
     /// How each camera found its foreground: `background` (empty-scene images), `median` (the
     /// recording's median), `mog2`.

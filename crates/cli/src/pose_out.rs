@@ -8,7 +8,7 @@ use anyhow::Context as _;
 use hullcut_pose::{BladePose, PoseError, PoseEstimate};
 use hullcut_viz::RecordingStream;
 use nalgebra::{Point3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Errors above these count as wrong in the report (the refusal line), degrees and mm.
 pub const WRONG_DEG: f64 = 5.0;
@@ -24,7 +24,7 @@ fn vector(v: &Vector3<f64>) -> [f64; 3] {
 }
 
 /// One line of `poses.jsonl`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub struct PoseLine {
     frame: u64,
     timestamp_ns: i64,
@@ -93,7 +93,7 @@ impl PoseWriter {
 }
 
 /// One frame's pose errors in the report.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FrameError {
     frame: u64,
     valid: bool,
@@ -118,7 +118,7 @@ pub struct FrameError {
 }
 
 /// Mean, 95th percentile (nearest rank) and maximum.
-#[derive(Debug, Default, Clone, Copy, Serialize)]
+#[derive(Debug, Default, Clone, Copy, Serialize, Deserialize)]
 pub struct Spread {
     mean: f64,
     p95: f64,
@@ -138,7 +138,7 @@ impl Spread {
 }
 
 /// The pose section of the report.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub struct PoseReport {
     /// Whether the dataset has a tool.json (without one every frame is refused).
     pub tool: bool,

@@ -74,10 +74,28 @@ impl StageTiming {
     }
 }
 
-/// Writes a report as pretty JSON.
-pub fn write_json(path: &Path, value: &impl Serialize) -> anyhow::Result<()> {
+/// Writes a report as pretty JSON, after checking that it reads back as the same report (every
+/// report type is `Deserialize`; a field that would not survive the trip is a bug, refused here
+/// rather than written). The file is written beside its place and renamed over it, so a failed
+/// write (a full disk) never leaves half a report.
+pub fn write_json<T: Serialize + serde::de::DeserializeOwned>(path: &Path, value: &T) -> anyhow::Result<()> {
     let text = serde_json::to_string_pretty(value).context("serializing the report")?;
-    std::fs::write(path, text + "\n").with_context(|| format!("writing report {}", path.display()))
+    let back: T = serde_json::from_str(&text).context("the report does not read back")?;
+    let again = serde_json::to_string_pretty(&back).context("serializing the report read back")?;
+    if again != text {
+        anyhow::bail!("the report for {} does not read back as written", path.display());
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let write = || -> std::io::Result<()> {
+        let mut file = tempfile::NamedTempFile::new_in(dir)?;
+        std::io::Write::write_all(&mut file, (text + "\n").as_bytes())?;
+        file.persist(path).map_err(|e| e.error)?;
+        Ok(())
+    };
+    write().with_context(|| format!("writing report {}", path.display()))
 }
 
 /// A value for a message, cut to `max` characters (with an ellipsis and the full length) so that

@@ -18,19 +18,8 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("JSON")
 }
 
-/// A CSV file read with the csv crate: its header and rows, every row as wide as the header.
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let mut reader = csv::Reader::from_path(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let header: Vec<String> = reader.headers().expect("a header").iter().map(str::to_owned).collect();
-    let rows: Vec<Vec<String>> = reader
-        .records()
-        .map(|r| r.unwrap_or_else(|e| panic!("{}: {e}", path.display())).iter().map(str::to_owned).collect())
-        .collect();
-    for (k, row) in rows.iter().enumerate() {
-        assert_eq!(row.len(), header.len(), "{} row {}: {row:?} under {header:?}", path.display(), k + 1);
-    }
-    (header, rows)
-}
+mod common;
+use common::read_csv;
 
 /// `hullcut run` on the shipped dataset at 1 cm cells with `extra` arguments, recording and
 /// reporting into `dir`; the output and the report (null when none was written).

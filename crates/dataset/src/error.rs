@@ -100,7 +100,7 @@ pub enum DatasetError {
         path: PathBuf,
     },
     /// A frame number outside `0..frame_count`.
-    #[error("{path}: frame {frame} is outside the dataset (frame_count = {frame_count})")]
+    #[error("{path}: frame {frame} is outside the dataset (dataset.toml: frame_count = {frame_count})")]
     NoSuchFrame {
         /// The dataset (or output) folder.
         path: PathBuf,

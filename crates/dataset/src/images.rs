@@ -132,7 +132,7 @@ pub(crate) fn load_mask(path: &Path, what: &str, check: SizeCheck<'_>) -> Result
         DynamicImage::ImageLuma8(i) => Ok(i),
         other => Err(DatasetError::Image {
             path: path.to_owned(),
-            message: format!("a mask must be 8-bit greyscale, found {:?}", other.color()),
+            message: format!("a mask must be 8-bit greyscale, found {}", colour_words(other.color())),
         }),
     }
 }
@@ -143,7 +143,29 @@ pub(crate) fn load_depth(path: &Path, what: &str, check: SizeCheck<'_>) -> Resul
         DynamicImage::ImageLuma16(i) => Ok(i),
         other => Err(DatasetError::Image {
             path: path.to_owned(),
-            message: format!("a depth image must be 16-bit greyscale (millimetres), found {:?}", other.color()),
+            message: format!(
+                "a depth image must be 16-bit greyscale (millimetres), found {}",
+                colour_words(other.color())
+            ),
         }),
     }
+}
+
+/// A pixel format in words, for messages (not the `image` crate's Debug names such as `Rgb8`).
+fn colour_words(colour: image::ColorType) -> String {
+    use image::ColorType as C;
+    let (channels, bits) = match colour {
+        C::L8 => ("greyscale", 8),
+        C::La8 => ("greyscale with alpha", 8),
+        C::Rgb8 => ("RGB", 8),
+        C::Rgba8 => ("RGBA", 8),
+        C::L16 => ("greyscale", 16),
+        C::La16 => ("greyscale with alpha", 16),
+        C::Rgb16 => ("RGB", 16),
+        C::Rgba16 => ("RGBA", 16),
+        C::Rgb32F => ("RGB floating-point", 32),
+        C::Rgba32F => ("RGBA floating-point", 32),
+        _ => return format!("a pixel format of {} bytes per pixel", colour.bytes_per_pixel()),
+    };
+    format!("{bits}-bit {channels}")
 }

@@ -204,7 +204,7 @@ impl Dataset {
             let pose = parsed.into_pose().map_err(err)?;
             if pose.frame >= self.meta.frame_count {
                 return Err(err(format!(
-                    "frame {} is outside the dataset (frame_count = {})",
+                    "frame {} is outside the dataset (dataset.toml: frame_count = {})",
                     pose.frame, self.meta.frame_count
                 )));
             }
@@ -448,7 +448,10 @@ fn read_frames_csv(path: &Path, meta: &DatasetMeta, rig: &Rig) -> Result<Rows> {
         let frame: u64 =
             frame.parse().map_err(|_| err(format!("the frame `{}` is not a non-negative integer", shorten(frame))))?;
         if frame >= meta.frame_count {
-            return Err(err(format!("frame {frame} is outside the dataset (frame_count = {})", meta.frame_count)));
+            return Err(err(format!(
+                "frame {frame} is outside the dataset (dataset.toml: frame_count = {})",
+                meta.frame_count
+            )));
         }
         let Some(cam) = rig.index_of(camera) else {
             return Err(err(format!(

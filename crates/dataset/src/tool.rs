@@ -163,6 +163,33 @@ pub fn read_tool(path: impl AsRef<Path>) -> Result<ToolGeometry> {
         key: "mesh".to_owned(),
         message: format!("cannot read the mesh: {e}"),
     })?;
+    if mesh.triangles.is_empty() {
+        return Err(DatasetError::Invalid {
+            path: path.to_owned(),
+            key: "mesh".to_owned(),
+            message: format!("{} has no triangles", mesh_path.display()),
+        });
+    }
+    // The mesh is the tool too: its vertices obey the tool's bounds (a vertex at 1e300 would size
+    // the pose template's grids), and the error names the mesh file.
+    if let Some((lo, hi)) = mesh.bounds() {
+        let far = lo.coords.iter().chain(hi.coords.iter()).any(|c| c.abs() > MAX_TOOL_COORDINATE_M);
+        let extent = (hi - lo).max();
+        if far || extent > MAX_TOOL_EXTENT_M {
+            return Err(DatasetError::Invalid {
+                path: path.to_owned(),
+                key: "mesh".to_owned(),
+                message: format!(
+                    "{} spans {} m, from [{}] to [{}]; a hand-held tool is within ±{MAX_TOOL_COORDINATE_M} m and at \
+                     most {MAX_TOOL_EXTENT_M} m across (a mesh in millimetres?)",
+                    mesh_path.display(),
+                    short_number(extent),
+                    lo.coords.iter().map(|&c| short_number(c)).collect::<Vec<_>>().join(", "),
+                    hi.coords.iter().map(|&c| short_number(c)).collect::<Vec<_>>().join(", "),
+                ),
+            });
+        }
+    }
     let mut tool =
         ToolGeometry { mesh, tip, cutting_edge, blade_normal, blade_thickness: file.blade_thickness, blade_outline };
     tool.blade_normal = validate(path, &tool)?;

@@ -13,7 +13,7 @@
 use hullcut_rig::{Camera, Rig};
 use nalgebra::{Matrix3, Point3, Vector3};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::{Aabb, HullError};
 
@@ -25,7 +25,7 @@ const REFINE_SAMPLES: usize = 64;
 const NEAR_M: f64 = 0.01;
 
 /// Where a working volume came from.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum VolumeSource {
     /// `--workspace` on the command line.
@@ -68,10 +68,10 @@ impl VolumeSource {
 }
 
 /// The box carving covers and where it came from.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WorkingVolume {
     /// The box, world metres.
-    #[serde(serialize_with = "serialize_aabb")]
+    #[serde(serialize_with = "serialize_aabb", deserialize_with = "deserialize_aabb")]
     pub aabb: Aabb,
     /// Where it came from.
     pub source: VolumeSource,
@@ -85,6 +85,16 @@ fn serialize_aabb<S: serde::Serializer>(a: &Aabb, s: S) -> Result<S::Ok, S::Erro
     st.serialize_field("min", &[a.min.x, a.min.y, a.min.z])?;
     st.serialize_field("max", &[a.max.x, a.max.y, a.max.z])?;
     st.end()
+}
+
+fn deserialize_aabb<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Aabb, D::Error> {
+    #[derive(Deserialize)]
+    struct Corners {
+        min: [f64; 3],
+        max: [f64; 3],
+    }
+    let c = Corners::deserialize(d)?;
+    Ok(Aabb { min: Point3::from(c.min), max: Point3::from(c.max) })
 }
 
 impl WorkingVolume {

@@ -49,6 +49,6 @@ pub use track::{
 #[derive(Debug, thiserror::Error)]
 pub enum ToolError {
     /// The tool geometry cannot serve as a template.
-    #[error("tool.json: {0}")]
+    #[error("the tool cannot serve as a blade template: {0}")]
     Template(String),
 }

@@ -69,7 +69,7 @@ pub fn shorten_to(value: &str, max_chars: usize) -> String {
 /// notation (`1e-300` rather than 302 characters of zeros).
 pub fn short_number(x: f64) -> String {
     let plain = format!("{x}");
-    if plain.len() <= 24 { plain } else { format!("{x:e}") }
+    if plain.len() <= 12 { plain } else { format!("{x:e}") }
 }
 
 /// Max |RᵀR − I| and det R of a 3x3 matrix.

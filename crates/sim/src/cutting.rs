@@ -41,7 +41,7 @@ use crate::{Material, SimError};
 mod on_gpu;
 
 /// Settings of a [`CutSim`].
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CutSimParams {
     /// TLED quadrature and hourglass control.
     pub tled: TledParams,
@@ -75,7 +75,7 @@ impl Default for CutSimParams {
 }
 
 /// What one call of [`CutSim::cut`] did.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CutOutcome {
     /// Lattice edges the swept surface crossed.
     pub crossed: usize,

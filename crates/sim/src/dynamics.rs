@@ -38,7 +38,7 @@ pub fn ramp(t: f32, duration: f32) -> f32 {
 }
 
 /// Why a run stopped early.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Divergence {
     /// Step at which it was detected.
     pub step: u64,

@@ -75,7 +75,7 @@ const MIN_LEN: usize = 512;
 pub const MAX_W: usize = 1000;
 
 /// Parameters of FLSM, the scenario's `[flsm]` table.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FlsmParams {
     /// Region half-width in cells (`flsm.w`), 1 to [`MAX_W`]. Larger regions are stiffer and propagate
     /// deformation further per step; the cost per step does not depend on it.

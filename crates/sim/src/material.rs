@@ -5,7 +5,7 @@ use nalgebra::Matrix3;
 use crate::SimError;
 
 /// Lamé parameters and density.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Material {
     /// First Lamé parameter λ, pascals.
     pub lambda: f64,

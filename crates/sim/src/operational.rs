@@ -36,7 +36,7 @@ use crate::{CELL_EDGES, SimError};
 pub const MAX_SUBSTEPS: usize = 1000;
 
 /// Settings of the hybrid model in a [`crate::CutSim`].
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HybridParams {
     /// Cells whose deformed centre lies within this distance of the tool are TLED, metres.
     pub radius: f64,
@@ -84,7 +84,7 @@ impl HybridParams {
 }
 
 /// What [`HybridParams`] come to for one body: its steps and stiffnesses.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HybridSteps {
     /// TLED steps per FLSM step.
     pub substeps: usize,

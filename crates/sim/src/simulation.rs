@@ -17,7 +17,7 @@ use crate::{Lattice, Material, SimError};
 mod on_gpu;
 
 /// What simulates a node (the seed paper's Fig. 1 colours: TLED green, FLSM yellow, interface white).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum NodeRole {
     /// Moved by TLED only.
     Tled,

@@ -12,7 +12,7 @@ use nalgebra::Vector3;
 use crate::tled::Tled;
 
 /// Result of the eigenvalue estimate.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StabilityLimit {
     /// Estimated highest angular frequency, rad/s.
     pub omega_max: f64,

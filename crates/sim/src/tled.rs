@@ -17,7 +17,7 @@ use crate::tled_slabs::{SlabAccumulators, Slabs};
 use crate::{Material, SimError};
 
 /// Quadrature of the hexahedra.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Integration {
     /// One point at the centre with Flanagan–Belytschko hourglass control: cheap, and free of
     /// volumetric locking for nearly incompressible tissue.
@@ -27,7 +27,7 @@ pub enum Integration {
 }
 
 /// TLED settings.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TledParams {
     /// Quadrature.
     pub integration: Integration,

@@ -8,7 +8,7 @@
 
 use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::classes::{ColourClass, ColourClasses, ColourLut};
 
@@ -21,7 +21,7 @@ const COV_FLOOR: f64 = 1e-4;
 const GATE_LOG_RATIO: f64 = 3.0;
 
 /// Running sums of one label's features, with forgetting.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 struct Sums {
     weight: f64,
     sum: [f64; 3],
@@ -63,7 +63,7 @@ impl Sums {
 }
 
 /// Where the model's samples came from, for reports.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AppearanceSources {
     /// Frame sets whose geometric labels were learned from.
     pub geometry_frames: u64,
@@ -72,7 +72,7 @@ pub struct AppearanceSources {
 }
 
 /// The learned appearance of the hand and the tool (see the module docs).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AppearanceModel {
     /// Per label of [`label::NAMED`]: hand, scalpel.
     sums: [Sums; 2],
@@ -106,10 +106,10 @@ impl Default for AppearanceModel {
 }
 
 /// One label's learned colour, for reports.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LearnedColour {
     /// `hand` or `scalpel`.
-    pub label: &'static str,
+    pub label: String,
     /// Weight of the samples (pixels, decayed).
     pub pixels: f64,
     /// Mean (r/s, b/s, s/765).
@@ -196,7 +196,7 @@ impl AppearanceModel {
             .map(|(&(l, name), s)| {
                 let class = s.class(l);
                 LearnedColour {
-                    label: name,
+                    label: name.to_owned(),
                     pixels: s.weight,
                     mean: class.as_ref().map(|c| c.mean),
                     sd: class.as_ref().map(|c| [0, 1, 2].map(|i| c.cov[i][i].sqrt())),

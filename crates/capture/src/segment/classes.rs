@@ -8,7 +8,7 @@
 use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::CaptureError;
 
@@ -21,7 +21,7 @@ const MIN_LEARN_SUM: u32 = 24;
 const COV_FLOOR: f64 = 1e-4;
 
 /// One colour class: a label and a Gaussian over (r/s, b/s, s/765).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ColourClass {
     /// The label this class assigns (e.g. [`label::HAND`]).
     pub label: u8,
@@ -72,7 +72,7 @@ impl ColourClass {
 }
 
 /// The foreground's colour classes and how to decide between them.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ColourClasses {
     /// The classes; several may share a label.
     pub classes: Vec<ColourClass>,

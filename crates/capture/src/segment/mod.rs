@@ -24,7 +24,7 @@ mod report;
 use hullcut_dataset::{Dataset, FrameSet, label};
 use image::{GrayImage, RgbImage};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub use appearance::{AppearanceModel, AppearanceSources, LearnedColour};
 pub use background::BackgroundModel;
@@ -38,7 +38,7 @@ use classes::ClassLut;
 use mog2::Mog2;
 
 /// Settings of segmentation.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SegmentParams {
     /// β: how much brighter than expected (relative, after exposure compensation) a pixel may
     /// be and still be background. Small, because a static scene's shading does not change;
@@ -130,7 +130,7 @@ impl SegmentParams {
 }
 
 /// How a camera finds its foreground.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// Per-pixel model from empty-scene images.

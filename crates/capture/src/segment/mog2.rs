@@ -12,7 +12,7 @@ use crate::convert::rgb_to_bgr_mat;
 use crate::error::{CaptureError, Context as _};
 
 /// Settings of the MOG2 fallback (OpenCV's defaults, except shadows which are background here).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mog2Params {
     /// Frames of history that shape the model.
     pub history: i32,

@@ -2,7 +2,7 @@
 
 use hullcut_dataset::label;
 use image::GrayImage;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::CaptureError;
 
@@ -51,7 +51,7 @@ impl Counts {
 }
 
 /// Accuracy of one label over many views.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LabelScore {
     /// Label value.
     pub label: u8,
@@ -78,7 +78,7 @@ pub struct LabelScore {
 }
 
 /// Per-label accuracy of a segmentation run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SegmentationReport {
     /// Views scored.
     pub views: u64,

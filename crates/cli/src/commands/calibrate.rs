@@ -74,15 +74,15 @@ struct Timings {
     total: StageTiming,
 }
 
-#[derive(Debug, Serialize)]
-struct Report<'a> {
+#[derive(Debug, Serialize, Deserialize)]
+struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
-    images_dir: &'a Path,
+    images_dir: PathBuf,
     #[serde(flatten)]
-    calibration: &'a CalibReport,
+    calibration: CalibReport,
     timings: Timings,
 }
 
@@ -147,10 +147,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let per_image = if total > 0 { detect_time / total as u32 } else { Duration::ZERO };
         let report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "calibration",
+            kind: "calibration".to_owned(),
             provenance: Provenance::current(),
-            images_dir: &args.images,
-            calibration: &cal.report,
+            images_dir: args.images.clone(),
+            calibration: cal.report.clone(),
             timings: Timings {
                 detect: StageTiming::from_durations(&vec![per_image; total]),
                 calibrate: StageTiming::from_durations(&[cal_time]),

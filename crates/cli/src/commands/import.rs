@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use hullcut_capture::import::{ImportParams, VideoInput, import_videos};
 use hullcut_rig::Rig;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, write_json};
@@ -129,16 +129,16 @@ fn name_and_seconds(s: &str) -> Result<(String, f64), String> {
     Ok((name.to_owned(), seconds))
 }
 
-#[derive(Debug, Serialize)]
-struct Report<'a> {
+#[derive(Debug, Serialize, Deserialize)]
+struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
     rig: String,
     videos: Vec<(String, String, f64)>,
     #[serde(flatten)]
-    summary: &'a hullcut_capture::import::ImportSummary,
+    summary: hullcut_capture::import::ImportSummary,
 }
 
 /// Runs `import-videos`.
@@ -208,11 +208,11 @@ pub fn videos(args: &VideosArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
         let report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "import_videos",
+            kind: "import_videos".to_owned(),
             provenance: Provenance::current(),
             rig: args.rig.display().to_string(),
             videos: inputs.iter().map(|i| (i.camera.clone(), i.path.display().to_string(), i.offset_s)).collect(),
-            summary: &summary,
+            summary: summary.clone(),
         };
         write_json(path, &report)?;
     }

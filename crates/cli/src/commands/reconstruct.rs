@@ -14,7 +14,7 @@ use hullcut_hull::accuracy::{
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, WorkingVolume, carve, carve_within, silhouettes};
 use hullcut_pose::{Template, Tracker, TrackerParams, ViewInput, pose_error, rigid_from_matrix};
 use nalgebra::Isometry3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use self::checks::{Faults, ViewDisagreement};
 use crate::backend::{Backend, Carver};
@@ -127,9 +127,9 @@ pub struct Args {
     rrd_every: u64,
 }
 
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct LabelAccuracy {
-    label: &'static str,
+    label: String,
     frames: usize,
     iou_mean: Option<f64>,
     iou_min: Option<f64>,
@@ -156,7 +156,7 @@ struct LabelAccuracy {
 }
 
 /// Re-projected hull against the observed masks, per camera.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Consistency {
     camera: String,
     frames: usize,
@@ -166,7 +166,7 @@ struct Consistency {
     values: Vec<f64>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Timings {
     read: StageTiming,
     segment: Option<StageTiming>,
@@ -180,7 +180,7 @@ struct Timings {
     total: StageTiming,
 }
 
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Counters {
     frame_sets: usize,
     views_missing: usize,
@@ -198,18 +198,18 @@ struct Counters {
     truth_poses_refused: u64,
 }
 
-#[derive(Debug, Serialize)]
-struct Report<'a> {
+#[derive(Debug, Serialize, Deserialize)]
+struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
     dataset: String,
     out: String,
     frames: [u64; 2],
     backend: Backend,
-    masks: &'a str,
-    workspace: &'a WorkingVolume,
+    masks: String,
+    workspace: WorkingVolume,
     voxel_m: f64,
     resolution: usize,
     carve_votes: usize,
@@ -275,8 +275,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }
         }
     }
-    let template =
-        tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
+    let template = tool
+        .as_ref()
+        .map(Template::new)
+        .transpose()
+        .with_context(|| ds.root().join("tool.json").display().to_string())?;
     let mut tracker = template.clone().map(|t| Tracker::new(t, TrackerParams::default()));
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut pose_writer = PoseWriter::create(&args.out.join("poses.jsonl"))?;
@@ -298,8 +301,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let frames: Vec<u64> = ds.frame_numbers().into_iter().filter(|f| range.contains(f)).collect();
     let pb = bar(frames.len() as u64, "carving");
     let mut t = StageTimes::default();
-    let mut accuracy: Vec<LabelAccuracy> =
-        label::NAMED.iter().map(|&(_, name)| LabelAccuracy { label: name, ..LabelAccuracy::default() }).collect();
+    let mut accuracy: Vec<LabelAccuracy> = label::NAMED
+        .iter()
+        .map(|&(_, name)| LabelAccuracy { label: name.to_owned(), ..LabelAccuracy::default() })
+        .collect();
     let mut consistency: Vec<Consistency> =
         ds.meta().cameras.iter().map(|c| Consistency { camera: c.clone(), ..Consistency::default() }).collect();
     let mut disagreement = ViewDisagreement::new(&ds.meta().cameras);
@@ -552,14 +557,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
         let mut report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "reconstruction",
+            kind: "reconstruction".to_owned(),
             provenance: Provenance::current(),
             dataset: args.dataset.display().to_string(),
             out: args.out.display().to_string(),
             frames: [range.start, range.end],
             backend: args.backend,
-            masks: if use_files { "files" } else { "segment" },
-            workspace: &volume,
+            masks: if use_files { "files" } else { "segment" }.to_owned(),
+            workspace: volume.clone(),
             voxel_m: params.leaf_size,
             resolution,
             carve_votes: params.carve_votes,

@@ -17,7 +17,7 @@ use hullcut_pose::{PoseError, Template, pose_error, rigid_from_matrix};
 use hullcut_sim::{HybridParams, HybridSteps};
 use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use nalgebra::Isometry3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use self::stages::{Policy, StageTimes, Work};
 use crate::backend::{Backend, Carver};
@@ -176,7 +176,7 @@ pub struct Args {
 }
 
 /// Counted events of a run.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Counters {
     frame_sets_read: u64,
     /// Camera images missing from the frame sets processed (a camera that dropped frames or died).
@@ -208,7 +208,7 @@ struct Counters {
     tissue_surfaces_unchanged: u64,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Timings {
     read: StageTiming,
     segment: Option<StageTiming>,
@@ -227,7 +227,7 @@ struct Timings {
     latency: StageTiming,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct TissueReport {
     source: String,
     cell_m: f64,
@@ -258,10 +258,10 @@ struct TissueReport {
     gpu: Option<hullcut_sim::GpuStats>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     provenance: Provenance,
     source: String,
     seed: Option<u64>,
@@ -269,7 +269,7 @@ struct Report {
     /// Times the frames were replayed (`--repeat`).
     repeat: u64,
     backend: Backend,
-    masks: &'static str,
+    masks: String,
     workspace: hullcut_hull::WorkingVolume,
     voxel_m: f64,
     realtime: bool,
@@ -305,7 +305,7 @@ struct Report {
 const MEMORY_SAMPLE: Duration = Duration::from_secs(60);
 
 /// The process's memory at one moment of a run.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct MemorySample {
     /// Wall time since processing started, seconds.
     wall_s: f64,
@@ -420,8 +420,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pass_frames = last + 1;
     let pass_span_ns = ((last - first + 1) as f64 * 1e9 / ds.meta().fps).round() as i64;
     let tool = ds.tool()?;
-    let template =
-        tool.as_ref().map(Template::new).transpose().context("tool.json cannot serve as a blade template")?;
+    let template = tool
+        .as_ref()
+        .map(Template::new)
+        .transpose()
+        .with_context(|| ds.root().join("tool.json").display().to_string())?;
     // True poses, each checked: a matrix that is not a rigid pose (a NaN, a rotation entry of
     // 1e19) is not scored, and counted.
     let mut truth: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
@@ -710,7 +713,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
         let mut report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "run",
+            kind: "run".to_owned(),
             provenance: Provenance::current(),
             source: args
                 .dataset
@@ -720,7 +723,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             frames: [range.start, range.end],
             repeat: args.repeat,
             backend: args.backend,
-            masks: if use_files { "files" } else { "segment" },
+            masks: if use_files { "files" } else { "segment" }.to_owned(),
             workspace: volume,
             voxel_m: args.voxel,
             realtime: args.realtime,

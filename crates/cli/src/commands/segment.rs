@@ -75,10 +75,10 @@ pub struct Args {
 /// Frame sets at most that wait for learned colours (their masks held in memory).
 const MAX_DEFERRED: usize = 64;
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
     dataset: String,
@@ -260,7 +260,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let parameters = labelling.params().clone();
         let report = Report {
             schema_version: SCHEMA_VERSION,
-            kind: "segmentation",
+            kind: "segmentation".to_owned(),
             provenance: Provenance::current(),
             dataset: args.dataset.display().to_string(),
             frames: [range.start, range.end],

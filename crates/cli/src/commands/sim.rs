@@ -1,12 +1,12 @@
 //! `hullcut sim`: a simulation-only scenario (no cameras), with a report and a rerun recording.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
 use hullcut_sim::dynamics::Divergence;
 use hullcut_sim::{NodeRole, Scenario, Simulation};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::backend::Backend;
 use crate::progress::bar;
@@ -49,19 +49,19 @@ pub struct Args {
     rrd: Option<PathBuf>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Reaction {
     face: String,
     force_n: [f64; 3],
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Probe {
     at_m: [f64; 3],
     displacement_m: Option<[f64; 3]>,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct LatticeInfo {
     cell_m: f64,
     nodes: usize,
@@ -72,7 +72,7 @@ struct LatticeInfo {
     interface_nodes: usize,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Stability {
     dt_s: f64,
     dt_critical_s: f64,
@@ -83,7 +83,7 @@ struct Stability {
     dt_above_critical: bool,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Timings {
     /// Per call of advance (one TLED step, or one FLSM step with its TLED sub-steps).
     step: StageTiming,
@@ -91,24 +91,24 @@ struct Timings {
     total: StageTiming,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 struct Throughput {
     element_steps_per_s: f64,
     node_steps_per_s: f64,
     realtime_factor: f64,
 }
 
-#[derive(Debug, Serialize)]
-struct Report<'a> {
+#[derive(Debug, Serialize, Deserialize)]
+struct Report {
     schema_version: u32,
-    kind: &'static str,
+    kind: String,
     #[serde(flatten)]
     provenance: Provenance,
-    scenario: &'a Path,
+    scenario: PathBuf,
     backend: Backend,
     /// The GPU backend's adapter and counts (batches on the GPU, batches redone on the CPU);
     /// null on the CPU backend.
-    gpu: Option<&'a hullcut_sim::GpuStats>,
+    gpu: Option<hullcut_sim::GpuStats>,
     lattice: LatticeInfo,
     /// The hybrid's FLSM step (in TLED steps), FLSM stiffness and interface pull; null: all TLED.
     hybrid: Option<hullcut_sim::HybridSteps>,
@@ -121,7 +121,7 @@ struct Report<'a> {
     inverted_cells_max: usize,
     reactions: Vec<Reaction>,
     probes: Vec<Probe>,
-    warnings: &'a [String],
+    warnings: Vec<String>,
     timings: Timings,
     throughput: Throughput,
 }
@@ -226,11 +226,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let secs = run_time.as_secs_f64().max(1e-9);
     let report = Report {
         schema_version: SCHEMA_VERSION,
-        kind: "simulation",
+        kind: "simulation".to_owned(),
         provenance: Provenance::current(),
-        scenario: &args.scenario,
+        scenario: args.scenario.clone(),
         backend: args.backend,
-        gpu: sim.gpu_stats(),
+        gpu: sim.gpu_stats().cloned(),
         stability: Stability {
             dt_s: sim.dt(),
             dt_critical_s: sim.stability.dt_critical,
@@ -255,7 +255,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         failure,
         reactions,
         probes,
-        warnings: &sim.warnings,
+        warnings: sim.warnings.clone(),
         timings: Timings {
             step: StageTiming::from_durations(&step_times),
             setup: StageTiming::from_durations(&[setup]),
@@ -331,7 +331,7 @@ fn first_non_finite(r: &Report) -> Option<String> {
         figures.push(("hybrid.alpha".into(), f64::from(h.alpha)));
         figures.push(("hybrid.beta".into(), f64::from(h.beta)));
     }
-    if let Some(ms) = r.gpu.and_then(|g| g.device_ms) {
+    if let Some(ms) = r.gpu.as_ref().and_then(|g| g.device_ms) {
         figures.push(("gpu.device_ms".into(), ms));
     }
     for (i, x) in r.reactions.iter().enumerate() {
@@ -377,7 +377,7 @@ fn print_summary(r: &Report) {
         r.throughput.realtime_factor,
         r.throughput.element_steps_per_s
     );
-    if let Some(g) = r.gpu {
+    if let Some(g) = &r.gpu {
         println!(
             "GPU {}: {} batches ({} steps) on the GPU{}, {} batches ({} steps) redone on the CPU{}",
             g.adapter,

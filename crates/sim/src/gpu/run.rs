@@ -14,7 +14,7 @@ use crate::dynamics::{Divergence, Integrator};
 
 /// How the GPU backend has done so far (in the reports of `hullcut sim` and `hullcut run` with
 /// `--backend gpu`).
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GpuStats {
     /// The adapter's name.
     pub adapter: String,

@@ -5,7 +5,7 @@
 use anyhow::bail;
 use hullcut_dataset::{Dataset, FrameSet, View, label};
 use hullcut_hull::CarveStats;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// `--voxel` lies in (0, the workspace's side].
 pub(crate) fn voxel(voxel: f64, extent: f64) -> anyhow::Result<()> {
@@ -69,7 +69,7 @@ pub(crate) fn camera_name(ds: &Dataset, camera: usize) -> String {
 /// A camera image (or a whole frame set) that could not be used: unreadable (a corrupt or
 /// truncated PNG, a camera whose files stop mid-recording), or a mask with labels carving does
 /// not know.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct ViewFault {
     /// The frame.
     pub frame: u64,
@@ -92,7 +92,7 @@ impl std::fmt::Display for ViewFault {
 pub(crate) const MAX_LISTED_FAULTS: usize = 100;
 
 /// The faults of a run: every one counted, the first [`MAX_LISTED_FAULTS`] listed.
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 pub(crate) struct Faults {
     /// Camera images left out (unreadable, or with unknown labels).
     pub views: u64,
@@ -509,14 +509,14 @@ impl serde::ser::SerializeStructVariant for &mut NonFinite {
 }
 
 /// Lone refutations of one camera, summed over frames.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub(super) struct LoneRefutations {
     camera: String,
     cells: u64,
 }
 
 /// Which view disagreed with all the others, and how often (docs/reports.md).
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, Deserialize)]
 pub(super) struct ViewDisagreement {
     lone_refutations: Vec<LoneRefutations>,
     disagreed_most: Option<String>,
@@ -581,18 +581,18 @@ mod tests {
 
     use super::*;
 
-    #[derive(Serialize)]
+    #[derive(Serialize, Deserialize)]
     struct Inner {
         fine: f64,
         energy: f64,
     }
 
-    #[derive(Serialize)]
+    #[derive(Serialize, Deserialize)]
     enum Kind {
         Pair(f64, f32),
     }
 
-    #[derive(Serialize)]
+    #[derive(Serialize, Deserialize)]
     struct Report {
         name: &'static str,
         fps: f64,
