@@ -143,6 +143,22 @@ def mutate_ply(data: bytes, rng: random.Random) -> tuple[bytes, str]:
     return flip_bytes(data, rng)
 
 
+def mutate_jpeg(data: bytes, rng: random.Random) -> tuple[bytes, str]:
+    kind = rng.choice(["bytes", "truncate", "size"])
+    sof = data.find(b"\xff\xc0")
+    if kind == "size" and sof > 0 and sof + 9 <= len(data):
+        h = rng.choice([0, 1, 65535])
+        w = rng.choice([0, 1, 65535])
+        out = bytearray(data)
+        out[sof + 5: sof + 7] = h.to_bytes(2, "big")
+        out[sof + 7: sof + 9] = w.to_bytes(2, "big")
+        return bytes(out), f"SOF0 size {w}x{h}"
+    if kind == "truncate":
+        n = rng.randrange(len(data))
+        return data[:n], f"truncated to {n} bytes"
+    return flip_bytes(data, rng)
+
+
 class Runner:
     def __init__(self, binary: Path, timeout: float, memory_gib: float):
         self.binary = binary
@@ -259,6 +275,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--bin", type=Path, default=ROOT / "target" / "debug" / "hullcut")
     ap.add_argument("--cases", type=int, default=300, help="mutated inputs (each runs 1-3 commands)")
+    ap.add_argument("--calib-cases", type=int, default=0,
+                    help="mutated chessboard photos through `calibrate` (OpenCV's stereo samples; slower)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds before a run counts as a hang")
     ap.add_argument("--memory-gib", type=float, default=8.0, help="address-space limit per run")
@@ -298,27 +316,58 @@ def main() -> int:
                 )
                 print(f"{case:4} {str(rel):32} {name:12} {outcome:18} {how[:50]}", flush=True)
             shutil.rmtree(work, ignore_errors=True)
+        for case in range(args.calib_cases):
+            work = tmp / f"calib{case}"
+            tree = work / "images"
+            subprocess.run(["bash", str(ROOT / "tools" / "stereo-sample.sh"), str(tree)], check=True,
+                           stdout=subprocess.DEVNULL)
+            photos = sorted(tree.glob("*/*.jpg"))
+            target = rng.choice(photos)
+            new, how = mutate_jpeg(target.read_bytes(), rng)
+            target.write_bytes(new)
+            rel = target.relative_to(work)
+            report = work / "calib.json"
+            cmd = ["calibrate", "--images", str(tree), "--pattern", "9x6", "--square", "0.025", "--out",
+                   str(work / "rig.yaml"), "--report", str(report)]
+            result = runner.run(cmd, work)
+            outcome, detail = classify(result, report, target.name)
+            records.append(
+                {"case": args.cases + case, "file": str(rel), "mutation": how, "command": "calibrate",
+                 "outcome": outcome, "rc": result["rc"], "seconds": result["seconds"], "detail": detail}
+            )
+            print(f"{case:4} {str(rel):32} calibrate    {outcome:18} {how[:50]}", flush=True)
+            shutil.rmtree(work, ignore_errors=True)
 
     tally: dict[str, int] = {}
     for r in records:
         tally[r["outcome"]] = tally.get(r["outcome"], 0) + 1
     bad = [r for r in records if r["outcome"] in ("panic", "abort", "hang", "nan")]
     print(json.dumps(tally, indent=1))
+    by_command: dict[str, dict[str, int]] = {}
+    for r in records:
+        row = by_command.setdefault(r["command"], {})
+        row[r["outcome"]] = row.get(r["outcome"], 0) + 1
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "campaign.json").write_text(
-            json.dumps({"seed": args.seed, "cases": args.cases, "tally": tally, "runs": records}, indent=1) + "\n"
+            json.dumps({"seed": args.seed, "cases": args.cases, "calib_cases": args.calib_cases, "tally": tally,
+                        "by_command": by_command, "runs": records}, indent=1) + "\n"
         )
         lines = [
             "# Mutation campaign",
             "",
-            f"`python3 tools/mutation_campaign.py --cases {args.cases} --seed {args.seed} --out {args.out}`",
+            f"`python3 tools/mutation_campaign.py --cases {args.cases} --calib-cases {args.calib_cases} "
+            f"--seed {args.seed} --timeout {args.timeout:g} --out {args.out}`",
             "",
-            f"{args.cases} mutated inputs, {len(records)} runs.",
+            f"{args.cases + args.calib_cases} mutated inputs, {len(records)} runs.",
             "",
             "| outcome | runs |",
             "|---|---|",
             *[f"| {k} | {v} |" for k, v in sorted(tally.items())],
+            "",
+            "| command | " + " | ".join(sorted(tally)) + " |",
+            "|---|" + "---|" * len(tally),
+            *[f"| {c} | " + " | ".join(str(row.get(k, 0)) for k in sorted(tally)) + " |" for c, row in sorted(by_command.items())],
             "",
         ]
         if bad:

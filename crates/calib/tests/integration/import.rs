@@ -161,3 +161,62 @@ fn bad_calibration_files_are_refused_naming_file_and_key() {
     let e = read_opencv_cameras(dir.path(), 1.0).expect_err("twice").to_string();
     assert!(e.contains("two files for camera `cam0`"), "{e}");
 }
+
+/// OpenCV FileStorage files with bytes flipped, inserted or removed, or a number replaced by a
+/// hostile one: the import refuses them (naming the file) or reads a valid rig, never panics.
+mod generated {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    const HOSTILE: [&str; 10] =
+        ["nan", "-inf", "1e308", "-1e308", "1e-300", "0", "-1", "9223372036854775807", "4294967296", "1e19"];
+
+    fn valid_file() -> Vec<u8> {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("cam0.yml");
+        write_camera(&path, &lab8_rig().cameras[0], 0, 1.0);
+        std::fs::read(&path).expect("read")
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+
+        #[test]
+        fn mutated_opencv_files_never_panic(
+            edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>(), 0u8..4), 1..5),
+            hostile in 0usize..HOSTILE.len(),
+        ) {
+            let mut bytes = valid_file();
+            for (at, byte, kind) in edits {
+                if bytes.is_empty() {
+                    break;
+                }
+                let i = at.index(bytes.len());
+                match kind {
+                    0 => bytes[i] = byte,
+                    1 => bytes.insert(i, byte),
+                    2 => {
+                        bytes.remove(i);
+                    }
+                    _ => {
+                        // Replace the number that starts at or after i, if any.
+                        if let Some(start) = bytes[i..].iter().position(u8::is_ascii_digit).map(|p| p + i) {
+                            let end = bytes[start..]
+                                .iter()
+                                .position(|b| !(b.is_ascii_digit() || b"+-.e".contains(b)))
+                                .map_or(bytes.len(), |p| p + start);
+                            bytes.splice(start..end, HOSTILE[hostile].bytes());
+                        }
+                    }
+                }
+            }
+            let dir = tempfile::tempdir().expect("tempdir");
+            std::fs::write(dir.path().join("cam0.yml"), &bytes).expect("write");
+            match read_opencv_cameras(dir.path(), 1.0) {
+                Ok(rig) => prop_assert!(rig.validate("mutated").is_ok()),
+                Err(e) => prop_assert!(e.to_string().contains("cam0.yml") || e.to_string().contains(dir.path().to_str().expect("utf-8")), "{e}"),
+            }
+        }
+    }
+}
