@@ -238,8 +238,12 @@ pub struct BoundarySpec {
     /// Components held at their rest value.
     #[serde(default)]
     pub fix: Vec<String>,
-    /// Prescribed displacement of all three components, metres (reached at the end of `ramp`).
+    /// Prescribed displacement, metres (reached at the end of `ramp`): of all three components, or
+    /// of those in `components`.
     pub displace: Option<[f64; 3]>,
+    /// With `displace`: the components it prescribes (`"x"`, `"y"`, `"z"`); the others stay free.
+    /// All three when absent.
+    pub components: Option<Vec<String>>,
     /// Ramp duration, seconds.
     #[serde(default)]
     pub ramp: f64,
@@ -477,6 +481,9 @@ impl Scenario {
         for (i, b) in self.boundary.iter().enumerate() {
             count(&format!("boundary[{i}].faces"), b.faces.len(), 6)?;
             count(&format!("boundary[{i}].fix"), b.fix.len(), 3)?;
+            if let Some(c) = &b.components {
+                count(&format!("boundary[{i}].components"), c.len(), 3)?;
+            }
             if let Some(r) = &b.region {
                 region(&format!("boundary[{i}].box"), r)?;
             }

@@ -108,7 +108,11 @@ fn axis_of(name: &str, key: &str) -> Result<usize, SimError> {
         "x" => Ok(0),
         "y" => Ok(1),
         "z" => Ok(2),
-        _ => Err(invalid(key, format!("unknown component `{name}` (expected x, y or z)"))),
+        _ => {
+            let shown: String = name.chars().take(16).collect();
+            let more = if shown.len() < name.len() { "…" } else { "" };
+            Err(invalid(key, format!("unknown component `{shown}{more}` (expected x, y or z)")))
+        }
     }
 }
 
@@ -282,11 +286,28 @@ impl Simulation {
             for c in &b.fix {
                 comps.push((axis_of(c, &format!("{key}.fix"))?, 0.0));
             }
+            let mut displaced = [true; 3];
+            if let Some(list) = &b.components {
+                if b.displace.is_none() {
+                    return Err(invalid(&format!("{key}.components"), "needs `displace`"));
+                }
+                if list.is_empty() {
+                    return Err(invalid(&format!("{key}.components"), "lists no component (omit it for all three)"));
+                }
+                displaced = [false; 3];
+                for c in list {
+                    let k = axis_of(c, &format!("{key}.components"))?;
+                    if displaced[k] {
+                        return Err(invalid(&format!("{key}.components"), format!("lists `{c}` twice")));
+                    }
+                    displaced[k] = true;
+                }
+            }
             if let Some(d) = b.displace {
                 if d.iter().any(|x| !x.is_finite()) {
                     return Err(invalid(&format!("{key}.displace"), "must be finite"));
                 }
-                for (k, &v) in d.iter().enumerate() {
+                for (k, &v) in d.iter().enumerate().filter(|&(k, _)| displaced[k]) {
                     if comps.iter().any(|&(a, _)| a == k) {
                         return Err(invalid(
                             &key,

@@ -182,3 +182,81 @@ fn a_node_on_two_reaction_faces_counts_toward_both() {
     assert!((r[0].z - weight).abs() < 0.01 * weight, "base reaction {} N, weight {weight} N", r[0].z);
     assert!(r[2].z > 0.0 && r[2].z < r[0].z, "the shared edge's share: {} N of {} N", r[2].z, r[0].z);
 }
+
+/// The free-lateral uniaxial stretch of the seed's neo-Hookean, `S = μ(I − C⁻¹) + λJ(J−1)C⁻¹`, to
+/// `F = diag(s, t, t)`: the lateral stretch `t` makes `S_yy = 0`, that is
+/// `μ(t² − 1) + λJ(J − 1) = 0` with `J = s t²` (bisection: the left side grows with `t`); the
+/// reaction on the pulled face is `P_xx A = s S_xx A`. Returns `(t, reaction)`.
+fn free_lateral_uniaxial(lambda: f64, mu: f64, s: f64, area: f64) -> (f64, f64) {
+    let lateral = |t: f64| {
+        let j = s * t * t;
+        mu * (t * t - 1.0) + lambda * j * (j - 1.0)
+    };
+    let (mut lo, mut hi) = (0.1, 1.0);
+    assert!(lateral(lo) < 0.0 && lateral(hi) > 0.0, "the root lies in (0.1, 1) for a stretch");
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if lateral(mid) > 0.0 { hi = mid } else { lo = mid }
+    }
+    let t = 0.5 * (lo + hi);
+    let j = s * t * t;
+    let s_xx = mu * (1.0 - 1.0 / (s * s)) + lambda * j * (j - 1.0) / (s * s);
+    (t, s * s_xx * area)
+}
+
+#[test]
+fn a_cube_stretched_with_free_sides_matches_the_closed_form_reaction_and_contraction() {
+    // A 5 cm cube on rollers (x- held in x, y- in y, z- in z: free to contract sideways), its x+
+    // face pulled 5 mm along x only (`components = ["x"]`), so y and z stay free there too. The
+    // deformation is homogeneous, which trilinear cells represent exactly: what is left is the
+    // dynamics, settled by damping after the ramp.
+    let (lambda, mu, side, pull) = (30_000.0, 20_000.0, 0.05, 0.005);
+    let text = format!(
+        "[body]\nshape = \"box\"\nsize = [{side}, {side}, {side}]\ncell = 0.01\n\
+         [material]\nlambda = {lambda}\nmu = {mu}\ndensity = 1000.0\n\
+         [[boundary]]\nfaces = [\"x-\"]\nfix = [\"x\"]\n\
+         [[boundary]]\nfaces = [\"y-\"]\nfix = [\"y\"]\n\
+         [[boundary]]\nfaces = [\"z-\"]\nfix = [\"z\"]\n\
+         [[boundary]]\nfaces = [\"x+\"]\ndisplace = [{pull}, 0.0, 0.0]\ncomponents = [\"x\"]\nramp = 0.5\n\
+         [run]\nduration = 1.5\ndamping = 60.0\n\
+         [report]\nreaction = [\"x+\"]\nprobes = [[{side}, {side}, {side}]]\n"
+    );
+    let scenario = Scenario::parse(&text, "free-lateral").expect("scenario");
+    let sim = run(&scenario);
+    let (t, expected) = free_lateral_uniaxial(lambda, mu, 1.0 + pull / side, side * side);
+    let reaction = sim.integrator.reactions[0].x;
+    // The closed form is exact for this mesh; 1% leaves room for the f32 state and the residual
+    // motion after 1 s of damping (e^{-30} of the ramp's transient).
+    assert!((reaction - expected).abs() < 0.01 * expected, "reaction {reaction} N, closed form {expected} N");
+    let corner = sim.probe_displacements()[0].1.expect("the corner is in the body");
+    let contraction = -corner[1] / side;
+    let exact = 1.0 - t;
+    eprintln!("reaction {reaction:.6} N (closed form {expected:.6} N); lateral contraction {contraction:.6} ({exact:.6})");
+    assert!((contraction - exact).abs() < 0.02 * exact, "lateral contraction {contraction}, closed form {exact}");
+    assert!((corner[1] - corner[2]).abs() < 1e-6, "y and z contract alike: {corner:?}");
+    // Clamping the pulled face sideways (no `components`) is a different test: a stiffer reaction.
+    let clamped = Scenario::parse(&text.replace("components = [\"x\"]\n", ""), "clamped").expect("scenario");
+    let stiffer = run(&clamped).integrator.reactions[0].x;
+    assert!(stiffer > 1.02 * reaction, "clamped {stiffer} N vs free {reaction} N");
+}
+
+#[test]
+fn components_are_checked() {
+    let base = "[body]\nshape = \"box\"\nsize = [0.02, 0.02, 0.02]\ncell = 0.01\n\
+                [[boundary]]\nfaces = [\"x-\"]\nfix = [\"x\", \"y\", \"z\"]\n\
+                [[boundary]]\nfaces = [\"x+\"]\nBOUNDARY\n";
+    for (boundary, expected) in [
+        ("fix = [\"y\"]\ncomponents = [\"x\"]", "needs `displace`"),
+        ("displace = [0.001, 0.0, 0.0]\ncomponents = []", "lists no component"),
+        ("displace = [0.001, 0.0, 0.0]\ncomponents = [\"x\", \"x\"]", "twice"),
+        ("displace = [0.001, 0.0, 0.0]\ncomponents = [\"w\"]", "unknown component"),
+        ("displace = [0.001, 0.0, 0.0]\ncomponents = [\"x\", \"y\", \"z\", \"x\"]", "boundary[1].components"),
+    ] {
+        let text = base.replace("BOUNDARY", boundary);
+        let e = match Scenario::parse(&text, "components") {
+            Err(e) => e.to_string(),
+            Ok(s) => Simulation::from_scenario(&s).map(|_| ()).expect_err(boundary).to_string(),
+        };
+        assert!(e.contains(expected), "{boundary}: {e}");
+    }
+}
