@@ -20,13 +20,14 @@ instead of swapping the machine, and a time limit. Usage:
     python3 tools/mutation_campaign.py --bin target/debug/hullcut --cases 400 --seed 1 \\
         --out docs/bench/robustness
 
-writes campaign.json (every case: file, mutation, command, outcome, first line of the message) and
+writes runs.csv (every run: file, mutation, command, outcome, the start of the message) and
 summary.md. Exit status 1 when any case panicked, aborted, hung or accepted NaN.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import random
@@ -280,7 +281,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--timeout", type=float, default=60.0, help="seconds before a run counts as a hang")
     ap.add_argument("--memory-gib", type=float, default=8.0, help="address-space limit per run")
-    ap.add_argument("--out", type=Path, default=None, help="folder for campaign.json and summary.md")
+    ap.add_argument("--out", type=Path, default=None, help="folder for runs.csv and summary.md")
     args = ap.parse_args()
 
     rng = random.Random(args.seed)
@@ -349,10 +350,12 @@ def main() -> int:
         row[r["outcome"]] = row.get(r["outcome"], 0) + 1
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "campaign.json").write_text(
-            json.dumps({"seed": args.seed, "cases": args.cases, "calib_cases": args.calib_cases, "tally": tally,
-                        "by_command": by_command, "runs": records}, indent=1) + "\n"
-        )
+        with open(args.out / "runs.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["case", "file", "mutation", "command", "outcome", "rc", "seconds", "message"])
+            for r in records:
+                w.writerow([r["case"], r["file"], r["mutation"], r["command"], r["outcome"], r["rc"], r["seconds"],
+                            r["detail"][:100]])
         lines = [
             "# Mutation campaign",
             "",

@@ -231,7 +231,9 @@ fn a_cube_stretched_with_free_sides_matches_the_closed_form_reaction_and_contrac
     let corner = sim.probe_displacements()[0].1.expect("the corner is in the body");
     let contraction = -corner[1] / side;
     let exact = 1.0 - t;
-    eprintln!("reaction {reaction:.6} N (closed form {expected:.6} N); lateral contraction {contraction:.6} ({exact:.6})");
+    eprintln!(
+        "reaction {reaction:.6} N (closed form {expected:.6} N); lateral contraction {contraction:.6} ({exact:.6})"
+    );
     assert!((contraction - exact).abs() < 0.02 * exact, "lateral contraction {contraction}, closed form {exact}");
     assert!((corner[1] - corner[2]).abs() < 1e-6, "y and z contract alike: {corner:?}");
     // Clamping the pulled face sideways (no `components`) is a different test: a stiffer reaction.
