@@ -670,7 +670,8 @@ mod tool_json {
         assert!((read.blade_normal - Vector3::new(0.0, 0.6, 0.8)).norm() < 1e-15, "{}", read.blade_normal);
     }
 
-    fn error_for(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    /// tool.json as written for the sample tool, edited; the error of reading it.
+    pub(super) fn error_for(edit: impl FnOnce(&mut serde_json::Value)) -> String {
         let tmp = tempfile::tempdir().expect("tempdir");
         let path = tmp.path().join("tool.json");
         write_tool(&path, &tool()).expect("write");
@@ -1053,18 +1054,6 @@ mod hostile {
         }
     }
 
-    /// tool.json as written for the sample tool, edited; the error of reading it.
-    fn tool_error(edit: impl FnOnce(&mut serde_json::Value)) -> String {
-        let tmp = tempfile::tempdir().expect("tempdir");
-        let path = tmp.path().join("tool.json");
-        write_tool(&path, &tool()).expect("write");
-        let mut v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
-        edit(&mut v);
-        std::fs::write(&path, v.to_string()).expect("write");
-        message(read_tool(&path))
-    }
-
     #[test]
     fn tool_numbers_outside_their_ranges_are_refused() {
         use serde_json::json;
@@ -1078,7 +1067,7 @@ mod hostile {
             (json!({"blade_normal": [1e308, 1e308, 0.0]}), "blade_normal", "1e308"),
         ];
         for (patch, key, what) in cases {
-            let err = tool_error(|v| {
+            let err = super::tool_json::error_for(|v| {
                 for (k, value) in patch.as_object().expect("object") {
                     v[k] = value.clone();
                 }
@@ -1164,9 +1153,9 @@ mod hostile {
         assert!(err.len() < 600, "{} chars", err.len());
         let err = open_with("dataset.toml", |t| format!("{t}{long} = 1\n"));
         assert!(err.contains("dataset.toml") && err.len() < 600, "{} chars", err.len());
-        let err = tool_error(|v| v[long.as_str()] = serde_json::json!(1));
+        let err = super::tool_json::error_for(|v| v[long.as_str()] = serde_json::json!(1));
         assert!(err.contains("tool.json") && err.len() < 600, "{} chars", err.len());
-        let err = tool_error(|v| v["mesh"] = serde_json::json!(long));
+        let err = super::tool_json::error_for(|v| v["mesh"] = serde_json::json!(long));
         assert!(err.contains("tool.json") && err.len() < 600, "{} chars", err.len());
     }
 

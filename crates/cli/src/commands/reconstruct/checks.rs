@@ -386,74 +386,35 @@ impl serde::Serializer for &mut NonFinite {
     }
 }
 
-impl serde::ser::SerializeSeq for &mut NonFinite {
-    type Ok = ();
-    type Error = std::fmt::Error;
-    fn serialize_element<T>(&mut self, value: &T) -> Result<(), Self::Error>
-    where
-        T: ?Sized + Serialize,
-    {
-        value.serialize(&mut **self)?;
-        self.next_index();
-        Ok(())
-    }
-    fn end(self) -> Result<(), Self::Error> {
-        self.path.pop();
-        Ok(())
-    }
+/// The walker's sequence-like parts: each element is visited under its index; `end` leaves the
+/// index (and, for a tuple variant, the variant's key) pushed when the part began.
+macro_rules! indexed_part {
+    ($trait:ident, $method:ident, $pops:literal) => {
+        impl serde::ser::$trait for &mut NonFinite {
+            type Ok = ();
+            type Error = std::fmt::Error;
+            fn $method<T>(&mut self, value: &T) -> Result<(), Self::Error>
+            where
+                T: ?Sized + Serialize,
+            {
+                value.serialize(&mut **self)?;
+                self.next_index();
+                Ok(())
+            }
+            fn end(self) -> Result<(), Self::Error> {
+                for _ in 0..$pops {
+                    self.path.pop();
+                }
+                Ok(())
+            }
+        }
+    };
 }
 
-impl serde::ser::SerializeTuple for &mut NonFinite {
-    type Ok = ();
-    type Error = std::fmt::Error;
-    fn serialize_element<T>(&mut self, value: &T) -> Result<(), Self::Error>
-    where
-        T: ?Sized + Serialize,
-    {
-        value.serialize(&mut **self)?;
-        self.next_index();
-        Ok(())
-    }
-    fn end(self) -> Result<(), Self::Error> {
-        self.path.pop();
-        Ok(())
-    }
-}
-
-impl serde::ser::SerializeTupleStruct for &mut NonFinite {
-    type Ok = ();
-    type Error = std::fmt::Error;
-    fn serialize_field<T>(&mut self, value: &T) -> Result<(), Self::Error>
-    where
-        T: ?Sized + Serialize,
-    {
-        value.serialize(&mut **self)?;
-        self.next_index();
-        Ok(())
-    }
-    fn end(self) -> Result<(), Self::Error> {
-        self.path.pop();
-        Ok(())
-    }
-}
-
-impl serde::ser::SerializeTupleVariant for &mut NonFinite {
-    type Ok = ();
-    type Error = std::fmt::Error;
-    fn serialize_field<T>(&mut self, value: &T) -> Result<(), Self::Error>
-    where
-        T: ?Sized + Serialize,
-    {
-        value.serialize(&mut **self)?;
-        self.next_index();
-        Ok(())
-    }
-    fn end(self) -> Result<(), Self::Error> {
-        self.path.pop();
-        self.path.pop();
-        Ok(())
-    }
-}
+indexed_part!(SerializeSeq, serialize_element, 1);
+indexed_part!(SerializeTuple, serialize_element, 1);
+indexed_part!(SerializeTupleStruct, serialize_field, 1);
+indexed_part!(SerializeTupleVariant, serialize_field, 2);
 
 impl serde::ser::SerializeMap for &mut NonFinite {
     type Ok = ();
