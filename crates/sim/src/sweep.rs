@@ -36,23 +36,44 @@ impl SweptSurface {
         max_chord: f64,
         max_angle: f64,
     ) -> Option<Self> {
+        Self::through(edge, &[*from, *to], max_chord, max_angle)
+    }
+
+    /// The surface `edge` sweeps along the path through `poses` (at least two), each leg divided
+    /// as [`SweptSurface::between`] divides it; its rows run from the first pose to the last.
+    /// `None` as for `between`, or for fewer than two poses or as many legs as [`MAX_ROWS`].
+    ///
+    /// A caller that cuts a moving body sweeps the last two legs, not the last one: each sweep is
+    /// tested against the body where it is now, so an edge of the body that moved across the seam
+    /// between two single-leg sweeps (behind the row where the last sweep ended, ahead of the row
+    /// where this one starts) would be crossed by neither.
+    pub fn through(edge: &[Point3<f64>], poses: &[Isometry3<f64>], max_chord: f64, max_angle: f64) -> Option<Self> {
         let finite = |p: &Isometry3<f64>| p.to_homogeneous().iter().all(|c| c.is_finite());
-        if !(edge.len() >= 2 && finite(from) && finite(to) && max_chord > 0.0 && max_angle > 0.0) {
+        if !(edge.len() >= 2 && poses.len() >= 2 && poses.iter().all(finite) && max_chord > 0.0 && max_angle > 0.0) {
             return None;
         }
-        let travel = edge.iter().map(|p| (to * p - from * p).norm()).fold(0.0, f64::max);
-        let angle = from.rotation.angle_to(&to.rotation);
-        let steps = ((travel / max_chord).ceil().max((angle / max_angle).ceil()) as usize).clamp(1, MAX_ROWS - 1);
-        let rows = steps + 1;
-        let mut vertices = Vec::with_capacity(rows * edge.len());
-        for r in 0..rows {
-            let s = r as f64 / steps as f64;
-            let pose = interpolate(from, to, s);
-            vertices.extend(edge.iter().map(|p| pose * p));
+        let legs = poses.len() - 1;
+        if legs >= MAX_ROWS {
+            return None;
+        }
+        let per_leg = (MAX_ROWS - 1) / legs;
+        let mut vertices = Vec::new();
+        let mut rows = 0;
+        for (k, leg) in poses.windows(2).enumerate() {
+            let (from, to) = (&leg[0], &leg[1]);
+            let travel = edge.iter().map(|p| (to * p - from * p).norm()).fold(0.0, f64::max);
+            let angle = from.rotation.angle_to(&to.rotation);
+            let steps = ((travel / max_chord).ceil().max((angle / max_angle).ceil()) as usize).clamp(1, per_leg);
+            // Every leg but the first starts where the one before ended.
+            for r in usize::from(k > 0)..=steps {
+                let pose = interpolate(from, to, r as f64 / steps as f64);
+                vertices.extend(edge.iter().map(|p| pose * p));
+                rows += 1;
+            }
         }
         let n = edge.len() as u32;
-        let mut triangles = Vec::with_capacity(2 * steps * (edge.len() - 1));
-        for r in 0..steps as u32 {
+        let mut triangles = Vec::with_capacity(2 * (rows - 1) * (edge.len() - 1));
+        for r in 0..(rows - 1) as u32 {
             for k in 0..n - 1 {
                 let (a, b, c, d) = (r * n + k, r * n + k + 1, (r + 1) * n + k, (r + 1) * n + k + 1);
                 triangles.push([a, b, d]);
@@ -111,5 +132,22 @@ mod tests {
         assert!(SweptSurface::between(&edge()[..1], &from, &to, 1.0, 0.1).is_none());
         let nan = Isometry3::translation(f64::NAN, 0.0, 0.0);
         assert!(SweptSurface::between(&edge(), &from, &nan, 1.0, 0.1).is_none());
+    }
+
+    #[test]
+    fn a_path_through_three_poses_is_its_two_legs_joined_at_the_middle_pose() {
+        let poses = [
+            Isometry3::translation(0.0, 0.0, 0.1),
+            Isometry3::translation(0.0, 0.0, 0.08),
+            Isometry3::translation(0.0, 0.01, 0.07),
+        ];
+        let path = SweptSurface::through(&edge(), &poses, 0.004, 0.5).expect("surface");
+        let first = SweptSurface::between(&edge(), &poses[0], &poses[1], 0.004, 0.5).expect("surface");
+        let second = SweptSurface::between(&edge(), &poses[1], &poses[2], 0.004, 0.5).expect("surface");
+        assert_eq!(path.rows, first.rows + second.rows - 1);
+        assert_eq!(&path.vertices[..first.vertices.len()], &first.vertices[..]);
+        assert_eq!(&path.vertices[first.vertices.len() - 5..], &second.vertices[..]);
+        assert_eq!(path.triangles.len(), first.triangles.len() + second.triangles.len());
+        assert!(SweptSurface::through(&edge(), &poses[..1], 0.004, 0.5).is_none());
     }
 }

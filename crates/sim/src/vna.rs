@@ -21,6 +21,11 @@ use nalgebra::{Matrix3, Point3, Vector3};
 
 use crate::collide::{CELL_EDGES, EdgeCut};
 use crate::lattice::{CORNERS, Lattice};
+use crate::sliver::Torn;
+
+/// Material, in full cells, below which a piece is dust: too small for the lattice to resolve, it
+/// joins the piece beside it instead of counting as one.
+pub const DUST: f64 = 0.1;
 
 /// Samples per axis when a cut cell's material is shared out between its copies.
 const SHARE_SAMPLES: usize = 8;
@@ -48,12 +53,15 @@ pub struct CutTopology {
     /// For each virtual node (node number minus the lattice's node count), the lattice node whose
     /// rest position it takes.
     pub virtual_of: Vec<u32>,
-    /// Connected pieces of the body (copies linked by shared nodes).
+    /// Connected pieces of the body (copies linked by shared nodes; a piece of less than [`DUST`]
+    /// cells of material joins the piece of the largest other copy of its cells).
     pub pieces: usize,
     /// For each copy, its piece.
     pub piece_of: Vec<u32>,
     /// The copies of lattice cell `c` are `copies[first_copy[c]..first_copy[c + 1]]`.
     pub first_copy: Vec<u32>,
+    /// What tearing the slivers between nearly coincident cuts changed ([`crate::sliver`]).
+    pub torn: Torn,
 }
 
 struct UnionFind(Vec<usize>);
@@ -121,6 +129,7 @@ impl CutTopology {
         for e in edges {
             cut.entry((e.a.min(e.b), e.a.max(e.b))).or_insert(if e.a <= e.b { e.t } else { 1.0 - e.t });
         }
+        let torn = crate::sliver::tear(lattice, &mut cut);
         let base = lattice.node_count();
         // Copies and their corner masks.
         let mut copies = Vec::with_capacity(lattice.cells.len());
@@ -196,6 +205,26 @@ impl CutTopology {
                 }
             }
         }
+        // Dust: a piece holding less than DUST of a cell's material in all (a corner that a blade
+        // sweeping past the body's boundary clips off, a node between torn slivers) is below what
+        // the lattice resolves; it stays with the piece of the largest other copy of its cells.
+        let material = |k: usize| f64::from(lattice.cells[copies[k].parent as usize].fraction) * copies[k].share;
+        let mut piece_material = vec![0.0f64; copies.len()];
+        for k in 0..copies.len() {
+            piece_material[pieces.find(k)] += material(k);
+        }
+        let dust: Vec<bool> = (0..copies.len()).map(|k| piece_material[pieces.find(k)] < DUST).collect();
+        for c in 0..lattice.cells.len() {
+            let range = first_copy[c]..first_copy[c + 1];
+            let Some(big) =
+                range.clone().filter(|&k| !dust[k]).max_by(|&a, &b| copies[a].share.total_cmp(&copies[b].share))
+            else {
+                continue;
+            };
+            for k in range.filter(|&k| dust[k]) {
+                pieces.union(k, big);
+            }
+        }
         let mut piece_ids: BTreeMap<usize, u32> = BTreeMap::new();
         let piece_of: Vec<u32> = (0..copies.len())
             .map(|k| {
@@ -205,7 +234,7 @@ impl CutTopology {
             })
             .collect();
         let first_copy = first_copy.into_iter().map(|k| k as u32).collect();
-        CutTopology { cut, copies, virtual_of, pieces: piece_ids.len(), piece_of, first_copy }
+        CutTopology { cut, copies, virtual_of, pieces: piece_ids.len(), piece_of, first_copy, torn }
     }
 
     /// The copies of lattice cell `c`, as indices into [`CutTopology::copies`].

@@ -67,13 +67,19 @@ pub struct TissueStep {
     pub contacts: usize,
 }
 
-/// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge between
-/// them; untrusted poses never cut, and a sweep never bridges a refused frame.
+/// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge from the
+/// pose before that one when it was trusted too (two legs: the tissue moves between frames, and
+/// consecutive sweeps must overlap, see [`SweptSurface::through`]), else from the one before;
+/// untrusted poses never cut, and a sweep never bridges a refused frame.
 #[derive(Debug, Default)]
 pub struct Sweeper {
-    previous: Option<Isometry3<f64>>,
+    /// The last trusted poses since the last refusal, oldest first, at most [`SWEEP_LEGS`].
+    previous: Vec<Isometry3<f64>>,
     refused_since: bool,
 }
+
+/// Frame gaps a sweep spans when the poses before it were trusted.
+pub const SWEEP_LEGS: usize = 2;
 
 /// Lattice-cell-sized hash cells a swept surface may cover, summed over its triangles' bounding
 /// boxes: the cut's collision test visits every one of them, so a sweep beyond this (a cutting
@@ -85,50 +91,50 @@ pub const MAX_SWEEP_CELLS: u64 = 1 << 22;
 pub const MAX_EDGE_POINTS: usize = 4096;
 
 impl Sweeper {
-    /// The step a frame set's pose starts: its swept surface (rows at most half a `cell` apart, at
-    /// most 0.05 rad of turn), or whether a sweep was skipped after a refusal, or refused for its
+    /// The step a frame set's pose starts: its swept surface over the last [`SWEEP_LEGS`] frame
+    /// gaps at most (rows at most half a `cell` apart, at most 0.05 rad of turn), or whether a sweep was skipped after a refusal, or refused for its
     /// size ([`MAX_SWEEP_CELLS`], [`MAX_EDGE_POINTS`]).
     pub fn next(&mut self, estimate: Option<&PoseEstimate>, template: Option<&Template>, cell: f64) -> TissueStep {
         let mut step = TissueStep::default();
         let trusted = estimate.filter(|e| e.valid).and_then(|e| e.pose.as_ref()).map(|p| p.tool_to_world);
         match (trusted, template) {
             (Some(now), Some(template)) => {
-                if let Some(before) = self.previous {
-                    match sweep(template, &before, &now, cell) {
+                if !self.previous.is_empty() {
+                    let mut path = self.previous.clone();
+                    path.push(now);
+                    match sweep(template, &path, cell) {
                         Ok(swept) => step.swept = swept,
                         Err(reason) => step.sweep_refused = Some(reason),
                     }
                 } else if self.refused_since {
                     step.sweep_skipped = true;
                 }
-                self.previous = Some(now);
+                if self.previous.len() == SWEEP_LEGS {
+                    self.previous.remove(0);
+                }
+                self.previous.push(now);
                 self.refused_since = false;
             }
             _ => {
-                self.refused_since |= self.previous.is_some();
-                self.previous = None;
+                self.refused_since |= !self.previous.is_empty();
+                self.previous.clear();
             }
         }
         step
     }
 }
 
-/// The blade's cutting edge swept from `before` to `now`, refused when its collision test would
+/// The blade's cutting edge swept along `path` (trusted poses, oldest first), refused when its collision test would
 /// visit more than [`MAX_SWEEP_CELLS`] cells of `cell` metres (counted with checked arithmetic,
 /// a number that is not finite refused) or the edge has more than [`MAX_EDGE_POINTS`] points.
-fn sweep(
-    template: &Template,
-    before: &Isometry3<f64>,
-    now: &Isometry3<f64>,
-    cell: f64,
-) -> Result<Option<SweptSurface>, String> {
+fn sweep(template: &Template, path: &[Isometry3<f64>], cell: f64) -> Result<Option<SweptSurface>, String> {
     if template.edge.len() > MAX_EDGE_POINTS {
         return Err(format!(
             "the cutting edge has {} points, more than the {MAX_EDGE_POINTS} a sweep takes",
             template.edge.len()
         ));
     }
-    let Some(swept) = SweptSurface::between(&template.edge, before, now, cell / 2.0, 0.05) else { return Ok(None) };
+    let Some(swept) = SweptSurface::through(&template.edge, path, cell / 2.0, 0.05) else { return Ok(None) };
     let mut total: u64 = 0;
     for t in 0..swept.triangles.len() {
         let corners = swept.triangle(t);
@@ -383,24 +389,28 @@ mod tests {
     fn only_consecutive_trusted_poses_sweep_and_a_refusal_is_never_bridged() {
         let t = template();
         let mut s = Sweeper::default();
-        let steps: Vec<TissueStep> = [(true, 0.0), (true, 0.01), (false, 0.02), (true, 0.03), (true, 0.04)]
-            .into_iter()
-            .map(|(valid, x)| s.next(Some(&estimate(&t, valid, x)), Some(&t), 0.005))
-            .collect();
+        let steps: Vec<TissueStep> =
+            [(true, 0.0), (true, 0.01), (false, 0.02), (true, 0.03), (true, 0.04), (true, 0.05), (true, 0.06)]
+                .into_iter()
+                .map(|(valid, x)| s.next(Some(&estimate(&t, valid, x)), Some(&t), 0.005))
+                .collect();
         let swept: Vec<bool> = steps.iter().map(|s| s.swept.is_some()).collect();
         let skipped: Vec<bool> = steps.iter().map(|s| s.sweep_skipped).collect();
-        assert_eq!(swept, [false, true, false, false, true]);
-        assert_eq!(skipped, [false, false, false, true, false]);
-        // The sweep spans exactly the blade's travel between the two trusted poses.
-        let sweep = steps[4].swept.as_ref().expect("a sweep");
-        let xs = sweep.vertices.iter().map(|p| p.x - t.edge[0].x);
-        let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+        assert_eq!(swept, [false, true, false, false, true, true, true]);
+        assert_eq!(skipped, [false, false, false, true, false, false, false]);
+        // A sweep spans exactly the blade's travel from the trusted pose two frames back, or one
+        // when the one before was refused: consecutive sweeps overlap by one frame's travel.
         let span = t
             .edge
             .iter()
             .map(|p| p.x - t.edge[0].x)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
-        assert!((lo - (0.03 + span.0)).abs() < 1e-9 && (hi - (0.04 + span.1)).abs() < 1e-9, "{lo} {hi}");
+        for (k, from, to) in [(4, 0.03, 0.04), (5, 0.03, 0.05), (6, 0.04, 0.06)] {
+            let sweep = steps[k].swept.as_ref().expect("a sweep");
+            let xs = sweep.vertices.iter().map(|p| p.x - t.edge[0].x);
+            let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+            assert!((lo - (from + span.0)).abs() < 1e-9 && (hi - (to + span.1)).abs() < 1e-9, "frame {k}: {lo} {hi}");
+        }
         // Without a template (no tool.json) nothing ever sweeps.
         assert!(s.next(Some(&estimate(&t, true, 0.05)), None, 0.005).swept.is_none());
     }

@@ -1,0 +1,194 @@
+//! Slivers between two cuts that nearly coincide: torn through, so passes of a blade that follow
+//! each other's groove separate what they cut between them.
+//!
+//! A blade stroked twice along the same line never sweeps the same surface twice: the hand
+//! drifts, and the tissue moves between the passes, so in the material frame the second pass's
+//! surface lies a little beside the first. Where the two surfaces overlap, the material between
+//! them is a sliver joined to one side above the overlap and to the other below it; where they
+//! merely abut, the seam between them leaves a bridge. Either way the body stays one piece,
+//! exactly as a continuum cut by two zero-thickness surfaces would, and unlike tissue, which tears
+//! a sliver far thinner than the blade's own width. On the lattice the sliver shows as lattice
+//! nodes between two crossings of their edges along one axis (two surfaces on either side of a
+//! node plane), and the bridge as neighbouring nodes in a node plane, one cut from the plane's
+//! low side and the other from its high side.
+//!
+//! [`tear`] closes both, given [`TEAR_CELLS`]: a node cut on both sides along an axis, the two
+//! crossings closer together than that, keeps only the nearer crossing (the two surfaces become
+//! one there); then an uncut edge between two neighbours cut from opposite sides along another
+//! axis, with crossings closer than that across the plane, is cut half-way. A single surface never
+//! triggers either rule (a continuous surface that passes on one side of a node and on the other
+//! side of its neighbour crosses the edge between them), and two cuts at least [`TEAR_CELLS`]
+//! apart are both kept, so a slice that thick comes off as its own piece.
+
+use std::collections::BTreeMap;
+
+use crate::lattice::Lattice;
+
+/// Two cuts closer together than this, in lattice cells along an axis, are one: the material
+/// between them tears.
+pub const TEAR_CELLS: f64 = 0.75;
+
+/// A lattice edge's key in a map of crossings: its nodes, lower first.
+fn key(a: u32, b: u32) -> (u32, u32) {
+    (a.min(b), a.max(b))
+}
+
+/// How far from `n` the crossing of edge `(n, m)` lies, as a fraction of the edge (`cut` holds
+/// crossings from the lower node), if the edge is cut.
+fn distance(cut: &BTreeMap<(u32, u32), f64>, n: u32, m: u32) -> Option<f64> {
+    cut.get(&key(n, m)).map(|&t| if n < m { t } else { 1.0 - t })
+}
+
+/// The neighbour of node `n` one step along `axis` (`step` = -1 or +1), if there is one.
+fn neighbour(lattice: &Lattice, n: u32, axis: usize, step: i64) -> Option<u32> {
+    let mut ijk = lattice.node_ijk[n as usize].map(i64::from);
+    ijk[axis] += step;
+    if ijk[axis] < 0 {
+        return None;
+    }
+    lattice.node_at(ijk.map(|v| v as usize))
+}
+
+/// Which side along `axis` node `n` is cut from, with the crossing's distance from it: `Some(-1,
+/// d)` when only its edge toward lower `axis` is cut, `Some(+1, d)` when only the other one is,
+/// `None` when neither or both are.
+fn cut_side(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>, n: u32, axis: usize) -> Option<(i8, f64)> {
+    let low = neighbour(lattice, n, axis, -1).and_then(|m| distance(cut, n, m));
+    let high = neighbour(lattice, n, axis, 1).and_then(|m| distance(cut, n, m));
+    match (low, high) {
+        (Some(d), None) => Some((-1, d)),
+        (None, Some(d)) => Some((1, d)),
+        _ => None,
+    }
+}
+
+/// What [`tear`] changed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Torn {
+    /// Crossings dropped because a nearer one on the node's other side stands for both.
+    pub merged: usize,
+    /// Edges cut across a bridge between neighbours cut from opposite sides.
+    pub bridged: usize,
+}
+
+/// Tears the slivers and bridges between nearly coincident cuts in `cut` (crossed edges of
+/// `lattice` by their nodes, the crossing's parameter from the lower node), in place.
+pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
+    let mut torn = Torn::default();
+    if cut.is_empty() {
+        return torn;
+    }
+    // Nodes next to a crossing: the only ones either rule can apply to.
+    let mut near: Vec<u32> = cut.keys().flat_map(|&(a, b)| [a, b]).collect();
+    near.sort_unstable();
+    near.dedup();
+    // Slivers: both crossings of a node along an axis within TEAR_CELLS of each other. Each is
+    // within TEAR_CELLS of this node, so nearer to it than to the edge's other end, and no other
+    // node's decision involves the same edge: the drops are decided first and then made.
+    let mut drop = Vec::new();
+    for &n in &near {
+        for axis in 0..3 {
+            let low = neighbour(lattice, n, axis, -1).and_then(|m| Some((m, distance(cut, n, m)?)));
+            let high = neighbour(lattice, n, axis, 1).and_then(|m| Some((m, distance(cut, n, m)?)));
+            if let (Some((ml, dl)), Some((mh, dh))) = (low, high)
+                && dl + dh < TEAR_CELLS
+            {
+                drop.push(if dl <= dh { key(n, mh) } else { key(n, ml) });
+            }
+        }
+    }
+    for k in drop {
+        torn.merged += usize::from(cut.remove(&k).is_some());
+    }
+    // Bridges: an uncut edge between neighbours cut from opposite sides along another axis.
+    let mut bridges = Vec::new();
+    for &n in &near {
+        for along in 0..3 {
+            let Some(m) = neighbour(lattice, n, along, 1) else { continue };
+            if cut.contains_key(&key(n, m)) {
+                continue;
+            }
+            let opposite = (0..3).filter(|&a| a != along).any(|axis| {
+                match (cut_side(lattice, cut, n, axis), cut_side(lattice, cut, m, axis)) {
+                    (Some((sn, dn)), Some((sm, dm))) => sn != sm && dn + dm < TEAR_CELLS,
+                    _ => false,
+                }
+            });
+            if opposite {
+                bridges.push(key(n, m));
+            }
+        }
+    }
+    for k in bridges {
+        torn.bridged += usize::from(cut.insert(k, 0.5).is_none());
+    }
+    torn
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, Point3};
+
+    use super::*;
+    use crate::collide::{EdgeCut, SpatialHash, cut_edges};
+    use crate::sweep::SweptSurface;
+    use crate::vna::CutTopology;
+
+    fn block() -> Lattice {
+        Lattice::block(Point3::origin(), 0.01, [6, 6, 6])
+    }
+
+    /// The crossed edges of a stroke of an 8 cm edge along x at height `y`, from z0 down to z1.
+    fn stroke(l: &Lattice, y: f64, z0: f64, z1: f64) -> Vec<EdgeCut> {
+        let edge: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect();
+        let hash = SpatialHash::new(l, &l.rest, l.cell);
+        let s = SweptSurface::between(
+            &edge,
+            &Isometry3::translation(0.0, y, z0),
+            &Isometry3::translation(0.0, y, z1),
+            0.005,
+            0.1,
+        )
+        .expect("surface");
+        cut_edges(l, &l.rest, &hash, &s).edges
+    }
+
+    fn pieces(l: &Lattice, strokes: &[(f64, f64, f64)]) -> usize {
+        let edges = strokes.iter().flat_map(|&(y, z0, z1)| stroke(l, y, z0, z1));
+        CutTopology::rebuild(l, edges).pieces
+    }
+
+    #[test]
+    fn two_passes_on_either_side_of_a_node_plane_separate_whether_they_overlap_or_abut() {
+        let l = block();
+        // The node plane y = 3 cm; the first pass 0.1 mm below it from the top to z = 2.5 cm, the
+        // second 0.1 mm above it from z = 3.5 cm (overlapping) or 2.5 cm (abutting) to the bottom.
+        for (y1, y2) in [(0.0299, 0.0301), (0.0301, 0.0299), (0.0285, 0.0315), (0.028, 0.031), (0.027, 0.0335)] {
+            for z2 in [0.035, 0.025, 0.0251] {
+                assert_eq!(pieces(&l, &[(y1, 0.08, 0.025), (y2, z2, -0.01)]), 2, "y {y1} / {y2}, second from z {z2}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_rules_change_nothing_for_one_surface_and_keep_a_slice_thicker_than_the_tear_limit() {
+        let l = block();
+        for y in [0.023, 0.03, 0.0299, 0.0301] {
+            let mut cut: BTreeMap<(u32, u32), f64> =
+                stroke(&l, y, 0.08, -0.01).into_iter().map(|e| ((e.a, e.b), e.t)).collect();
+            let before = cut.clone();
+            assert_eq!(tear(&l, &mut cut), Torn::default(), "y = {y}");
+            assert_eq!(cut, before);
+        }
+        // A partial slit: nothing either.
+        let mut cut: BTreeMap<(u32, u32), f64> =
+            stroke(&l, 0.023, 0.08, 0.035).into_iter().map(|e| ((e.a, e.b), e.t)).collect();
+        assert_eq!(tear(&l, &mut cut), Torn::default());
+        // Two whole cuts 0.8 cells apart across a node plane, or a cell apart: a slice comes off.
+        assert_eq!(pieces(&l, &[(0.026, 0.08, -0.01), (0.034, 0.08, -0.01)]), 3);
+        assert_eq!(pieces(&l, &[(0.025, 0.08, -0.01), (0.035, 0.08, -0.01)]), 3);
+        // Closer than TEAR_CELLS: one cut.
+        assert_eq!(pieces(&l, &[(0.0285, 0.08, -0.01), (0.0315, 0.08, -0.01)]), 2);
+        assert_eq!(pieces(&l, &[(0.027, 0.08, -0.01), (0.033, 0.08, -0.01)]), 2);
+    }
+}
