@@ -194,6 +194,23 @@ fn run_names_what_is_wrong_with_its_input() {
     assert!(text(&o).contains("/nonexistent/dataset"), "{}", text(&o));
 }
 
+/// Nothing holds the organ: both pieces, the resected tip too, rest on the table (their lowest
+/// nodes on its top, nodes in contact, no speed to speak of).
+fn assert_pieces_rest_on_the_table(tissue: &serde_json::Value) {
+    assert_eq!(tissue["fixed_nodes"].as_u64(), Some(0), "{tissue}");
+    let pieces = tissue["pieces_at_end"].as_array().expect("pieces_at_end");
+    assert_eq!(pieces.len(), 2, "{tissue}");
+    for piece in pieces {
+        let f = |key: &str| piece[key].as_f64().expect(key);
+        assert!(f("lowest_above_table_m").abs() < 1e-4, "{piece}");
+        assert!(f("on_table") > 10.0 && f("held_nodes") == 0.0, "{piece}");
+        assert!(f("max_speed_m_s") < 0.01, "{piece}");
+    }
+    let volumes: Vec<f64> = pieces.iter().map(|p| p["volume_m3"].as_f64().expect("volume")).collect();
+    let tip = volumes.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!((10e-6..30e-6).contains(&tip), "the resected tip holds {tip} m³");
+}
+
 #[test]
 fn the_built_in_scene_cuts_the_organ_in_two() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -205,6 +222,7 @@ fn the_built_in_scene_cuts_the_organ_in_two() {
     let r = json(&report);
     assert_eq!(r["source"].as_str(), Some("built-in scene (resect)"));
     assert_eq!(r["tissue"]["pieces"].as_u64(), Some(2), "{}", r["tissue"]);
+    assert_pieces_rest_on_the_table(&r["tissue"]);
     let c = &r["counters"];
     assert_eq!(c["frame_sets_processed"].as_u64(), Some(135));
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 127, "{c}");
@@ -227,6 +245,7 @@ fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
     let t = &r["tissue"];
     assert_eq!(t["pieces"].as_u64(), Some(2), "{t}");
     assert!(t["failure"].is_null(), "{t}");
+    assert_pieces_rest_on_the_table(t);
     // The steps ran on the GPU, one stepper refitted to each cut lattice (writing only what
     // changed); a batch with an inverted cell would have gone to the CPU, counted.
     let g = &t["gpu"];

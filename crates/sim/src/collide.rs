@@ -2,11 +2,19 @@
 //! current (deformed) positions (Teschner et al. 2003) against the surface's triangles, then an
 //! exact segment–triangle test of the candidate cells' edges.
 //!
+//! The candidates come from either index, [`CellTree`] (parry's bounding volume hierarchy over the
+//! cells' boxes, the one [`crate::CutSim`] uses) or [`SpatialHash`]; both return a superset of the
+//! cells whose boxes overlap a query box, so the cuts are the same (`hullcut bench sim` times
+//! both).
+//!
 //! This is the geometric query the virtual node algorithm builds on: a lattice edge crossed by the
 //! blade separates its two nodes, and a cell with crossed edges is (partly) cut. The parameter of
 //! each crossing along its edge is kept, so the cut can be placed in the material (rest) frame.
 
 use nalgebra::{Point3, Vector3};
+use parry3d_f64::bounding_volume::Aabb;
+use parry3d_f64::math::Vector as PVector;
+use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy};
 
 use crate::lattice::Lattice;
 use crate::sweep::SweptSurface;
@@ -74,6 +82,59 @@ impl SpatialHash {
                 }
             }
         }
+        out.sort_unstable();
+        out.dedup();
+    }
+}
+
+/// An index of the lattice's cells by their current bounding boxes: what a swept surface's
+/// triangles are tested against.
+pub trait CellIndex {
+    /// Cells whose boxes may overlap the box `lo`..`hi` (a superset of those that do; sorted, no
+    /// repeats), appended to `out` after clearing it.
+    fn candidates(&self, lo: &Point3<f64>, hi: &Point3<f64>, out: &mut Vec<u32>);
+}
+
+impl CellIndex for SpatialHash {
+    fn candidates(&self, lo: &Point3<f64>, hi: &Point3<f64>, out: &mut Vec<u32>) {
+        SpatialHash::candidates(self, lo, hi, out);
+    }
+}
+
+/// parry's bounding volume hierarchy (binned SAH build) over the lattice's cells at their current
+/// positions.
+#[derive(Clone)]
+pub struct CellTree {
+    bvh: Bvh,
+}
+
+impl std::fmt::Debug for CellTree {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CellTree").field("cells", &self.bvh.leaf_count()).finish()
+    }
+}
+
+fn to_parry(p: &Point3<f64>) -> PVector {
+    PVector::new(p.x, p.y, p.z)
+}
+
+impl CellTree {
+    /// The hierarchy over every cell of `lattice` with its nodes at `positions` (one per lattice
+    /// node).
+    pub fn new(lattice: &Lattice, positions: &[Point3<f64>]) -> Self {
+        let boxes = lattice.cells.iter().map(|cell| {
+            let (lo, hi) = bounds(cell.nodes.iter().map(|&i| positions[i as usize]));
+            Aabb::new(to_parry(&lo), to_parry(&hi))
+        });
+        CellTree { bvh: Bvh::from_iter(BvhBuildStrategy::Binned, boxes.enumerate()) }
+    }
+}
+
+impl CellIndex for CellTree {
+    fn candidates(&self, lo: &Point3<f64>, hi: &Point3<f64>, out: &mut Vec<u32>) {
+        out.clear();
+        let query = Aabb::new(to_parry(lo), to_parry(hi));
+        out.extend(self.bvh.intersect_aabb(&query));
         out.sort_unstable();
         out.dedup();
     }
@@ -155,8 +216,9 @@ fn separates(a: &Point3<f64>, b: &Point3<f64>, s: f64, tri: &[Point3<f64>; 3]) -
     }
 }
 
-/// The lattice edges and cells `surface` cuts, with the lattice's nodes at `positions`.
-pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &SpatialHash, surface: &SweptSurface) -> Cuts {
+/// The lattice edges and cells `surface` cuts, with the lattice's nodes at `positions` (and `hash`
+/// built over them).
+pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &impl CellIndex, surface: &SweptSurface) -> Cuts {
     let mut found: Vec<EdgeCut> = Vec::new();
     let mut candidates = Vec::new();
     let mut pairs_tested = 0;
@@ -280,6 +342,26 @@ mod tests {
         // The nodes on the plane count as lying on the side its normal points to: one layer of
         // y-edges is cut, 49, at one end.
         assert_eq!(c.edges.len(), 49);
+    }
+
+    #[test]
+    fn the_cell_tree_and_the_hash_find_the_same_cuts_on_a_deformed_lattice() {
+        let l = block();
+        // A twisted, sheared lattice, and a tilted stroke through it.
+        let moved: Vec<Point3<f64>> = l
+            .rest
+            .iter()
+            .map(|p| Point3::new(p.x + 0.3 * p.z, p.y + 0.2 * (40.0 * p.x).sin() * 0.01, p.z + 0.1 * p.y))
+            .collect();
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.4);
+        let from = Isometry3::from_parts(Translation3::new(0.0, 0.02, 0.09), tilt);
+        let to = Isometry3::from_parts(Translation3::new(0.01, 0.035, -0.02), tilt);
+        let s = SweptSurface::between(&edge(), &from, &to, 0.004, 0.1).expect("surface");
+        let by_hash = cut_edges(&l, &moved, &SpatialHash::new(&l, &moved, l.cell), &s);
+        let by_tree = cut_edges(&l, &moved, &CellTree::new(&l, &moved), &s);
+        assert!(by_hash.edges.len() > 40, "{} edges", by_hash.edges.len());
+        assert_eq!(by_tree.edges, by_hash.edges);
+        assert_eq!(by_tree.cells, by_hash.cells);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! explicit time stepping under gravity, and the closed surfaces of its pieces.
 //!
 //! [`CutSim::cut`] finds the lattice edges a swept blade surface crosses in the deformed body
-//! (spatial hash, segment–triangle tests), adds them to the cuts so far and, when any is new,
+//! (parry's bounding volume hierarchy over the cells, segment–triangle tests), adds them to the cuts so far and, when any is new,
 //! rebuilds the topology ([`CutTopology::rebuild`]), the TLED model over the copies and the lumped
 //! masses, and carries the motion over: a node of the new topology takes the displacement of the
 //! node that held the same corner of the same material before, so nothing jumps when a cut lands
@@ -11,7 +11,9 @@
 //! valid (mass and stiffness of a copy both scale with its material).
 //!
 //! Obstacles ([`CutSim::set_obstacles`], the reconstructed hand) push the tissue aside: nodes
-//! found inside one after a time step are moved out and stopped.
+//! found inside one after a time step are moved out and stopped. A table
+//! ([`CutSimParams::table`]) holds the body up with friction, so a piece cut free falls onto it
+//! and rests there.
 //!
 //! Every cell is TLED unless [`CutSimParams::hybrid`] is set: then the operational region follows
 //! the tool ([`CutSim::set_tool`]) and FLSM moves the rest, with regions rebuilt from the cut
@@ -22,7 +24,7 @@ use std::time::Instant;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use crate::collide::{EdgeCut, SpatialHash, cut_edges};
+use crate::collide::{CellTree, EdgeCut, cut_edges};
 use crate::cut_surface::{BodySamples, PieceSurface, piece_surfaces};
 use crate::dynamics::{Divergence, Integrator, Prescribed};
 use crate::flsm::FlsmParams;
@@ -33,6 +35,7 @@ use crate::operational::{FlsmPart, HybridParams, HybridSteps, cut_band, near_too
 use crate::simulation::NodeRole;
 use crate::stability;
 use crate::sweep::SweptSurface;
+use crate::table::Table;
 use crate::tled::{Tled, TledParams};
 use crate::vna::CutTopology;
 use crate::{Material, SimError};
@@ -58,6 +61,8 @@ pub struct CutSimParams {
     pub samples_per_cell: usize,
     /// The hybrid model (TLED near the tool, FLSM elsewhere); `None`: TLED everywhere.
     pub hybrid: Option<HybridParams>,
+    /// The table the body rests on (contact with friction after every step); `None`: no table.
+    pub table: Option<Table>,
 }
 
 impl Default for CutSimParams {
@@ -70,6 +75,7 @@ impl Default for CutSimParams {
             min_fraction: 1e-3,
             samples_per_cell: 2,
             hybrid: None,
+            table: None,
         }
     }
 }
@@ -95,6 +101,27 @@ pub struct CutOutcome {
     pub surface_ms: f64,
 }
 
+/// Where a piece of the body is and how it moves (see [`CutSim::piece_states`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PieceState {
+    /// Material volume, cubic metres.
+    pub volume_m3: f64,
+    /// Nodes (real and virtual) of its cell copies.
+    pub nodes: usize,
+    /// Mean position of its nodes, world metres.
+    pub centroid_m: [f64; 3],
+    /// Its lowest node's height above the table's top (world z when there is no table), metres.
+    pub lowest_above_table_m: f64,
+    /// Mean and largest node speed, m/s.
+    pub mean_speed_m_s: f64,
+    /// See `mean_speed_m_s`.
+    pub max_speed_m_s: f64,
+    /// Nodes held in place.
+    pub held_nodes: usize,
+    /// Nodes resting on the table (within a micrometre of its top).
+    pub on_table: usize,
+}
+
 /// A deformable body that can be cut.
 #[derive(Debug)]
 pub struct CutSim {
@@ -117,6 +144,8 @@ pub struct CutSim {
     held: Vec<bool>,
     obstacles: Vec<Obstacle>,
     contacts: usize,
+    /// Nodes on the table after the last step.
+    table_contacts: usize,
     /// The cut lattice: one cell per kept copy, over lattice and virtual nodes.
     cut_lattice: Lattice,
     /// Gravity on each node, newtons.
@@ -166,6 +195,9 @@ impl CutSim {
         if let Some(hybrid) = &params.hybrid {
             hybrid.validate()?;
         }
+        if let Some(table) = &params.table {
+            table.validate()?;
+        }
         let fixed: Vec<bool> = lattice.rest.iter().map(fixed).collect();
         let samples = BodySamples::new(&lattice, params.samples_per_cell, signed);
         let topology = CutTopology::rebuild(&lattice, []);
@@ -197,6 +229,7 @@ impl CutSim {
             held: Vec::new(),
             obstacles: Vec::new(),
             contacts: 0,
+            table_contacts: 0,
             cut_lattice: Lattice::block(Point3::origin(), 1.0, [0, 0, 0]),
             f_gravity: Vec::new(),
             cell_tled: Vec::new(),
@@ -416,8 +449,8 @@ impl CutSim {
         let start = Instant::now();
         let positions: Vec<Point3<f64>> =
             self.lattice.rest.iter().zip(&self.integrator.u).map(|(p, u)| p + u.cast::<f64>()).collect();
-        let hash = SpatialHash::new(&self.lattice, &positions, self.lattice.cell);
-        let cuts = cut_edges(&self.lattice, &positions, &hash, surface);
+        let tree = CellTree::new(&self.lattice, &positions);
+        let cuts = cut_edges(&self.lattice, &positions, &tree, surface);
         let new_edges =
             cuts.edges.iter().filter(|e| !self.topology.cut.contains_key(&(e.a.min(e.b), e.a.max(e.b)))).count();
         let mut outcome = CutOutcome {
@@ -545,6 +578,10 @@ impl CutSim {
                 if !self.obstacles.is_empty() {
                     self.contacts = self.resolve_contacts();
                 }
+                if let Some(table) = &self.params.table {
+                    let i = &mut self.integrator;
+                    self.table_contacts = table.resolve(&self.rest, &mut i.u, &mut i.u_prev, &self.held);
+                }
             }
         }
         Ok(outer * substeps)
@@ -559,6 +596,11 @@ impl CutSim {
     /// Nodes in contact with an obstacle after the last time step of the last [`Self::advance`].
     pub fn contacts(&self) -> usize {
         self.contacts
+    }
+
+    /// Nodes on the table after the last time step of the last [`Self::advance`].
+    pub fn table_contacts(&self) -> usize {
+        self.table_contacts
     }
 
     /// Moves the free nodes inside an obstacle toward its outside and stops them; returns how
@@ -586,6 +628,68 @@ impl CutSim {
                 }
             })
             .sum()
+    }
+
+    /// Each piece's volume, place and motion now, piece by piece: whether a piece cut free rests
+    /// on the table (`lowest_above_table_m` about 0, `on_table` > 0, speeds about 0).
+    pub fn piece_states(&self) -> Vec<PieceState> {
+        let pieces = self.topology.pieces;
+        let mut piece_of_node = vec![u32::MAX; self.integrator.u.len()];
+        for (copy, &p) in self.topology.copies.iter().zip(&self.topology.piece_of) {
+            for &n in &copy.nodes {
+                piece_of_node[n as usize] = p;
+            }
+        }
+        let dt = f64::from(self.integrator.dt);
+        let mut flsm_v: Vec<Option<Vector3<f32>>> = vec![None; piece_of_node.len()];
+        if let Some(part) = &self.flsm {
+            for (k, &n) in part.node.iter().enumerate() {
+                if part.is_active(k) {
+                    flsm_v[n as usize] = Some(part.v[k]);
+                }
+            }
+        }
+        let top = self.params.table.map_or(0.0, |t| t.height);
+        let volumes = self.topology.piece_volumes(&self.lattice);
+        let mut states: Vec<PieceState> = volumes
+            .iter()
+            .map(|&volume_m3| PieceState {
+                volume_m3,
+                nodes: 0,
+                centroid_m: [0.0; 3],
+                lowest_above_table_m: f64::INFINITY,
+                mean_speed_m_s: 0.0,
+                max_speed_m_s: 0.0,
+                held_nodes: 0,
+                on_table: 0,
+            })
+            .collect();
+        for (n, &p) in piece_of_node.iter().enumerate() {
+            let Some(state) = states.get_mut(p as usize) else { continue };
+            let x = (self.rest[n] + self.integrator.u[n]).cast::<f64>();
+            let v = flsm_v[n].unwrap_or_else(|| (self.integrator.u[n] - self.integrator.u_prev[n]) / dt as f32);
+            let speed = f64::from(v.norm());
+            state.nodes += 1;
+            for a in 0..3 {
+                state.centroid_m[a] += x[a];
+            }
+            state.lowest_above_table_m = state.lowest_above_table_m.min(x.z - top);
+            state.mean_speed_m_s += speed;
+            state.max_speed_m_s = state.max_speed_m_s.max(speed);
+            state.held_nodes += usize::from(self.held[n]);
+            state.on_table += usize::from(self.params.table.is_some() && x.z - top < 1e-6);
+        }
+        for state in states.iter_mut().take(pieces) {
+            let count = state.nodes.max(1) as f64;
+            state.centroid_m = state.centroid_m.map(|c| c / count);
+            state.mean_speed_m_s /= count;
+        }
+        states
+    }
+
+    /// The table the body rests on, if any.
+    pub fn table(&self) -> Option<&Table> {
+        self.params.table.as_ref()
     }
 
     /// The pieces' closed surfaces, deformed (world metres), piece by piece.
@@ -983,5 +1087,71 @@ mod tests {
                 "{kind:?} TLED cells: fell {fell} m, expected {expected}"
             );
         }
+    }
+
+    /// An L-shaped body of 5 mm cells on a table at z = 0: a 3 x 2 x 3 cm column held at its
+    /// foot and a 3 x 2 x 1.5 cm arm reaching out from its top, 1.5 cm above the table.
+    pub(super) fn l_shape(table: Option<Table>) -> CutSim {
+        let h = 0.005;
+        let dims = [12, 4, 6];
+        let inside = |x: f64, z: f64| x < 0.03 || z > 0.015;
+        let fractions: Vec<f32> = (0..dims[0] * dims[1] * dims[2])
+            .map(|g| {
+                let (i, k) = (g % dims[0], g / (dims[0] * dims[1]));
+                if inside((i as f64 + 0.5) * h, (k as f64 + 0.5) * h) { 1.0 } else { 0.0 }
+            })
+            .collect();
+        let lattice = Lattice::from_fractions(Point3::origin(), h, dims, &fractions, 0.5);
+        let column = box_sdf(Vector3::new(0.03, 0.02, 0.03));
+        let arm = box_sdf(Vector3::new(0.06, 0.02, 0.015));
+        let signed = move |p: &Point3<f64>| column(p).min(arm(&(p - Vector3::new(0.0, 0.0, 0.015))));
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let params = CutSimParams { table, ..CutSimParams::default() };
+        CutSim::new(lattice, &signed, material, |p| p.z < 1e-9, params).expect("sim")
+    }
+
+    #[test]
+    fn a_piece_cut_off_above_the_table_falls_onto_it_and_rests_there() {
+        let table = Table { height: 0.0, friction: 0.5 };
+        let mut landed = Vec::new();
+        for with_table in [true, false] {
+            let mut sim = l_shape(with_table.then_some(table));
+            sim.advance(0.2).expect("stable");
+            let outcome = sim.cut(&vertical_stroke(0.0455, 0.05, -0.02)).expect("cut");
+            assert_eq!(outcome.pieces, 2);
+            let tip = sim.topology().copies_of(sim.lattice().cells.len() - 1).start;
+            let at_cut = sim.node_positions()[sim.topology().copies[tip].nodes[0] as usize].z;
+            assert!(!with_table || at_cut > 0.003, "the arm's far end hangs above the table when cut off: {at_cut} m");
+            sim.advance(0.6).expect("stable");
+            let topology = sim.topology();
+            let free = topology.piece_of[topology.copies_of(sim.lattice().cells.len() - 1).start];
+            let nodes: Vec<u32> = topology
+                .copies
+                .iter()
+                .zip(&topology.piece_of)
+                .filter(|(_, p)| **p == free)
+                .flat_map(|(c, _)| c.nodes)
+                .collect();
+            let before = sim.node_positions();
+            sim.advance(0.05).expect("stable");
+            let after = sim.node_positions();
+            let lowest = nodes.iter().map(|&n| after[n as usize].z).fold(f32::INFINITY, f32::min);
+            let speed =
+                nodes.iter().map(|&n| (after[n as usize] - before[n as usize]).norm()).fold(0.0f32, f32::max) / 0.05;
+            let drift = nodes
+                .iter()
+                .map(|&n| (after[n as usize].x - sim.topology().rest(sim.lattice(), n).x as f32).abs())
+                .fold(0.0f32, f32::max);
+            landed.push((lowest, speed, drift, sim.table_contacts()));
+        }
+        let (lowest, speed, drift, contacts) = landed[0];
+        // On the table: its lowest node within 0.2 mm of the top, still (under 5 mm/s), where it
+        // fell (within a centimetre of where it was cut off), resting on nodes in contact.
+        assert!(lowest.abs() < 2e-4, "lowest node at {lowest} m");
+        assert!(speed < 5e-3, "still moving at {speed} m/s");
+        assert!(drift < 0.01, "slid {drift} m");
+        assert!(contacts > 0);
+        // Without the table it falls through where the table would be.
+        assert!(landed[1].0 < -0.1, "without a table the piece is at {} m", landed[1].0);
     }
 }

@@ -256,6 +256,12 @@ struct TissueReport {
     region_changes: usize,
     /// The GPU backend's adapter and counts (null on the CPU).
     gpu: Option<hullcut_sim::GpuStats>,
+    /// The table the tissue rests on.
+    table: Option<hullcut_sim::Table>,
+    /// Nodes on the table after the last step.
+    table_contacts: usize,
+    /// Each piece at the end: volume, place, speed, nodes on the table.
+    pieces_at_end: Vec<hullcut_sim::PieceState>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -707,6 +713,17 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             topology.virtual_of.len(),
             outcome.failure.as_ref().map_or(String::new(), |f| format!("; STOPPED: {f}"))
         );
+        for (k, piece) in sim.piece_states().iter().enumerate() {
+            println!(
+                "  piece {k}: {:.1} ml, lowest node {:.2} mm above the table, {} node(s) on it, {} held; speed {:.2} mm/s mean, {:.2} max",
+                piece.volume_m3 * 1e6,
+                piece.lowest_above_table_m * 1e3,
+                piece.on_table,
+                piece.held_nodes,
+                piece.mean_speed_m_s * 1e3,
+                piece.max_speed_m_s * 1e3
+            );
+        }
     }
     let timing = |d: &[Duration]| StageTiming::from_durations(d);
     let mut non_finite = Vec::new();
@@ -760,6 +777,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),
                     region_changes: sim.region_changes(),
                     gpu: sim.gpu_stats().cloned(),
+                    table: sim.table().copied(),
+                    table_contacts: sim.table_contacts(),
+                    pieces_at_end: sim.piece_states(),
                 }
             }),
             labelling: outcome.labelling.clone(),

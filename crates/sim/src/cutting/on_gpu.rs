@@ -54,14 +54,15 @@ impl CutSim {
         }
         let max_push = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
         if let Some(stepper) = run.stepper.as_mut()
-            && let Err(e) = stepper.set_obstacle(self.obstacles.first(), max_push)
+            && let Err(e) = stepper.set_contacts(self.obstacles.first(), self.params.table.as_ref(), max_push)
         {
             run.give_up(e.to_string());
             return Ok(false);
         }
         match run.advance(&mut self.integrator, None, steps as u64)? {
-            Ran::Gpu { contacts, .. } => {
+            Ran::Gpu { contacts, table_contacts, .. } => {
                 self.contacts = contacts as usize;
+                self.table_contacts = table_contacts as usize;
                 Ok(true)
             }
             Ran::Cpu => Ok(false),
@@ -75,7 +76,7 @@ mod tests {
 
     use super::*;
     use crate::body::box_sdf;
-    use crate::cutting::tests::{finger, vertical_stroke};
+    use crate::cutting::tests::{finger, l_shape, vertical_stroke};
     use crate::{CutSimParams, HybridParams, Lattice, Material};
 
     /// A 6 x 3 x 3 cm bar of 1 cm cells held at x = 0, under gravity (as the CPU's cutting test).
@@ -161,6 +162,36 @@ mod tests {
         let deepest =
             on_gpu.node_positions().iter().filter_map(|p| finger.push_at(p)).map(|d| d.norm()).fold(0.0, f32::max);
         assert!(deepest <= 1.01 * h as f32, "a node {deepest} m inside the finger");
+    }
+
+    #[test]
+    fn a_piece_cut_off_falls_onto_the_table_and_rests_on_the_gpu_as_on_the_cpu() {
+        let Some(gpu) = hullcut_gpu::for_tests() else { return };
+        let table = crate::Table { height: 0.0, friction: 0.5 };
+        let (mut cpu, mut on_gpu) = (l_shape(Some(table)), l_shape(Some(table)));
+        on_gpu.use_gpu(Arc::new(gpu)).expect("use_gpu");
+        for sim in [&mut cpu, &mut on_gpu] {
+            sim.advance(0.2).expect("stable");
+            assert_eq!(sim.cut(&vertical_stroke(0.0455, 0.05, -0.02)).expect("cut").pieces, 2);
+            sim.advance(0.6).expect("stable");
+        }
+        assert_eq!(on_gpu.gpu_stats().expect("stats").cpu_batches, 0);
+        assert!(on_gpu.table_contacts() > 0 && cpu.table_contacts() > 0);
+        // The cut-off end of the arm (x > 4.5 cm) rests on the table on both, where it fell.
+        let far_end = |s: &CutSim| -> (f32, f32) {
+            let far: Vec<_> = s
+                .node_positions()
+                .iter()
+                .zip(0..)
+                .filter(|(_, n)| s.topology().rest(s.lattice(), *n).x > 0.0455)
+                .map(|(p, _)| *p)
+                .collect();
+            let lowest = far.iter().map(|p| p.z).fold(f32::MAX, f32::min);
+            (lowest, far.iter().map(|p| p.x).sum::<f32>() / far.len() as f32)
+        };
+        let ((cpu_low, cpu_x), (gpu_low, gpu_x)) = (far_end(&cpu), far_end(&on_gpu));
+        assert!(gpu_low.abs() < 2e-4 && cpu_low.abs() < 2e-4, "lowest: cpu {cpu_low} gpu {gpu_low}");
+        assert!((cpu_x - gpu_x).abs() < 5e-4, "where it rests: cpu x {cpu_x} gpu x {gpu_x}");
     }
 
     #[test]

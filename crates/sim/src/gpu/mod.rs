@@ -46,9 +46,11 @@ mod status {
     pub const INVERTED: usize = 3;
     /// Nodes pushed out of the obstacle in the last completed step.
     pub const CONTACTS: usize = 4;
-    /// Length of the buffer; entry 5 counts the contacts of the step under way, which the tick
-    /// moves to `CONTACTS`.
-    pub const LEN: usize = 6;
+    /// Nodes put back on the table in the last completed step.
+    pub const TABLE_CONTACTS: usize = 6;
+    /// Length of the buffer; entries 5 and 7 count the contacts of the step under way, which the
+    /// tick moves to `CONTACTS` and `TABLE_CONTACTS`.
+    pub const LEN: usize = 8;
 }
 
 /// The kernels' shared constants (a uniform buffer; 48 bytes).

@@ -52,6 +52,8 @@ pub(crate) enum Ran {
         u_older: Vec<Vector3<f32>>,
         /// Nodes pushed out of the obstacle in the last step.
         contacts: u32,
+        /// Nodes put back on the table in the last step.
+        table_contacts: u32,
         /// The hybrid's FLSM velocities and goal displacements after the batch.
         flsm: Option<FlsmState>,
     },
@@ -171,9 +173,14 @@ impl GpuRun {
             Err(e) => {
                 // The displacements are in; the FLSM velocities are not: the CPU goes on from here.
                 self.give_up(e.to_string());
-                return Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts, flsm: None });
+                return Ok(Ran::Gpu {
+                    u_older: batch.u_older,
+                    contacts: batch.contacts,
+                    table_contacts: batch.table_contacts,
+                    flsm: None,
+                });
             }
         };
-        Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts, flsm })
+        Ok(Ran::Gpu { u_older: batch.u_older, contacts: batch.contacts, table_contacts: batch.table_contacts, flsm })
     }
 }

@@ -17,6 +17,7 @@ use super::{
 };
 use crate::Obstacle;
 use crate::SimError;
+use crate::Table;
 use crate::dynamics::Integrator;
 use crate::tled::Tled;
 
@@ -53,25 +54,31 @@ struct NodeData {
 }
 ";
 
-/// The obstacle's grid (a uniform; 32 bytes).
+/// The obstacle's grid and the table (a uniform; 48 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct ContactParams {
     origin: [f32; 3],
     h: f32,
+    /// Voxels per axis (zeros: no obstacle).
     dims: [u32; 3],
     /// Longest push per step, m.
     max_push: f32,
+    /// The table: height (m), friction coefficient, 1 when there is one (else 0), unused.
+    table: [f32; 4],
 }
 
 /// Contact pass: a free node inside the obstacle moves toward its outside by at most
-/// `max_push` and stops (its previous displacement set to the new one).
+/// `max_push` and stops (its previous displacement set to the new one); then a node below the
+/// table is put back on it, its normal velocity removed and its tangential step shortened by
+/// friction, as [`crate::Table::resolve`] does.
 const CONTACT_WGSL: &str = "
 struct Contact {
     origin: vec3<f32>,
     h: f32,
     dims: vec3<u32>,
     max_push: f32,
+    table: vec4<f32>,
 }
 @group(0) @binding(2) var<uniform> obstacle: Contact;
 @group(0) @binding(3) var<storage, read> push: array<vec4<f32>>;
@@ -86,23 +93,41 @@ fn contact(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (n >= p.nodes || atomicLoad(&status[1]) != 0u || (node_data[n].fixed & 7u) == 7u) {
         return;
     }
-    let u = vec3<f32>(u_new[3u * n], u_new[3u * n + 1u], u_new[3u * n + 2u]);
-    let x = vec3<f32>(rest[3u * n], rest[3u * n + 1u], rest[3u * n + 2u]) + u;
-    let q = round((x - obstacle.origin) / obstacle.h);
-    if (!(all(q >= vec3<f32>(0.0)) && all(q < vec3<f32>(obstacle.dims)))) {
-        return;
+    let r = vec3<f32>(rest[3u * n], rest[3u * n + 1u], rest[3u * n + 2u]);
+    var u = vec3<f32>(u_new[3u * n], u_new[3u * n + 1u], u_new[3u * n + 2u]);
+    var prev = vec3<f32>(u_old[3u * n], u_old[3u * n + 1u], u_old[3u * n + 2u]);
+    var touched = false;
+    let q = round((r + u - obstacle.origin) / obstacle.h);
+    if (all(q >= vec3<f32>(0.0)) && all(q < vec3<f32>(obstacle.dims))) {
+        let g = u32(q.x) + obstacle.dims.x * (u32(q.y) + obstacle.dims.y * u32(q.z));
+        let v = push[g];
+        if (v.w != 0.0) {
+            u = u + v.xyz * (obstacle.max_push / max(length(v.xyz), obstacle.max_push));
+            prev = u;
+            touched = true;
+            atomicAdd(&status[5], 1u);
+        }
     }
-    let g = u32(q.x) + obstacle.dims.x * (u32(q.y) + obstacle.dims.y * u32(q.z));
-    let v = push[g];
-    if (v.w == 0.0) {
-        return;
+    let depth = obstacle.table.x - (r.z + u.z);
+    if (obstacle.table.z != 0.0 && depth > 0.0) {
+        u.z = u.z + depth;
+        prev.z = u.z;
+        let slip = u.xy - prev.xy;
+        let grip = obstacle.table.y * depth;
+        var removed = slip;
+        if (length(slip) > grip) {
+            removed = slip * (grip / length(slip));
+        }
+        u = vec3<f32>(u.xy - removed, u.z);
+        touched = true;
+        atomicAdd(&status[7], 1u);
     }
-    let moved = u + v.xyz * (obstacle.max_push / max(length(v.xyz), obstacle.max_push));
-    for (var k = 0u; k < 3u; k++) {
-        u_new[3u * n + k] = moved[k];
-        u_old[3u * n + k] = moved[k];
+    if (touched) {
+        for (var k = 0u; k < 3u; k++) {
+            u_new[3u * n + k] = u[k];
+            u_old[3u * n + k] = prev[k];
+        }
     }
-    atomicAdd(&status[5], 1u);
 }
 ";
 
@@ -167,6 +192,8 @@ fn tick() {
         atomicAdd(&status[0], 1u);
         atomicStore(&status[4], atomicLoad(&status[5]));
         atomicStore(&status[5], 0u);
+        atomicStore(&status[6], atomicLoad(&status[7]));
+        atomicStore(&status[7], 0u);
     }
 }
 ";
@@ -192,6 +219,8 @@ pub struct StepBatch {
     pub inverted_cell_steps: u32,
     /// Nodes the contact pass pushed out of the obstacle in the last completed step.
     pub contacts: u32,
+    /// Nodes the contact pass put back on the table in the last completed step.
+    pub table_contacts: u32,
     /// Device time of the batch's passes (timestamp queries; `None` where the adapter has none).
     pub device_ns: Option<f64>,
     /// Displacements after the completed steps.
@@ -523,23 +552,30 @@ impl GpuStepper {
     }
 
     /// The obstacle free nodes cannot enter from the next step on (`None`: none), each moving
-    /// out by at most `max_push` metres per step; as [`crate::CutSim::set_obstacles`], up to the
-    /// rounding of positions to the obstacle's voxels in f32 instead of f64.
-    pub fn set_obstacle(&mut self, obstacle: Option<&Obstacle>, max_push: f32) -> Result<(), SimError> {
-        let Some(o) = obstacle else {
+    /// out by at most `max_push` metres per step, and the table they rest on (`None`: none); as
+    /// [`crate::CutSim::set_obstacles`] and [`crate::Table::resolve`], up to the rounding of
+    /// positions to the obstacle's voxels in f32 instead of f64.
+    pub fn set_contacts(
+        &mut self,
+        obstacle: Option<&Obstacle>,
+        table: Option<&Table>,
+        max_push: f32,
+    ) -> Result<(), SimError> {
+        if obstacle.is_none() && table.is_none() {
             self.contact_binds = None;
             return Ok(());
+        }
+        let (origin, h, dims, grid) = match obstacle {
+            Some(o) => {
+                let (origin, h, dims) = o.frame();
+                (origin.coords.cast::<f32>().into(), h as f32, dims.map(|d| d as u32), o.voxels())
+            }
+            None => ([0.0; 3], 1.0, [0; 3], vec![[0.0; 4]]),
         };
-        let (origin, h, dims) = o.frame();
-        let params = ContactParams {
-            origin: origin.coords.cast::<f32>().into(),
-            h: h as f32,
-            dims: dims.map(|d| d as u32),
-            max_push,
-        };
-        let grid = o.voxels();
+        let table = table.map_or([0.0; 4], |t| [t.height as f32, t.friction as f32, 1.0, 0.0]);
+        let params = ContactParams { origin, h, dims, max_push, table };
         let gpu = &*self.gpu;
-        let uniform = gpu.uniform("obstacle", &params);
+        let uniform = gpu.uniform("contacts", &params);
         let grid = gpu.storage("obstacle grid", &grid).map_err(gpu_err)?;
         self.contact_binds = Some([0, 1, 2].map(|r| {
             gpu.bind_numbered(
@@ -661,6 +697,7 @@ impl GpuStepper {
             diverged_node: (s[status::DIVERGED] != 0).then_some(s[status::NODE]),
             inverted_cell_steps: s[status::INVERTED],
             contacts: s[status::CONTACTS],
+            table_contacts: s[status::TABLE_CONTACTS],
             device_ns,
             u: read((r + 1) % 3)?,
             u_prev: read(r)?,

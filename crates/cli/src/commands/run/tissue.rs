@@ -7,7 +7,7 @@ use anyhow::Context as _;
 use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
-    Body, CutOutcome, CutSim, CutSimParams, HybridParams, Material, NodeRole, Obstacle, SweptSurface, TriMesh,
+    Body, CutOutcome, CutSim, CutSimParams, HybridParams, Material, NodeRole, Obstacle, SweptSurface, Table, TriMesh,
     VoxelizeParams, WindingTree, organ_sdf, voxelize,
 };
 use nalgebra::{Isometry3, Point3};
@@ -20,6 +20,8 @@ pub const YOUNG_PA: f64 = 3e3;
 pub const POISSON: f64 = 0.45;
 /// Density of the tissue, kg/m³.
 pub const DENSITY: f64 = 1000.0;
+/// Coulomb friction between the tissue and the table (wet tissue on a drape).
+pub const TABLE_FRICTION: f64 = 0.5;
 /// Simulated time the tissue settles under gravity before the first frame set, seconds.
 pub const SETTLE_S: f64 = 0.5;
 
@@ -159,8 +161,9 @@ fn sweep(template: &Template, path: &[Isometry3<f64>], cell: f64) -> Result<Opti
 }
 
 /// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
-/// at lattice spacing `cell`, its lowest layer of nodes held (it rests on the table), settled
-/// under gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere; with `gpu`, the
+/// at lattice spacing `cell`, resting on a table at its lowest layer of nodes (contact with
+/// friction, nothing held: a piece cut off falls onto the table and rests there), settled under
+/// gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere; with `gpu`, the
 /// TLED steps run there.
 pub fn build(
     name: &str,
@@ -185,9 +188,9 @@ pub fn build(
     let voxelized = voxelize(&body, cell, &VoxelizeParams::default()).context("--tissue")?;
     let lattice = voxelized.lattice;
     let floor = lattice.rest.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-    let fixed = move |p: &Point3<f64>| p.z < floor + 0.25 * cell;
-    let params = CutSimParams { hybrid, ..CutSimParams::default() };
-    let mut sim = CutSim::new(lattice, &*signed, material, fixed, params)
+    let table = Table { height: floor, friction: TABLE_FRICTION };
+    let params = CutSimParams { hybrid, table: Some(table), ..CutSimParams::default() };
+    let mut sim = CutSim::new(lattice, &*signed, material, |_| false, params)
         .with_context(|| format!("setting up the tissue ({name})"))?;
     if let Some(gpu) = gpu {
         sim.use_gpu(gpu).context("--backend gpu")?;
