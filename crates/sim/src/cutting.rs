@@ -22,7 +22,6 @@
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
-use rayon::prelude::*;
 
 use crate::collide::{CellTree, EdgeCut, cut_edges};
 use crate::cut_surface::{BodySamples, PieceSurface, piece_surfaces};
@@ -146,6 +145,8 @@ pub struct CutSim {
     contacts: usize,
     /// Nodes on the table after the last step.
     table_contacts: usize,
+    /// Time the last advance spent resolving contacts on the CPU, seconds.
+    contact_s: f64,
     /// The cut lattice: one cell per kept copy, over lattice and virtual nodes.
     cut_lattice: Lattice,
     /// Gravity on each node, newtons.
@@ -230,6 +231,7 @@ impl CutSim {
             obstacles: Vec::new(),
             contacts: 0,
             table_contacts: 0,
+            contact_s: 0.0,
             cut_lattice: Lattice::block(Point3::origin(), 1.0, [0, 0, 0]),
             f_gravity: Vec::new(),
             cell_tled: Vec::new(),
@@ -539,6 +541,7 @@ impl CutSim {
         }
         let outer = (seconds / (f64::from(self.integrator.dt) * substeps as f64)).ceil().max(1.0) as usize;
         self.contacts = 0;
+        self.contact_s = 0.0;
         #[cfg(feature = "gpu")]
         if self.gpu_steps(outer)? {
             return Ok(outer);
@@ -575,6 +578,7 @@ impl CutSim {
                 self.tled.element_pass(&self.integrator.u);
                 let tled = &self.tled;
                 self.integrator.advance_with(|i| tled.node_force(i), &self.f_ext)?;
+                let clock = Instant::now();
                 if !self.obstacles.is_empty() {
                     self.contacts = self.resolve_contacts();
                 }
@@ -582,6 +586,7 @@ impl CutSim {
                     let i = &mut self.integrator;
                     self.table_contacts = table.resolve(&self.rest, &mut i.u, &mut i.u_prev, &self.held);
                 }
+                self.contact_s += clock.elapsed().as_secs_f64();
             }
         }
         Ok(outer * substeps)
@@ -610,10 +615,12 @@ impl CutSim {
     fn resolve_contacts(&mut self) -> usize {
         let (rest, held, obstacles) = (&self.rest, &self.held, &self.obstacles);
         let max_push = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
+        // Sequential: a voxel lookup per node is cheaper than spreading a few thousand of them
+        // over threads every step.
         self.integrator
             .u
-            .par_iter_mut()
-            .zip(self.integrator.u_prev.par_iter_mut())
+            .iter_mut()
+            .zip(self.integrator.u_prev.iter_mut())
             .enumerate()
             .filter(|(n, _)| !held[*n])
             .map(|(n, (u, u_prev))| {
@@ -685,6 +692,12 @@ impl CutSim {
             state.mean_speed_m_s /= count;
         }
         states
+    }
+
+    /// Time the last [`Self::advance`] spent resolving contacts (obstacles and table) on the CPU,
+    /// seconds; on the GPU they are part of its steps and this is 0.
+    pub fn contact_seconds(&self) -> f64 {
+        self.contact_s
     }
 
     /// The table the body rests on, if any.

@@ -60,12 +60,14 @@ impl Table {
         skip: &[bool],
     ) -> usize {
         let (half_space, pose) = self.shape();
+        let top = self.height as f32;
         let mut contacts = 0;
         for n in 0..u.len() {
-            if skip[n] {
+            let x = rest[n] + u[n];
+            // The broad phase: only nodes at or below the top can be in the half-space.
+            if skip[n] || x.z > top {
                 continue;
             }
-            let x = rest[n] + u[n];
             let point = PVector::new(f64::from(x.x), f64::from(x.y), f64::from(x.z));
             let projection = half_space.project_point(&pose, point, false);
             if !projection.is_inside {
