@@ -381,6 +381,27 @@ fn bench_sim_quick_writes_tables_and_charts() {
     assert!(std::fs::read(dir.path().join("backends.png")).expect("png").starts_with(b"\x89PNG"));
 }
 
+#[test]
+fn bench_cut_quick_runs_one_stress_case_of_each_family_and_charts_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "cut", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (header, rows) = read_csv(&dir.path().join("cut_stress.csv"));
+    let column = |name: &str| header.iter().position(|h| h == name).expect(name);
+    let families: std::collections::BTreeSet<&str> = rows.iter().map(|r| r[column("family")].as_str()).collect();
+    assert_eq!(rows.len(), families.len(), "one case per family: {rows:?}");
+    assert!(families.len() >= 10, "{families:?}");
+    for row in &rows {
+        assert_eq!(row[column("separated")], "true", "{row:?}");
+        assert_eq!(row[column("stable")], "true", "{row:?}");
+        assert!(row[column("frame_ms_mean")].parse::<f64>().expect("ms") > 0.0, "{row:?}");
+    }
+    for name in ["cut_stress_cost", "cut_stress_pieces"] {
+        let png = std::fs::read(dir.path().join(format!("{name}.png"))).expect("png");
+        assert!(png.starts_with(b"\x89PNG"), "{name}.png is a PNG");
+    }
+}
+
 /// The benchmark tables committed under docs/bench read back with the csv crate, every row as
 /// wide as its header.
 #[test]

@@ -141,9 +141,8 @@ fn smooth_min(a: f64, b: f64, k: f64) -> f64 {
     a.min(b) - h * h * k * 0.25
 }
 
-/// Exact signed distance of the box `[0, size]`, metres (negative inside); for tests.
-#[cfg(test)]
-pub(crate) fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
+/// Exact signed distance of the box `[0, size]`, metres (negative inside).
+pub fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
     move |p: &Point3<f64>| {
         let q = (p.coords - size / 2.0).abs() - size / 2.0;
         q.map(|x| x.max(0.0)).norm() + q.max().min(0.0)

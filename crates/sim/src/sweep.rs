@@ -43,10 +43,10 @@ impl SweptSurface {
     /// as [`SweptSurface::between`] divides it; its rows run from the first pose to the last.
     /// `None` as for `between`, or for fewer than two poses or as many legs as [`MAX_ROWS`].
     ///
-    /// A caller that cuts a moving body sweeps the last two legs, not the last one: each sweep is
-    /// tested against the body where it is now, so an edge of the body that moved across the seam
-    /// between two single-leg sweeps (behind the row where the last sweep ended, ahead of the row
-    /// where this one starts) would be crossed by neither.
+    /// A caller that cuts a moving body starts each sweep a little back along the leg before
+    /// ([`reach_back`]): each sweep is tested against the body where it is now, so an edge of the
+    /// body that moved across the seam between two sweeps (behind the row where the last sweep
+    /// ended, ahead of the row where this one starts) would be crossed by neither.
     pub fn through(edge: &[Point3<f64>], poses: &[Isometry3<f64>], max_chord: f64, max_angle: f64) -> Option<Self> {
         let finite = |p: &Isometry3<f64>| p.to_homogeneous().iter().all(|c| c.is_finite());
         if !(edge.len() >= 2 && poses.len() >= 2 && poses.iter().all(finite) && max_chord > 0.0 && max_angle > 0.0) {
@@ -87,6 +87,28 @@ impl SweptSurface {
     pub fn triangle(&self, t: usize) -> [Point3<f64>; 3] {
         self.triangles[t].map(|i| self.vertices[i as usize])
     }
+}
+
+/// Where a sweep from `before` should start so that it overlaps the leg from `earlier` to
+/// `before` by `back` metres of the edge's travel (its farthest-moving point), or `earlier` when
+/// that leg is shorter.
+///
+/// The overlap closes the seam between consecutive sweeps of a moving body (see
+/// [`SweptSurface::through`]) and is kept short: material that moved into the blade's earlier
+/// path after the blade had left it would be cut again, at another place in the material. Half a
+/// lattice cell is more than the tissue moves in a frame, and two cuts that close are one
+/// ([`crate::sliver`]).
+pub fn reach_back(
+    edge: &[Point3<f64>],
+    earlier: &Isometry3<f64>,
+    before: &Isometry3<f64>,
+    back: f64,
+) -> Isometry3<f64> {
+    let travel = edge.iter().map(|p| (before * p - earlier * p).norm()).fold(0.0, f64::max);
+    if travel <= back || !travel.is_finite() {
+        return *earlier;
+    }
+    interpolate(earlier, before, 1.0 - back / travel)
 }
 
 /// The pose a fraction `s` of the way from `a` to `b` (translation lerp, rotation slerp).
@@ -149,5 +171,13 @@ mod tests {
         assert_eq!(&path.vertices[first.vertices.len() - 5..], &second.vertices[..]);
         assert_eq!(path.triangles.len(), first.triangles.len() + second.triangles.len());
         assert!(SweptSurface::through(&edge(), &poses[..1], 0.004, 0.5).is_none());
+    }
+
+    #[test]
+    fn a_sweep_reaches_back_half_a_cell_along_a_long_leg_and_over_a_short_one() {
+        let (earlier, before) = (Isometry3::translation(0.0, 0.0, 0.1), Isometry3::translation(0.0, 0.0, 0.05));
+        let start = reach_back(&edge(), &earlier, &before, 0.0025);
+        assert!((start.translation.vector.z - 0.0525).abs() < 1e-12);
+        assert_eq!(reach_back(&edge(), &earlier, &before, 0.06), earlier);
     }
 }

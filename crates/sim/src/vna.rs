@@ -27,6 +27,10 @@ use crate::sliver::Torn;
 /// joins the piece beside it instead of counting as one.
 pub const DUST: f64 = 0.1;
 
+/// Largest share of its cells a piece may hold everywhere and still be a shaving: a layer thinner
+/// than this, cut off a face, joins the piece beside it instead of counting as one.
+pub const SHAVING: f64 = 0.25;
+
 /// Samples per axis when a cut cell's material is shared out between its copies.
 const SHARE_SAMPLES: usize = 8;
 
@@ -54,7 +58,8 @@ pub struct CutTopology {
     /// rest position it takes.
     pub virtual_of: Vec<u32>,
     /// Connected pieces of the body (copies linked by shared nodes; a piece of less than [`DUST`]
-    /// cells of material joins the piece of the largest other copy of its cells).
+    /// cells of material, or one no copy of which holds [`SHAVING`] of its cell, joins the piece
+    /// of the largest other copy of its cells).
     pub pieces: usize,
     /// For each copy, its piece.
     pub piece_of: Vec<u32>,
@@ -206,14 +211,25 @@ impl CutTopology {
             }
         }
         // Dust: a piece holding less than DUST of a cell's material in all (a corner that a blade
-        // sweeping past the body's boundary clips off, a node between torn slivers) is below what
-        // the lattice resolves; it stays with the piece of the largest other copy of its cells.
+        // sweeping past the body's boundary clips off, a node between torn slivers), or a shaving
+        // no thicker than SHAVING of a cell anywhere (a blade grazing a face), is below what the
+        // lattice resolves; it stays with the piece of the largest other copy of its cells.
         let material = |k: usize| f64::from(lattice.cells[copies[k].parent as usize].fraction) * copies[k].share;
         let mut piece_material = vec![0.0f64; copies.len()];
         for k in 0..copies.len() {
             piece_material[pieces.find(k)] += material(k);
         }
-        let dust: Vec<bool> = (0..copies.len()).map(|k| piece_material[pieces.find(k)] < DUST).collect();
+        let mut thickest = vec![0.0f64; copies.len()];
+        for k in 0..copies.len() {
+            let r = pieces.find(k);
+            thickest[r] = thickest[r].max(copies[k].share);
+        }
+        let dust: Vec<bool> = (0..copies.len())
+            .map(|k| {
+                let r = pieces.find(k);
+                piece_material[r] < DUST || thickest[r] < SHAVING
+            })
+            .collect();
         for c in 0..lattice.cells.len() {
             let range = first_copy[c]..first_copy[c + 1];
             let Some(big) =

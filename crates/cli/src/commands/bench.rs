@@ -12,7 +12,16 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim`, `hull`, `pose`, `segment` and `pipeline`.
+/// Targets: `sim`, `hull`, `pose`, `segment`, `pipeline` and `cut`.
+/// `cut` measures (the cutting stress cases: a 6 x 4 x 3 cm block of 5 mm cells on a table, stroked
+/// at 30 fps: speed up to 2 m/s, tilt, lattice phase, two passes beside each other, depth, a flat
+/// blade, grazing, crossing and repeated cuts, cuts a cell and half a cell apart, 24 fragments)
+///   cut_stress.csv, cut_stress_cost.png, cut_stress_pieces.png
+///                     per case: pieces found and expected, stable (no divergence, no inverted
+///                     cell left, peak kinetic energy under the block's m g H), the failure if
+///                     any, inverted cells, edges cut, copies, slivers torn, ms per frame and per
+///                     cut; the charts: cost against peak energy, pieces found against expected;
+///                     the command fails when a case does.
 /// `pipeline` measures (the `resect` scene, the built-in scene of `hullcut run`: 150 frame sets of
 /// 6 x 640x480 truth masks held in memory, the built-in organ at 6 mm, the paper's size, and 5 mm)
 ///   pipeline_stages.csv per configuration (hull leaf 6.25 / 3.1 mm x tissue cell 6 / 5 mm) and
@@ -108,6 +117,8 @@ enum Target {
     Pipeline,
     /// Segmentation: the labelling methods on several rigs and looks.
     Segment,
+    /// Cutting where it fails: the stress cases.
+    Cut,
 }
 
 /// Runs the command.
@@ -136,6 +147,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
         Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,
         Target::Segment => super::bench_segment::run(&args.out, quick)?,
+        Target::Cut => super::bench_cut::run(&args.out, quick)?,
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! One module per subcommand, and the value parsers their flags share.
 
 pub mod bench;
+pub mod bench_cut;
 pub mod bench_hull;
 pub mod bench_pipeline;
 pub mod bench_pose;

@@ -4,4 +4,5 @@ mod body;
 mod flsm;
 mod mechanics;
 mod scenario;
+mod stress;
 mod tled;

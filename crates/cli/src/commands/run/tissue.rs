@@ -8,7 +8,7 @@ use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
     Body, CutOutcome, CutSim, CutSimParams, HybridParams, Material, NodeRole, Obstacle, SweptSurface, Table, TriMesh,
-    VoxelizeParams, WindingTree, organ_sdf, voxelize,
+    VoxelizeParams, WindingTree, organ_sdf, reach_back, voxelize,
 };
 use nalgebra::{Isometry3, Point3};
 
@@ -70,8 +70,9 @@ pub struct TissueStep {
 }
 
 /// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge from the
-/// pose before that one when it was trusted too (two legs: the tissue moves between frames, and
-/// consecutive sweeps must overlap, see [`SweptSurface::through`]), else from the one before;
+/// one before, reaching half a lattice cell back along the gap before that when its poses were
+/// trusted too (the tissue moves between frames, and consecutive sweeps must overlap, see
+/// [`reach_back`]);
 /// untrusted poses never cut, and a sweep never bridges a refused frame.
 #[derive(Debug, Default)]
 pub struct Sweeper {
@@ -101,9 +102,12 @@ impl Sweeper {
         let trusted = estimate.filter(|e| e.valid).and_then(|e| e.pose.as_ref()).map(|p| p.tool_to_world);
         match (trusted, template) {
             (Some(now), Some(template)) => {
-                if !self.previous.is_empty() {
+                if let Some(&before) = self.previous.last() {
                     let mut path = self.previous.clone();
                     path.push(now);
+                    if let [earlier, _, _] = path.as_mut_slice() {
+                        *earlier = reach_back(&template.edge, earlier, &before, cell / 2.0);
+                    }
                     match sweep(template, &path, cell) {
                         Ok(swept) => step.swept = swept,
                         Err(reason) => step.sweep_refused = Some(reason),
@@ -404,14 +408,14 @@ mod tests {
         let skipped: Vec<bool> = steps.iter().map(|s| s.sweep_skipped).collect();
         assert_eq!(swept, [false, true, false, false, true, true, true]);
         assert_eq!(skipped, [false, false, false, true, false, false, false]);
-        // A sweep spans exactly the blade's travel from the trusted pose two frames back, or one
-        // when the one before was refused: consecutive sweeps overlap by one frame's travel.
+        // A sweep spans exactly the blade's travel from the trusted pose before, and half a cell
+        // (2.5 mm) back along the gap before that unless it was refused.
         let span = t
             .edge
             .iter()
             .map(|p| p.x - t.edge[0].x)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
-        for (k, from, to) in [(4, 0.03, 0.04), (5, 0.03, 0.05), (6, 0.04, 0.06)] {
+        for (k, from, to) in [(4, 0.03, 0.04), (5, 0.0375, 0.05), (6, 0.0475, 0.06)] {
             let sweep = steps[k].swept.as_ref().expect("a sweep");
             let xs = sweep.vertices.iter().map(|p| p.x - t.edge[0].x);
             let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
