@@ -161,7 +161,15 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
                     }
                 })
                 .collect();
-            let field = Field { values: &values, owner: &owner, samples, joined: &joined };
+            let field = Field {
+                values: &values,
+                owner: &owner,
+                samples,
+                joined: &joined,
+                lattice,
+                splits: &splits,
+                first_copy: &topology.first_copy,
+            };
             let (mesh, held_by) = field.surface_nets();
             let bindings =
                 mesh.vertices.iter().zip(held_by).map(|(p, copy)| bind(lattice, topology, copy, p)).collect();
@@ -192,6 +200,11 @@ struct Field<'a> {
     /// Whether two copies hold together (share a node): samples of copies that do not are on
     /// opposite faces of a cut, even inside one piece.
     joined: &'a (dyn Fn(u32, u32) -> bool + Sync),
+    lattice: &'a Lattice,
+    /// How each split cell is divided (`None` for whole cells).
+    splits: &'a [Option<CellSplit>],
+    /// Each lattice cell's first copy ([`CutTopology::first_copy`]).
+    first_copy: &'a [u32],
 }
 
 impl Field<'_> {
@@ -206,12 +219,24 @@ impl Field<'_> {
     }
 
     /// Where the surface crosses the grid edge from `a` (inside) to `b`, as a fraction of it.
+    ///
+    /// Where a cut passes between them (`b` is across a slit, or holds another piece's material),
+    /// at the cut plane of `a`'s cell or `b`'s: the plane's signed distance is affine, so the
+    /// crossing is exact for a planar cut even where the other sample's cell is whole (its
+    /// distance measured from the split cell's plane, extended).
     fn crossing(&self, a: usize, b: usize) -> f64 {
         let (va, vb) = (self.values[a], self.values[b]);
+        let other_piece = !self.inside(b) && self.samples.body[b] < 0.0 && self.owner[b].0 != NO_COPY;
+        if !self.inside(b) && !other_piece {
+            return (va / (va - vb)).clamp(0.0, 1.0);
+        }
+        if let Some(t) = self.plane_crossing(a, b) {
+            return t;
+        }
         if !self.inside(b) {
             return (va / (va - vb)).clamp(0.0, 1.0);
         }
-        // Across a cut: at the cut plane, as seen from either side's cell.
+        // Across a cut, no plane to measure from (crossing cuts): as seen from either side's cell.
         let h = self.samples.h;
         let (ca, cb) = (self.owner[a].1.abs(), self.owner[b].1.abs());
         match (ca.is_finite(), cb.is_finite()) {
@@ -220,6 +245,39 @@ impl Field<'_> {
             (false, true) => (1.0 - cb / h).max(0.0),
             (false, false) => 0.5,
         }
+    }
+
+    /// Where the cut plane of `a`'s cell, or else of `b`'s, crosses the grid edge from `a` to
+    /// `b`, when one of them has a plane that puts them on opposite sides.
+    fn plane_crossing(&self, a: usize, b: usize) -> Option<f64> {
+        for (of, sign) in [(a, 1.0), (b, -1.0)] {
+            let (Some(fa), Some(fb)) = (self.plane_side(a, of), self.plane_side(b, of)) else { continue };
+            let (fa, fb) = (sign * fa, sign * fb);
+            if fa <= 0.0 && fb > 0.0 {
+                return Some((-fa / (fb - fa)).clamp(0.0, 1.0));
+            }
+        }
+        None
+    }
+
+    /// Signed distance (cell units) of sample `g` from the cut plane of sample `of`'s cell,
+    /// negative on the side of `of`'s copy; `None` when that cell is whole or has no plane.
+    fn plane_side(&self, g: usize, of: usize) -> Option<f64> {
+        let cell = self.samples.cell[of];
+        let split = self.splits.get(cell as usize)?.as_ref()?;
+        let (centroid, normal) = split.plane?;
+        let ijk = self.lattice.cells[cell as usize].ijk;
+        let local = (self.samples.position(g) - self.lattice.origin) / self.lattice.cell
+            - Vector3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64);
+        let d = (local - centroid).dot(&normal);
+        // The plane's normal points away from component 0.
+        let first = self.lattice_copy_index(of) == 0;
+        Some(if first { d } else { -d })
+    }
+
+    /// Which of its cell's copies sample `g` belongs to (0 for the first).
+    fn lattice_copy_index(&self, g: usize) -> u32 {
+        self.owner[g].0 - self.first_copy[self.samples.cell[g] as usize]
     }
 
     /// Naive surface nets with cut walls: in each grid cube the surface crosses, the inside samples

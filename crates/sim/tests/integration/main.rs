@@ -1,6 +1,7 @@
 //! Integration tests of hullcut-sim.
 
 mod body;
+mod cut_faces;
 mod flsm;
 mod mechanics;
 mod scenario;
