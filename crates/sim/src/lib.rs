@@ -7,44 +7,32 @@
 //! [`dynamics::Integrator`] and [`embed::Embedding`].
 //!
 //! Cutting: [`SweptSurface`] (the blade edge's sweep between two trusted poses), [`cut_edges`] with
-//! a [`SpatialHash`] (the lattice edges it crosses), [`CutTopology`] (the virtual node algorithm's
+//! a [`CellTree`] (the lattice edges it crosses), [`CutTopology`] (the virtual node algorithm's
 //! cell copies and virtual nodes, and the cut lattice that TLED runs on),
 //! [`cut_surface::piece_surfaces`] (a closed surface per piece, cut faces included) and
 //! [`CutSim`], which puts them together under gravity: TLED everywhere, or the hybrid model with
 //! an operational region that follows the tool ([`operational`]). The scenario-driven
 //! [`Simulation`] (hybrid TLED/FLSM with a fixed operational region) does not cut.
 //!
+//! The crate's folders are its architecture: [`model`] is the deformation model, [`cut`] cutting
+//! and contact on top of it (never the reverse), [`scenario`] the TOML scenarios at the edge.
+//!
 //! Feature `gpu`: TLED on wgpu ([`gpu`]: internal forces and whole steps) and
 //! `Simulation::use_gpu` (TLED, and the hybrid's FLSM step and interface pull) and
 //! `CutSim::use_gpu` (all-TLED, with contacts).
 #![warn(missing_docs)]
 
-pub mod body;
-pub mod collide;
-pub mod cut_surface;
-pub mod cutting;
-pub mod dynamics;
-pub mod embed;
+pub mod cut;
 mod error;
-pub mod flsm;
-#[cfg(feature = "gpu")]
-pub mod gpu;
-pub mod lattice;
-pub mod material;
 pub mod mesh;
-pub mod obstacle;
-pub mod operational;
+pub mod model;
 pub mod scenario;
-pub mod simulation;
-pub mod sliver;
-pub mod stability;
-pub mod stress;
-pub mod sweep;
-pub mod table;
-pub mod tled;
-mod tled_batch;
-mod tled_slabs;
-pub mod vna;
+
+// The modules at the crate's root as before the split into `model` and `cut`.
+pub use cut::{collide, cut_surface, cutting, obstacle, sliver, stress, sweep, table, vna};
+#[cfg(feature = "gpu")]
+pub use model::gpu;
+pub use model::{body, dynamics, embed, flsm, lattice, material, operational, simulation, stability, tled};
 
 pub use body::{Body, VoxelizeError, VoxelizeParams, Voxelized, organ_sdf, voxelize};
 pub use collide::{CELL_EDGES, CellIndex, CellTree, Cuts, EdgeCut, SpatialHash, cut_edges, segment_triangle};

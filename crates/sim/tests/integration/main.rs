@@ -3,6 +3,7 @@
 mod body;
 mod cut_faces;
 mod flsm;
+mod layering;
 mod mechanics;
 mod scenario;
 mod stress;

@@ -10,6 +10,10 @@ use nalgebra::{Point3, Vector3};
 pub const CORNERS: [[usize; 3]; 8] =
     [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1]];
 
+/// The twelve edges of a cell as pairs of corners (see [`CORNERS`]): four along x, y, z.
+pub const CELL_EDGES: [[usize; 2]; 12] =
+    [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]];
+
 /// One hexahedral cell of the lattice.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cell {

@@ -25,9 +25,7 @@ const PRIMES: [i64; 3] = [73_856_093, 19_349_663, 83_492_791];
 /// hits at least one, and a node lying on the surface is found from both its edges.
 const BARY_EPS: f64 = 1e-12;
 
-/// The twelve edges of a cell as pairs of corners (see [`crate::CORNERS`]): four along x, y, z.
-pub const CELL_EDGES: [[usize; 2]; 12] =
-    [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]];
+pub use crate::model::lattice::CELL_EDGES;
 
 /// A hash table of the lattice's cells by the grid cells their current bounding boxes overlap.
 #[derive(Debug, Clone)]

@@ -15,9 +15,7 @@ use super::flsm::{FlsmPasses, FlsmSetup};
 use super::{
     CellBuffers, GATHER_FN_WGSL, PARAMS_WGSL, Params, WORKGROUP, flatten, gpu_err, status, status_init, unflatten,
 };
-use crate::Obstacle;
 use crate::SimError;
-use crate::Table;
 use crate::dynamics::Integrator;
 use crate::tled::Tled;
 
@@ -54,6 +52,28 @@ struct NodeData {
 }
 ";
 
+/// An obstacle as the contact pass takes it: per voxel of a regular grid, the push out of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PushGrid {
+    /// Centre of voxel 0, metres.
+    pub origin: [f32; 3],
+    /// Voxel side, metres.
+    pub h: f32,
+    /// Voxels per axis.
+    pub dims: [u32; 3],
+    /// Per voxel, x fastest: the push out of it (metres) and 1 where it is occupied (0 elsewhere).
+    pub voxels: Vec<[f32; 4]>,
+}
+
+/// What the contact pass resolves after every step.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ContactShapes {
+    /// An obstacle free nodes are pushed out of.
+    pub grid: Option<PushGrid>,
+    /// A table below: its top's height (metres) and the friction coefficient.
+    pub table: Option<(f32, f32)>,
+}
+
 /// The obstacle's grid and the table (a uniform; 48 bytes).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
@@ -71,7 +91,7 @@ struct ContactParams {
 /// Contact pass: a free node inside the obstacle moves toward its outside by at most
 /// `max_push` and stops (its previous displacement set to the new one); then a node below the
 /// table is put back on it, its normal velocity removed and its tangential step shortened by
-/// friction, as [`crate::Table::resolve`] does.
+/// friction, as the CPU's table contact does (`crate::cut::table`).
 const CONTACT_WGSL: &str = "
 struct Contact {
     origin: vec3<f32>,
@@ -551,32 +571,24 @@ impl GpuStepper {
         self.tick.1 = gpu.bind(&self.tick.0, &[&cells.status]);
     }
 
-    /// The obstacle free nodes cannot enter from the next step on (`None`: none), each moving
-    /// out by at most `max_push` metres per step, and the table they rest on (`None`: none); as
-    /// [`crate::CutSim::set_obstacles`] and [`crate::Table::resolve`], up to the rounding of
-    /// positions to the obstacle's voxels in f32 instead of f64.
-    pub fn set_contacts(
-        &mut self,
-        obstacle: Option<&Obstacle>,
-        table: Option<&Table>,
-        max_push: f32,
-    ) -> Result<(), SimError> {
-        if obstacle.is_none() && table.is_none() {
+    /// What the contact pass resolves from the next step on: free nodes inside the obstacle's grid
+    /// move out by at most `max_push` metres per step and stop; nodes below the table are put
+    /// back on it with friction (nothing when `shapes` holds neither).
+    pub fn set_contacts(&mut self, shapes: &ContactShapes, max_push: f32) -> Result<(), SimError> {
+        if shapes.grid.is_none() && shapes.table.is_none() {
             self.contact_binds = None;
             return Ok(());
         }
-        let (origin, h, dims, grid) = match obstacle {
-            Some(o) => {
-                let (origin, h, dims) = o.frame();
-                (origin.coords.cast::<f32>().into(), h as f32, dims.map(|d| d as u32), o.voxels())
-            }
-            None => ([0.0; 3], 1.0, [0; 3], vec![[0.0; 4]]),
+        let empty = [[0.0f32; 4]];
+        let (origin, h, dims, grid) = match &shapes.grid {
+            Some(g) => (g.origin, g.h, g.dims, g.voxels.as_slice()),
+            None => ([0.0; 3], 1.0, [0; 3], &empty[..]),
         };
-        let table = table.map_or([0.0; 4], |t| [t.height as f32, t.friction as f32, 1.0, 0.0]);
+        let table = shapes.table.map_or([0.0; 4], |(height, friction)| [height, friction, 1.0, 0.0]);
         let params = ContactParams { origin, h, dims, max_push, table };
         let gpu = &*self.gpu;
         let uniform = gpu.uniform("contacts", &params);
-        let grid = gpu.storage("obstacle grid", &grid).map_err(gpu_err)?;
+        let grid = gpu.storage("obstacle grid", grid).map_err(gpu_err)?;
         self.contact_binds = Some([0, 1, 2].map(|r| {
             gpu.bind_numbered(
                 &self.contact,

@@ -12,8 +12,8 @@ use rayon::prelude::*;
 
 use crate::lattice::{CORNERS, Lattice};
 use crate::material::{first_piola, regularize};
-use crate::tled_batch::{BatchForces, LANES, OnePointConstants};
-use crate::tled_slabs::{SlabAccumulators, Slabs};
+use crate::model::tled_batch::{BatchForces, LANES, OnePointConstants};
+use crate::model::tled_slabs::{SlabAccumulators, Slabs};
 use crate::{Material, SimError};
 
 /// Quadrature of the hexahedra.
@@ -140,7 +140,7 @@ impl Tled {
             lambda,
             mu,
             slabs: Slabs::default(),
-            contiguous: cell_nodes.chunks(LANES).map(crate::tled_batch::is_contiguous).collect(),
+            contiguous: cell_nodes.chunks(LANES).map(crate::model::tled_batch::is_contiguous).collect(),
             arch: pulp::Arch::new(),
             cell_nodes,
             volume,
@@ -233,10 +233,10 @@ impl Tled {
         let cells = self.cell_nodes.len();
         let (lo, hi) = (b * LANES, ((b + 1) * LANES).min(cells));
         if self.params.integration == Integration::OnePoint && hi - lo == LANES {
-            let ue = crate::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
+            let ue = crate::model::tled_batch::load(&self.cell_nodes[lo..hi], self.contiguous[b], u);
             let mut volume = [0.0; LANES];
             volume.copy_from_slice(&self.volume[lo..hi]);
-            if crate::tled_batch::forces(consts, ue, &volume, out) {
+            if crate::model::tled_batch::forces(consts, ue, &volume, out) {
                 return 0;
             }
         }

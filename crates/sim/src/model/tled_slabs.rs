@@ -10,7 +10,7 @@
 
 use nalgebra::Vector3;
 
-use crate::tled_batch::LANES;
+use crate::model::tled_batch::LANES;
 
 /// The accumulators for one split of the cells into slabs.
 #[derive(Debug, Clone, Default)]

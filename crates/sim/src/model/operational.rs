@@ -25,11 +25,10 @@
 
 use nalgebra::{Point3, Vector3};
 
+use crate::SimError;
 use crate::flsm::{Flsm, FlsmParams};
 use crate::lattice::Lattice;
 use crate::simulation::NodeRole;
-use crate::vna::CutTopology;
-use crate::{CELL_EDGES, SimError};
 
 /// Most TLED steps per FLSM step: the limit of `hybrid.substeps` and of the FLSM step
 /// [`match_flsm`] matches to the material (a longer one would be softer than the material anyway).
@@ -159,46 +158,6 @@ fn whole_steps(ratio: f64) -> usize {
 const FLSM_MATCH: f64 = 0.6;
 /// The interface pull of [`HybridParams::resolve`], in `E × cell`.
 const BETA_MATCH: f64 = 2.5;
-
-/// Lattice cells that are cut or partly cut (a crossed edge, more than one copy, or a virtual
-/// node), grown by `width` cells (26-neighbourhood).
-pub(crate) fn cut_band(lattice: &Lattice, topology: &CutTopology, width: usize) -> Vec<bool> {
-    let base = lattice.node_count() as u32;
-    let mut band: Vec<bool> = lattice
-        .cells
-        .iter()
-        .enumerate()
-        .map(|(c, cell)| {
-            let copies = topology.copies_of(c);
-            copies.len() > 1
-                || copies.clone().any(|k| topology.copies[k].nodes.iter().any(|&n| n >= base))
-                || CELL_EDGES.iter().any(|&[a, b]| {
-                    let (p, q) = (cell.nodes[a], cell.nodes[b]);
-                    topology.cut.contains_key(&(p.min(q), p.max(q)))
-                })
-        })
-        .collect();
-    let w = width as i64;
-    if width > 0 {
-        let seeds: Vec<[u32; 3]> = lattice.cells.iter().zip(&band).filter(|(_, b)| **b).map(|(c, _)| c.ijk).collect();
-        for ijk in seeds {
-            for dk in -w..=w {
-                for dj in -w..=w {
-                    for di in -w..=w {
-                        let at = [ijk[0] as i64 + di, ijk[1] as i64 + dj, ijk[2] as i64 + dk];
-                        if at.iter().any(|&a| a < 0) {
-                            continue;
-                        }
-                        if let Some(c) = lattice.cell_index(at.map(|a| a as usize)) {
-                            band[c] = true;
-                        }
-                    }
-                }
-            }
-        }
-    }
-    band
-}
 
 /// Lattice cells whose deformed centre (mean of its real corners, `rest + u`) lies within
 /// `radius` of a point of `tool`.

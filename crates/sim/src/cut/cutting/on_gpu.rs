@@ -8,7 +8,7 @@ use hullcut_gpu::Gpu;
 use super::{CutSim, MAX_PUSH_PER_STEP};
 use crate::SimError;
 use crate::dynamics::Divergence;
-use crate::gpu::{GpuRun, GpuStats, GpuStepper, Ran};
+use crate::gpu::{ContactShapes, GpuRun, GpuStats, GpuStepper, Ran};
 
 impl CutSim {
     /// Steps this body on `gpu` from now on (all TLED). Refused for the hybrid model, whose FLSM
@@ -29,13 +29,25 @@ impl CutSim {
         self.gpu.as_ref().map(|g| &g.stats)
     }
 
+    /// The hand's obstacle and the table, as the GPU's contact pass takes them.
+    fn contact_shapes(&self) -> ContactShapes {
+        ContactShapes {
+            grid: self.obstacles.first().map(crate::Obstacle::push_grid),
+            table: self.params.table.map(|t| (t.height as f32, t.friction as f32)),
+        }
+    }
+
     /// `steps` TLED steps on the GPU; `false` when the CPU must run them (no GPU, the hybrid
     /// model, more than one obstacle, a cell inverted, or a device error: the last two counted).
     pub(super) fn gpu_steps(&mut self, steps: usize) -> Result<bool, Divergence> {
         if self.params.hybrid.is_some() || self.obstacles.len() > 1 {
             return Ok(false);
         }
-        let Some(run) = self.gpu.as_mut().filter(|r| !r.given_up) else {
+        if self.gpu.as_ref().is_none_or(|r| r.given_up) {
+            return Ok(false);
+        }
+        let shapes = self.contact_shapes();
+        let Some(run) = self.gpu.as_mut() else {
             return Ok(false);
         };
         if run.stepper.is_none() || run.stale {
@@ -54,7 +66,7 @@ impl CutSim {
         }
         let max_push = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
         if let Some(stepper) = run.stepper.as_mut()
-            && let Err(e) = stepper.set_contacts(self.obstacles.first(), self.params.table.as_ref(), max_push)
+            && let Err(e) = stepper.set_contacts(&shapes, max_push)
         {
             run.give_up(e.to_string());
             return Ok(false);

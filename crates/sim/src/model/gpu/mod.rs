@@ -29,7 +29,7 @@ use crate::tled::{INVERSION_J, Integration, Tled};
 pub(crate) use flsm::FlsmSetup;
 pub use run::GpuStats;
 pub(crate) use run::{GpuRun, Ran};
-pub use step::{GpuStepper, StepBatch};
+pub use step::{ContactShapes, GpuStepper, PushGrid, StepBatch};
 
 /// Invocations per workgroup of the element and node passes.
 const WORKGROUP: u32 = 64;

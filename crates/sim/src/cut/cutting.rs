@@ -30,13 +30,14 @@ use crate::flsm::FlsmParams;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::obstacle::Obstacle;
-use crate::operational::{FlsmPart, HybridParams, HybridSteps, cut_band, near_tool, node_roles};
+use crate::operational::{FlsmPart, HybridParams, HybridSteps, near_tool, node_roles};
 use crate::simulation::NodeRole;
 use crate::stability;
 use crate::sweep::SweptSurface;
 use crate::table::Table;
 use crate::tled::{Tled, TledParams};
 use crate::vna::CutTopology;
+use crate::vna::cut_band;
 use crate::{Material, SimError};
 
 #[cfg(feature = "gpu")]

@@ -102,17 +102,20 @@ impl Obstacle {
         Some(Obstacle { origin, h, dims, push, occupied: occupied.to_vec() })
     }
 
-    /// The voxel grid: origin (centre of voxel 0), spacing and dimensions (for the GPU's contact
-    /// pass).
+    /// The grid as the GPU's contact pass takes it.
     #[cfg(feature = "gpu")]
-    pub(crate) fn frame(&self) -> (Point3<f64>, f64, [usize; 3]) {
-        (self.origin, self.h, self.dims)
-    }
-
-    /// Per voxel, x fastest: the push out of it and 1 where it is occupied (0 elsewhere).
-    #[cfg(feature = "gpu")]
-    pub(crate) fn voxels(&self) -> Vec<[f32; 4]> {
-        self.push.iter().zip(&self.occupied).map(|(v, &o)| [v.x, v.y, v.z, if o { 1.0 } else { 0.0 }]).collect()
+    pub(crate) fn push_grid(&self) -> crate::gpu::PushGrid {
+        crate::gpu::PushGrid {
+            origin: self.origin.coords.cast::<f32>().into(),
+            h: self.h as f32,
+            dims: self.dims.map(|d| d as u32),
+            voxels: self
+                .push
+                .iter()
+                .zip(&self.occupied)
+                .map(|(v, &o)| [v.x, v.y, v.z, if o { 1.0 } else { 0.0 }])
+                .collect(),
+        }
     }
 
     /// The offset that takes `p` out of the obstacle, or `None` when `p` is outside.
