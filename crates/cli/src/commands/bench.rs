@@ -75,7 +75,8 @@ use crate::progress::bar;
 ///   stability.csv/png the measured stability edge (bisection) against the power-iteration
 ///                     estimate and L/c, for several Poisson ratios;
 ///   collision.csv     per 60 Hz frame of a blade stroke through the paper-size organ: the
-///                     spatial hash of the lattice's cells, and the lattice edges the swept
+///                     spatial hash of the lattice's cells and parry's BVH over them (what
+///                     CutSim uses), each built and queried for the lattice edges the swept
 ///                     blade surface crosses (time, triangles, candidate pairs, edges, cells).
 ///   backends.csv/png  TLED whole steps (forces, update, constraints) in element-steps/s against
 ///                     lattice size, on the CPU (rayon) and on the GPU (wgpu, batches of 100 steps
@@ -433,24 +434,47 @@ fn collision(out: &Path) -> anyhow::Result<()> {
         let z = hi.z + 0.002 - 0.015 * (2.0 * s).min(1.0);
         nalgebra::Isometry3::translation(x, 0.5 * (lo.y + hi.y), z)
     };
-    let mut table =
-        Table::new(&["frame", "nodes", "hash_ms", "cut_ms", "triangles", "pairs_tested", "edges_cut", "cells_cut"]);
-    let mut total = Vec::new();
+    let mut table = Table::new(&[
+        "frame",
+        "nodes",
+        "hash_ms",
+        "cut_ms",
+        "tree_ms",
+        "tree_cut_ms",
+        "triangles",
+        "pairs_tested",
+        "edges_cut",
+        "cells_cut",
+    ]);
+    let (mut by_hash, mut by_tree) = (Vec::new(), Vec::new());
     for f in 1..=frames {
+        let surface = hullcut_sim::SweptSurface::between(&edge, &pose(f - 1), &pose(f), lattice.cell / 2.0, 0.1)
+            .context("a swept surface")?;
         let t0 = Instant::now();
         let hash = hullcut_sim::SpatialHash::new(lattice, positions, lattice.cell);
         let hash_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let surface = hullcut_sim::SweptSurface::between(&edge, &pose(f - 1), &pose(f), lattice.cell / 2.0, 0.1)
-            .context("a swept surface")?;
         let cuts = hullcut_sim::cut_edges(lattice, positions, &hash, &surface);
         let cut_ms = t1.elapsed().as_secs_f64() * 1e3;
-        total.push(hash_ms + cut_ms);
+        // parry's BVH over the cells (what CutSim uses): the same cuts.
+        let t2 = Instant::now();
+        let tree = hullcut_sim::CellTree::new(lattice, positions);
+        let tree_ms = t2.elapsed().as_secs_f64() * 1e3;
+        let t3 = Instant::now();
+        let tree_cuts = hullcut_sim::cut_edges(lattice, positions, &tree, &surface);
+        let tree_cut_ms = t3.elapsed().as_secs_f64() * 1e3;
+        if tree_cuts.edges != cuts.edges {
+            bail!("frame {f}: the BVH and the spatial hash found different edges");
+        }
+        by_hash.push(hash_ms + cut_ms);
+        by_tree.push(tree_ms + tree_cut_ms);
         table.row([
             f.to_string(),
             lattice.node_count().to_string(),
             format!("{hash_ms:.4}"),
             format!("{cut_ms:.4}"),
+            format!("{tree_ms:.4}"),
+            format!("{tree_cut_ms:.4}"),
             surface.triangles.len().to_string(),
             cuts.pairs_tested.to_string(),
             cuts.edges.len().to_string(),
@@ -458,12 +482,16 @@ fn collision(out: &Path) -> anyhow::Result<()> {
         ]);
     }
     table.write(&out.join("collision.csv"))?;
-    total.sort_by(f64::total_cmp);
+    for v in [&mut by_hash, &mut by_tree] {
+        v.sort_by(f64::total_cmp);
+    }
     println!(
-        "collision: {} nodes, hash + swept-surface cut {:.3} ms per frame (median), {:.3} ms (max)",
+        "collision: {} nodes, swept-surface cut per frame (build + query), median / max: spatial hash {:.3} / {:.3} ms, parry BVH {:.3} / {:.3} ms (the same edges)",
         lattice.node_count(),
-        total[total.len() / 2],
-        total[total.len() - 1]
+        by_hash[by_hash.len() / 2],
+        by_hash[by_hash.len() - 1],
+        by_tree[by_tree.len() / 2],
+        by_tree[by_tree.len() - 1]
     );
     Ok(())
 }
