@@ -29,7 +29,7 @@ pub mod model;
 pub mod scenario;
 
 // The modules at the crate's root as before the split into `model` and `cut`.
-pub use cut::{collide, cut_surface, cutting, obstacle, sliver, stress, sweep, table, vna};
+pub use cut::{collide, cut_surface, cutting, obstacle, piece_contact, sliver, stress, sweep, table, vna};
 #[cfg(feature = "gpu")]
 pub use model::gpu;
 pub use model::{body, dynamics, embed, flsm, lattice, material, operational, simulation, stability, tled};

@@ -260,6 +260,14 @@ struct TissueReport {
     table: Option<hullcut_sim::Table>,
     /// Nodes on the table after the last step.
     table_contacts: usize,
+    /// Contact planes between pieces at the end (nodes of one piece within a cell of another's
+    /// surface), of them nodes found inside the other piece, and nodes put back on a plane after
+    /// the last step.
+    piece_contact_planes: usize,
+    /// See `piece_contact_planes`.
+    piece_contact_inside: usize,
+    /// See `piece_contact_planes`.
+    piece_contact_nodes: usize,
     /// Each piece at the end: volume, place, speed, nodes on the table.
     pieces_at_end: Vec<hullcut_sim::PieceState>,
 }
@@ -779,6 +787,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     gpu: sim.gpu_stats().cloned(),
                     table: sim.table().copied(),
                     table_contacts: sim.table_contacts(),
+                    piece_contact_planes: sim.piece_contacts().planes.len(),
+                    piece_contact_inside: sim.piece_contacts().inside,
+                    piece_contact_nodes: sim.piece_contact_nodes(),
                     pieces_at_end: sim.piece_states(),
                 }
             }),

@@ -31,6 +31,7 @@ use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::obstacle::Obstacle;
 use crate::operational::{FlsmPart, HybridParams, HybridSteps, near_tool, node_roles};
+use crate::piece_contact::{self, PieceContacts};
 use crate::simulation::NodeRole;
 use crate::stability;
 use crate::sweep::SweptSurface;
@@ -148,6 +149,13 @@ pub struct CutSim {
     table_contacts: usize,
     /// Time the last advance spent resolving contacts on the CPU, seconds.
     contact_s: f64,
+    /// For each node of the cut lattice, the piece whose material it carries (`u32::MAX` for
+    /// virtual nodes, nodes without mass and held ones): the nodes kept out of other pieces.
+    piece_of_node: Vec<u32>,
+    /// The contact planes between pieces found at the start of the last advance.
+    piece_contacts: PieceContacts,
+    /// Nodes put back on a contact plane after the last step.
+    piece_contact_nodes: usize,
     /// The cut lattice: one cell per kept copy, over lattice and virtual nodes.
     cut_lattice: Lattice,
     /// Gravity on each node, newtons.
@@ -233,6 +241,9 @@ impl CutSim {
             contacts: 0,
             table_contacts: 0,
             contact_s: 0.0,
+            piece_of_node: Vec::new(),
+            piece_contacts: PieceContacts::default(),
+            piece_contact_nodes: 0,
             cut_lattice: Lattice::block(Point3::origin(), 1.0, [0, 0, 0]),
             f_gravity: Vec::new(),
             cell_tled: Vec::new(),
@@ -287,6 +298,15 @@ impl CutSim {
         self.f_int = vec![Vector3::zeros(); cut.node_count()];
         self.rest = cut.rest.iter().map(|p| p.cast::<f32>()).collect();
         self.held = (0..cut.node_count()).map(held).collect();
+        self.piece_of_node = vec![u32::MAX; cut.node_count()];
+        for (copy, &piece) in self.topology.copies.iter().zip(&self.topology.piece_of) {
+            for corner in (0..8).filter(|c| copy.material & (1 << c) != 0) {
+                let n = copy.nodes[corner] as usize;
+                if n < base && mass[n] > 0.0 && !self.held[n] {
+                    self.piece_of_node[n] = piece;
+                }
+            }
+        }
         let step = self.integrator.step;
         let mut integrator =
             Integrator::new(mass, prescribed, 0, self.params.damping, self.integrator.dt, self.integrator.speed_limit);
@@ -543,11 +563,29 @@ impl CutSim {
         let outer = (seconds / (f64::from(self.integrator.dt) * substeps as f64)).ceil().max(1.0) as usize;
         self.contacts = 0;
         self.contact_s = 0.0;
+        // The pieces' contact planes are found anew every PIECE_REFRESH_S of simulated time.
+        let step_s = f64::from(self.integrator.dt) * substeps as f64;
+        let refresh = ((PIECE_REFRESH_S / step_s).round() as usize).max(1);
+        #[allow(unused_mut)]
+        let mut done = 0;
         #[cfg(feature = "gpu")]
-        if self.gpu_steps(outer)? {
-            return Ok(outer);
+        while done < outer {
+            // On the GPU, in batches of `refresh` steps: its steps do not see the pieces' planes,
+            // which are enforced after each batch (and the state sent back when they moved a node).
+            let batch = refresh.min(outer - done);
+            self.find_piece_contacts();
+            if !self.gpu_steps(batch)? {
+                break;
+            }
+            let clock = Instant::now();
+            self.enforce_piece_contacts_after_batch();
+            self.contact_s += clock.elapsed().as_secs_f64();
+            done += batch;
         }
-        for _ in 0..outer {
+        for outer_step in done..outer {
+            if (outer_step - done) % refresh == 0 {
+                self.find_piece_contacts();
+            }
             if let (Some(part), Some(steps)) = (&mut self.flsm, self.steps) {
                 let dt = self.integrator.dt;
                 part.step(
@@ -587,10 +625,62 @@ impl CutSim {
                     let i = &mut self.integrator;
                     self.table_contacts = table.resolve(&self.rest, &mut i.u, &mut i.u_prev, &self.held);
                 }
+                self.enforce_piece_contacts();
                 self.contact_s += clock.elapsed().as_secs_f64();
             }
         }
         Ok(outer * substeps)
+    }
+
+    /// Finds the contact planes between pieces for this advance (see [`crate::piece_contact`]),
+    /// timed with the other contacts.
+    fn find_piece_contacts(&mut self) {
+        self.piece_contact_nodes = 0;
+        if self.topology.pieces < 2 {
+            self.piece_contacts = PieceContacts::default();
+            return;
+        }
+        let clock = Instant::now();
+        let reach = (PIECE_REACH * self.lattice.cell) as f32;
+        let u = &self.integrator.u;
+        self.piece_contacts = piece_contact::detect(&self.surfaces, &self.rest, u, &self.piece_of_node, reach);
+        self.contact_s += clock.elapsed().as_secs_f64();
+    }
+
+    /// After a batch of GPU steps: nodes behind their planes put back (up to half a cell), and
+    /// the GPU told to take the state over again when any moved.
+    #[cfg(feature = "gpu")]
+    fn enforce_piece_contacts_after_batch(&mut self) {
+        if self.piece_contacts.planes.is_empty() {
+            return;
+        }
+        let max_move = (PIECE_BATCH_MOVE * self.lattice.cell) as f32;
+        let i = &mut self.integrator;
+        let planes = &self.piece_contacts.planes;
+        self.piece_contact_nodes =
+            piece_contact::enforce(planes, &self.rest, &mut i.u, &mut i.u_prev, PIECE_FRICTION, max_move);
+        if self.piece_contact_nodes > 0
+            && let Some(run) = &mut self.gpu
+        {
+            run.in_sync = false;
+        }
+    }
+
+    /// Puts nodes of one piece that went behind their contact plane with another back on it.
+    fn enforce_piece_contacts(&mut self) {
+        if self.piece_contacts.planes.is_empty() {
+            return;
+        }
+        let max_move = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
+        let i = &mut self.integrator;
+        self.piece_contact_nodes = piece_contact::enforce(
+            &self.piece_contacts.planes,
+            &self.rest,
+            &mut i.u,
+            &mut i.u_prev,
+            PIECE_FRICTION,
+            max_move,
+        );
     }
 
     /// Obstacles the tissue cannot enter from now on (replacing the previous ones): nodes found
@@ -607,6 +697,16 @@ impl CutSim {
     /// Nodes on the table after the last time step of the last [`Self::advance`].
     pub fn table_contacts(&self) -> usize {
         self.table_contacts
+    }
+
+    /// The contact planes between pieces found at the start of the last [`Self::advance`].
+    pub fn piece_contacts(&self) -> &PieceContacts {
+        &self.piece_contacts
+    }
+
+    /// Nodes put back on a contact plane with another piece after the last time step.
+    pub fn piece_contact_nodes(&self) -> usize {
+        self.piece_contact_nodes
     }
 
     /// Moves the free nodes inside an obstacle toward its outside and stops them; returns how
@@ -797,6 +897,18 @@ impl CutSim {
         self.cut_lattice.cells.len()
     }
 }
+
+/// How far from another piece's surface a node gets a contact plane for the frame, in lattice
+/// cells (more than a frame's motion).
+pub const PIECE_REACH: f64 = 1.0;
+/// How often the pieces' contact planes are found anew, seconds of simulated time (a frame at
+/// 30 fps; between two searches the planes stay where they were found).
+pub const PIECE_REFRESH_S: f64 = 1.0 / 30.0;
+/// How far the pieces' planes move a node after a batch of GPU steps, in lattice cells.
+#[cfg(feature = "gpu")]
+const PIECE_BATCH_MOVE: f64 = 0.5;
+/// Coulomb friction between pieces (tissue on tissue).
+pub const PIECE_FRICTION: f32 = 0.5;
 
 /// How far contact moves a node in one time step, in lattice cells.
 pub const MAX_PUSH_PER_STEP: f64 = 0.05;
@@ -1167,5 +1279,44 @@ mod tests {
         assert!(contacts > 0);
         // Without the table it falls through where the table would be.
         assert!(landed[1].0 < -0.1, "without a table the piece is at {} m", landed[1].0);
+    }
+
+    #[test]
+    fn a_slab_cut_off_the_top_rests_on_the_rest_of_the_block_instead_of_sinking_through_it() {
+        // A 4 x 3 x 3 cm block of 5 mm cells on the table, nothing held, its top 1.2 cm sliced off
+        // by a blade edge (along y) moved flat through it at z = 1.8 cm.
+        let lattice = Lattice::block(Point3::origin(), 0.005, [8, 6, 6]);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let table = Table { height: 0.0, friction: 0.5 };
+        let params = CutSimParams { table: Some(table), ..CutSimParams::default() };
+        let size = Vector3::new(0.04, 0.03, 0.03);
+        let mut sim = CutSim::new(lattice, &box_sdf(size), material, |_| false, params).expect("sim");
+        sim.advance(0.2).expect("stable");
+        let edge: Vec<Point3<f64>> = (0..7).map(|k| Point3::new(0.0, -0.01 + 0.01 * k as f64, 0.0)).collect();
+        let slice = SweptSurface::between(
+            &edge,
+            &Isometry3::translation(-0.01, 0.0, 0.018),
+            &Isometry3::translation(0.05, 0.0, 0.018),
+            0.0025,
+            0.1,
+        )
+        .expect("surface");
+        assert_eq!(sim.cut(&slice).expect("cut").pieces, 2);
+        // Frame by frame, as `hullcut run` advances it: the contacts are found once a frame.
+        for _ in 0..15 {
+            sim.advance(1.0 / 30.0).expect("stable");
+        }
+        let states = sim.piece_states();
+        let top = states.iter().max_by(|a, b| a.centroid_m[2].total_cmp(&b.centroid_m[2])).expect("two pieces");
+        // It rests where the cut left it (its lowest nodes, virtual ones at the node plane 3 mm
+        // under the cut, 12.7 mm up: the block below sags under it), not on the table (0 without
+        // the pieces' contact: it sinks through), and it is still.
+        assert!(
+            top.lowest_above_table_m > 0.009,
+            "the slab's lowest node {} m above the table",
+            top.lowest_above_table_m
+        );
+        assert!(top.max_speed_m_s < 0.01, "{top:?}");
+        assert!(sim.piece_contacts().skipped_surfaces == 0 && !sim.piece_contacts().planes.is_empty());
     }
 }

@@ -1,13 +1,14 @@
 //! Cutting and contact, built on the deformation model ([`crate::model`]): the blade's swept
 //! surface, the lattice edges it crosses (parry's BVH of the cells), the virtual node algorithm's
 //! topology with torn slivers, the pieces' closed surfaces, the body that is cut while it deforms
-//! ([`cutting::CutSim`], its GPU steps beside it), the hand's obstacle, the table, and the stress
-//! test of cutting where it fails.
+//! ([`cutting::CutSim`], its GPU steps beside it), the hand's obstacle, the table, pieces kept
+//! out of each other, and the stress test of cutting where it fails.
 
 pub mod collide;
 pub mod cut_surface;
 pub mod cutting;
 pub mod obstacle;
+pub mod piece_contact;
 pub mod sliver;
 pub mod stress;
 pub mod sweep;

@@ -203,7 +203,10 @@ mod tests {
         };
         let ((cpu_low, cpu_x), (gpu_low, gpu_x)) = (far_end(&cpu), far_end(&on_gpu));
         assert!(gpu_low.abs() < 2e-4 && cpu_low.abs() < 2e-4, "lowest: cpu {cpu_low} gpu {gpu_low}");
-        assert!((cpu_x - gpu_x).abs() < 5e-4, "where it rests: cpu x {cpu_x} gpu x {gpu_x}");
+        // The pieces' contact (the falling end slides down the stub's cut face) is enforced after
+        // every step on the CPU and after every 1/30 s batch on the GPU, so where the end comes to
+        // rest differs by a little (1.5 mm measured); within half a cell.
+        assert!((cpu_x - gpu_x).abs() < 2.5e-3, "where it rests: cpu x {cpu_x} gpu x {gpu_x}");
     }
 
     #[test]
