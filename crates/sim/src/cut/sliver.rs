@@ -130,31 +130,9 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::{Isometry3, Point3};
-
     use super::*;
-    use crate::collide::{EdgeCut, SpatialHash, cut_edges};
-    use crate::sweep::SweptSurface;
     use crate::vna::CutTopology;
-
-    fn block() -> Lattice {
-        Lattice::block(Point3::origin(), 0.01, [6, 6, 6])
-    }
-
-    /// The crossed edges of a stroke of an 8 cm edge along x at height `y`, from z0 down to z1.
-    fn stroke(l: &Lattice, y: f64, z0: f64, z1: f64) -> Vec<EdgeCut> {
-        let edge: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect();
-        let hash = SpatialHash::new(l, &l.rest, l.cell);
-        let s = SweptSurface::between(
-            &edge,
-            &Isometry3::translation(0.0, y, z0),
-            &Isometry3::translation(0.0, y, z1),
-            0.005,
-            0.1,
-        )
-        .expect("surface");
-        cut_edges(l, &l.rest, &hash, &s).edges
-    }
+    use crate::vna::tests::{block, stroke};
 
     fn pieces(l: &Lattice, strokes: &[(f64, f64, f64)]) -> usize {
         let edges = strokes.iter().flat_map(|&(y, z0, z1)| stroke(l, y, z0, z1));

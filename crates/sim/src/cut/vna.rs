@@ -444,19 +444,19 @@ pub(crate) fn cut_band(lattice: &Lattice, topology: &CutTopology, width: usize) 
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use nalgebra::Isometry3;
 
     use super::*;
     use crate::collide::{SpatialHash, cut_edges};
     use crate::sweep::SweptSurface;
 
-    fn block() -> Lattice {
+    pub(crate) fn block() -> Lattice {
         Lattice::block(Point3::origin(), 0.01, [6, 6, 6])
     }
 
     /// The crossed edges of a stroke of an 8 cm edge along x at height `y`, from z0 down to z1.
-    fn stroke(l: &Lattice, y: f64, z0: f64, z1: f64) -> Vec<EdgeCut> {
+    pub(crate) fn stroke(l: &Lattice, y: f64, z0: f64, z1: f64) -> Vec<EdgeCut> {
         let edge: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect();
         let hash = SpatialHash::new(l, &l.rest, l.cell);
         let s = SweptSurface::between(
