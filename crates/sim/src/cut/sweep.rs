@@ -41,7 +41,8 @@ impl SweptSurface {
 
     /// The surface `edge` sweeps along the path through `poses` (at least two), each leg divided
     /// as [`SweptSurface::between`] divides it; its rows run from the first pose to the last.
-    /// `None` as for `between`, or for fewer than two poses or as many legs as [`MAX_ROWS`].
+    /// `None` as for `between`, or for fewer than two poses or 1024 legs and more (a sweep has
+    /// at most 1024 rows).
     ///
     /// A caller that cuts a moving body starts each sweep a little back along the leg before
     /// ([`reach_back`]): each sweep is tested against the body where it is now, so an edge of the
