@@ -42,7 +42,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// with segmented masks, the segmentation's own tracked fit of the tool, whose agreement bounds
 /// are looser),
 /// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
-/// virtual node algorithm; TLED moves it under gravity, its base held by the table; the hand's
+/// virtual node algorithm; TLED moves it under gravity, resting on the table with friction, pieces
+/// kept out of each other; the hand's
 /// hull pushes it aside where it presses on it). Untrusted
 /// poses never cut, and a sweep never bridges a refused frame. Without --realtime every frame is
 /// processed (a full queue blocks the reader); with --realtime the reader keeps to the capture
