@@ -711,6 +711,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         ),
     }
     println!("{}", pose_report.summary());
+    let pieces_at_end = sim.map(hullcut_sim::CutSim::piece_states);
     if let Some(sim) = sim {
         let topology = sim.topology();
         println!(
@@ -722,7 +723,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             topology.virtual_of.len(),
             outcome.failure.as_ref().map_or(String::new(), |f| format!("; STOPPED: {f}"))
         );
-        for (k, piece) in sim.piece_states().iter().enumerate() {
+        for (k, piece) in pieces_at_end.iter().flatten().enumerate() {
             println!(
                 "  piece {k}: {:.1} ml, lowest node {:.2} mm above the table, {} node(s) on it, {} held; speed {:.2} mm/s mean, {:.2} max",
                 piece.volume_m3 * 1e6,
@@ -791,7 +792,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     piece_contact_planes: sim.piece_contacts().planes.len(),
                     piece_contact_inside: sim.piece_contacts().inside,
                     piece_contact_nodes: sim.piece_contact_nodes(),
-                    pieces_at_end: sim.piece_states(),
+                    pieces_at_end: pieces_at_end.clone().unwrap_or_default(),
                 }
             }),
             labelling: outcome.labelling.clone(),

@@ -67,6 +67,11 @@ pub struct TissueStep {
     pub pieces: usize,
     /// Lattice nodes the hand's hull pushed at the end of the step.
     pub contacts: usize,
+    /// Nodes on the table, and nodes put back on a contact plane with another piece, after the
+    /// step's last time step.
+    pub table_contacts: usize,
+    /// See `table_contacts`.
+    pub piece_contacts: usize,
 }
 
 /// Which poses sweep: a trusted pose that follows a trusted pose sweeps the blade's edge from the
@@ -250,6 +255,8 @@ impl Tissue {
         step.tled_cells = self.sim.tled_cells();
         step.pieces = self.sim.pieces();
         step.contacts = self.sim.contacts();
+        step.table_contacts = self.sim.table_contacts();
+        step.piece_contacts = self.sim.piece_contact_nodes();
         times.tissue_surface.push(clock.elapsed());
         Ok(())
     }
@@ -352,6 +359,8 @@ pub fn log(
         None => hullcut_viz::log_clear(rec, "world/tissue/cut")?,
     }
     hullcut_viz::log_scalar(rec, "metrics/tissue/pieces", step.pieces as f64)?;
+    hullcut_viz::log_scalar(rec, "metrics/tissue/table_contacts", step.table_contacts as f64)?;
+    hullcut_viz::log_scalar(rec, "metrics/tissue/piece_contacts", step.piece_contacts as f64)?;
     Ok(())
 }
 
