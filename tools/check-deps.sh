@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Enforces DESIGN.md's dependency rules with `cargo tree` (normal and build edges, as shipped):
 #   - only hullcut-viz and the binary (and the test crate) reach rerun;
-#   - only hullcut-calib, hullcut-capture and the binary (and the test crate) reach OpenCV;
+#   - only hullcut-calib, hullcut-capture and the binary (and the test crate) reach OpenCV, and
+#     hullcut-pipeline only through hullcut-capture (never directly);
 #   - only hullcut-gpu, the binary and the test crate reach wgpu with all features; hullcut-hull
-#     and hullcut-sim reach it only through their `gpu` feature.
+#     and hullcut-sim (and hullcut-pipeline) reach it only through their `gpu` feature.
 # Exits non-zero, naming the crate and the path to the forbidden dependency, when a rule breaks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -54,13 +55,19 @@ check() { # check CRATE DEP FLAGS...
 
 for c in "${crates[@]}"; do
     allowed "$c" hullcut-viz hullcut || check "$c" rerun --all-features
-    allowed "$c" hullcut-calib hullcut-capture hullcut || check "$c" opencv --all-features
+    allowed "$c" hullcut-calib hullcut-capture hullcut hullcut-pipeline || check "$c" opencv --all-features
     case "$c" in
         hullcut-gpu | hullcut) ;;
-        hullcut-hull | hullcut-sim) check "$c" wgpu --no-default-features ;;
+        hullcut-hull | hullcut-sim | hullcut-pipeline) check "$c" wgpu --no-default-features ;;
         *) check "$c" wgpu --all-features ;;
     esac
 done
+
+# The pipeline reaches OpenCV through hullcut-capture alone.
+if cargo tree --offline -q -p hullcut-pipeline -e normal --all-features --depth 1 | grep -q ' opencv '; then
+    echo "check-deps: hullcut-pipeline depends on opencv directly (it must go through hullcut-capture)"
+    fail=1
+fi
 
 if [ "$fail" -ne 0 ]; then
     echo "check-deps: dependency rules broken (see DESIGN.md, 'Dependency rules')"

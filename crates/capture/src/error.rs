@@ -110,6 +110,9 @@ pub enum CaptureError {
         /// What is missing or wrong.
         message: String,
     },
+    /// An image to encode is not what it says it is (its buffer's size), or the encoder refused it.
+    #[error("{0}")]
+    Encode(String),
     /// The dataset crate reported an error (it names the file).
     #[error(transparent)]
     Dataset(#[from] hullcut_dataset::DatasetError),

@@ -21,12 +21,14 @@
 mod convert;
 mod error;
 pub mod import;
+mod jpeg;
 pub mod segment;
 mod source;
 mod sync;
 mod video;
 
 pub use error::CaptureError;
+pub use jpeg::JpegEncoder;
 pub use segment::{
     AppearanceModel, BackgroundModel, BackgroundSource, ColourClass, ColourClasses, ColourLut, IouAccumulator,
     LabelScore, Method, Mog2Params, SegmentParams, SegmentationReport, Segmenter, iou,

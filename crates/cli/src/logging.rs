@@ -26,6 +26,8 @@ const JPEG_QUALITY: u8 = 85;
 pub struct CameraLogger {
     names: Vec<String>,
     maps: Vec<UndistortMap>,
+    /// OpenCV's JPEG encoder and its buffers, reused from frame to frame.
+    jpeg: std::sync::Mutex<hullcut_capture::JpegEncoder>,
 }
 
 impl CameraLogger {
@@ -36,6 +38,7 @@ impl CameraLogger {
         Ok(CameraLogger {
             names: rig.cameras.iter().map(|c| c.name.clone()).collect(),
             maps: rig.cameras.iter().map(UndistortMap::new).collect(),
+            jpeg: std::sync::Mutex::new(hullcut_capture::JpegEncoder::new(JPEG_QUALITY)),
         })
     }
 
@@ -51,8 +54,9 @@ impl CameraLogger {
             }
             let rgb = map.remap(view.image.as_raw(), 3, true).context("remapping an image")?;
             let mut jpeg = Vec::new();
-            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY)
-                .encode(&rgb, w, h, image::ExtendedColorType::Rgb8)
+            let mut encoder = self.jpeg.lock().map_err(|_| anyhow::anyhow!("the JPEG encoder was poisoned"))?;
+            encoder
+                .encode(&rgb, w, h, &mut jpeg)
                 .with_context(|| format!("camera {name}: encoding a JPEG for rerun"))?;
             hullcut_viz::log_image_jpeg(rec, name, jpeg)?;
             if let Some(mask) = &view.mask {

@@ -3,16 +3,16 @@
 //!
 //! Exit codes: 0 success, 1 failure (the error is printed), 2 bad usage.
 
-mod backend;
 mod chart;
 mod commands;
 mod frames;
-mod labelling;
 mod logging;
 mod pose_out;
 mod progress;
 mod report;
 mod volume;
+
+use hullcut_pipeline::{backend, labelling};
 
 use std::fmt::Write as _;
 use std::process::ExitCode;

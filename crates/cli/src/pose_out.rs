@@ -258,17 +258,4 @@ pub fn log_blade(rec: &RecordingStream, which: &str, pose: &BladePose) -> anyhow
     Ok(())
 }
 
-/// The refused estimate of a frame set whose dataset has no tool.json.
-pub fn no_tool_estimate(frame: u64, timestamp_ns: i64) -> PoseEstimate {
-    PoseEstimate {
-        frame,
-        timestamp_ns,
-        valid: false,
-        held: false,
-        confidence: 0.0,
-        pose: None,
-        fitted: None,
-        reason: Some("the dataset has no tool.json: the pose needs the tool's geometry".to_owned()),
-        diagnostics: hullcut_pose::Diagnostics::default(),
-    }
-}
+pub use hullcut_pipeline::no_tool_estimate;

@@ -14,11 +14,11 @@ use hullcut_synth::{Scene, SceneConfig, SceneKind};
 use image::GrayImage;
 
 use super::bench::Table;
-use super::run::stages::{MAX_ADVANCE_S, StageTimes};
-use super::run::tissue::{self, Sweeper};
 use crate::chart::{Scale, Series, line_chart};
 use crate::progress::bar;
 use crate::report::StageTiming;
+use hullcut_pipeline::tissue::{self, Sweeper};
+use hullcut_pipeline::{MAX_ADVANCE_S, StageTimes};
 
 /// Operational radius of the hybrid configurations, metres: cells within 2 cm of the blade's
 /// sweep run TLED (about four cells on each side at 5 mm).

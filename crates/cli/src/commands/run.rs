@@ -1,31 +1,31 @@
 //! `hullcut run`: the whole pipeline, frame sets in, a cut organ out.
 
+mod logger;
 mod snapshot;
-pub(crate) mod stages;
-pub(crate) mod tissue;
+pub(crate) mod tissue_log;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
 use hullcut_dataset::Dataset;
 use hullcut_hull::HullParams;
+use hullcut_pipeline::{FrameSource, StageTimes, stages, tissue};
 use hullcut_pose::{PoseError, Template, pose_error, rigid_from_matrix};
 use hullcut_sim::{HybridParams, HybridSteps};
 use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
-use self::stages::{Policy, StageTimes, Work};
 use crate::backend::{Backend, Carver};
 use crate::commands::reconstruct::checks::{self, Faults};
 use crate::frames::parse_frames;
 use crate::labelling::{LabelMethod, Labelling};
-use crate::logging::{CameraLogger, log_tool};
-use crate::pose_out::{PoseReport, log_blade};
+use crate::logging::CameraLogger;
+use crate::pose_out::PoseReport;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 use crate::volume::{MIN_VIEWS, WorkspaceArg};
@@ -36,20 +36,26 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// a synthetic six-camera recording of a gloved hand cutting with a scalpel (`hullcut synth`'s
 /// `resect` scene: two strokes along one line cut the tip off the organ's left lobe, the second
 /// ending at about 4 s, then cut strokes 5 to 25 mm deep), rendered once at start-up into a
-/// temporary folder (with a progress bar) and replayed. The stages run as threads joined by bounded channels (--queue frame sets each):
-/// reading, hull (segmentation when the masks are not files, octree carving, surfaces), pose (the
-/// tool's blade template fitted to the scalpel silhouettes, tracked, refused when not trusted;
-/// with segmented masks, the segmentation's own tracked fit of the tool, whose agreement bounds
-/// are looser),
-/// and tissue (the blade's swept surface between consecutive trusted poses cuts the organ by the
-/// virtual node algorithm; TLED moves it under gravity, resting on the table with friction, pieces
-/// kept out of each other; the hand's
-/// hull pushes it aside where it presses on it). Untrusted
-/// poses never cut, and a sweep never bridges a refused frame. Without --realtime every frame is
-/// processed (a full queue blocks the reader); with --realtime the reader keeps to the capture
-/// timestamps and a full queue drops its oldest frame set, counted in the report; it waits at
-/// most 5 s between two frame sets: a longer gap in the capture times (or one backwards) is not
-/// waited out but counted (counters.realtime_gaps_skipped).
+/// temporary folder (with a progress bar) and replayed. The frame sets are decoded into memory
+/// before the loop when they fit in --preload-mib (decoding is timed apart, `decode`), else read
+/// as they are needed. The stages (the hullcut-pipeline crate) run as threads joined by bounded
+/// channels: reading, hull (segmentation when the masks are not files, octree carving,
+/// surfaces), pose (the tool's blade template fitted to the scalpel silhouettes, tracked, refused
+/// when not trusted; with segmented masks, the segmentation's own tracked fit of the tool, whose
+/// agreement bounds are looser), and tissue (the blade's swept surface between consecutive
+/// trusted poses cuts the organ by the virtual node algorithm; TLED moves it under gravity,
+/// resting on the table with friction, pieces kept out of each other; the hand's hull pushes it
+/// aside where it presses on it). Untrusted poses never cut, and a sweep never bridges a refused
+/// frame. At most --queue frame sets are in the stages at once, so no queue grows and the latency
+/// (from a frame set's capture to its cut surface) stays bounded. Without --realtime every frame
+/// set is processed, the next one taken when there is room; with --realtime the reader keeps to
+/// the capture timestamps and a frame set that finds no room is replaced by the next one, the
+/// older dropped and counted in the report; it waits at most 5 s between two frame sets: a longer
+/// gap in the capture times (or one backwards) is not waited out but counted
+/// (counters.realtime_gaps_skipped). Logging (rerun, --export-meshes, --snapshots) runs on its
+/// own thread behind a queue of 8 frame sets: without --realtime a full queue makes the loop wait
+/// (timed: timings.log_wait), with it the oldest frame set waiting to be logged is dropped
+/// (counters.log_dropped).
 ///
 /// Bad input: a camera image that cannot be read (a corrupt PNG, a camera whose files stop
 /// mid-recording) or a mask with unknown labels leaves that view out of its frame set (the whole
@@ -146,8 +152,9 @@ pub struct Args {
     /// Seed of the built-in scene.
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
-    /// Frame sets each queue between stages holds.
-    #[arg(long, value_name = "N", default_value_t = 4,
+    /// Frame sets in the stages at once (each queue's bound): more lets the stages overlap more
+    /// (throughput), fewer keeps the latency down.
+    #[arg(long, value_name = "N", default_value_t = hullcut_pipeline::stages::DEFAULT_IN_FLIGHT,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     queue: usize,
     /// Log images (JPEG), masks, hull leaves and meshes and the lattice nodes every N-th frame; the
@@ -155,6 +162,10 @@ pub struct Args {
     /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged).
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
+    /// Decode the frame sets into memory before the loop when they take at most this many MiB
+    /// (0: never; they are then read as they are needed).
+    #[arg(long, value_name = "MIB", default_value_t = 4096)]
+    preload_mib: u64,
     /// Write a JSON report.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
@@ -183,8 +194,10 @@ struct Counters {
     /// Camera images missing from the frame sets processed (a camera that dropped frames or died).
     views_missing: u64,
     frame_sets_processed: u64,
-    /// Dropped by the --realtime policy (queue full: the oldest frame set goes).
+    /// Dropped by --realtime: read, but a newer frame set came before there was room for it.
     frame_sets_dropped: u64,
+    /// Processed frame sets not logged: with --realtime, the logging queue was full.
+    log_dropped: u64,
     /// Gaps in the capture times over 5 s (or backwards) that --realtime did not wait out.
     realtime_gaps_skipped: u64,
     /// True poses in truth/poses.jsonl that are not rigid poses (not scored).
@@ -223,9 +236,18 @@ struct Timings {
     contact: StageTiming,
     deform: StageTiming,
     tissue_surface: StageTiming,
+    /// Rerun logging, meshes and snapshots, on the logging thread.
     log: StageTiming,
-    /// From reading a frame set to having logged it.
+    /// Times the loop waited for the logging queue (without --realtime), per wait.
+    log_wait: StageTiming,
+    /// From a frame set's capture (without --realtime: from when it was let into the stages) to
+    /// its cut surface.
     latency: StageTiming,
+    /// Of the latency, the wait for room in the stages (only --realtime waits).
+    admission_wait: StageTiming,
+    /// Decoding the frame sets into memory before the loop, per frame set (null when read as
+    /// needed: `read` holds the decoding then).
+    decode: Option<StageTiming>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -288,7 +310,13 @@ struct Report {
     workspace: hullcut_hull::WorkingVolume,
     voxel_m: f64,
     realtime: bool,
+    /// Frame sets in the stages at once (`--queue`).
     queue: usize,
+    /// The most frame sets each queue held at once: read → hull, hull → pose, pose → tissue,
+    /// tissue → logging; never more than `queue`.
+    queue_max: [usize; 4],
+    /// Whether the frame sets were decoded into memory before the loop (`--preload-mib`).
+    preloaded: bool,
     /// Stopped by Ctrl-C before the last frame set (everything read until then was processed).
     interrupted: bool,
     /// Why the run stopped before its end, when something failed (null when it did not).
@@ -491,7 +519,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         setup_s
     );
 
-    let mut snapshots = match &args.snapshots {
+    let snapshots = match &args.snapshots {
         Some(dir) => {
             let chosen: std::collections::BTreeSet<u64> = match &args.snapshot_frames {
                 Some(list) => list.iter().copied().collect(),
@@ -511,16 +539,40 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     crate::volume::log(&rec, &volume)?;
     let cams = CameraLogger::new(&rec, ds.rig())?;
 
-    let policy = if args.realtime { Policy::DropOldest } else { Policy::Block };
-    let dropped = Arc::new(AtomicU64::new(0));
+    // The frame sets in memory when they fit: decoding is timed apart from the loop.
+    let preload = preload_fits(&ds, frames.len(), use_files, args.preload_mib);
+    let (source, decode) = if preload {
+        let pb = bar(frames.len() as u64, "decoding the frame sets into memory");
+        let clock = Instant::now();
+        let sets = stages::preload(&ds, &frames, use_files, &|| pb.inc(1));
+        pb.finish_and_clear();
+        let per_set = clock.elapsed() / u32::try_from(frames.len()).unwrap_or(u32::MAX).max(1);
+        (FrameSource::Memory(Arc::clone(&ds), Arc::new(sets)), Some(vec![per_set; frames.len()]))
+    } else {
+        (FrameSource::Dataset(Arc::clone(&ds)), None)
+    };
     let t0 = Instant::now();
     let labelling = if use_files {
         None
     } else {
         Some(Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?)
     };
+    let mut log = logger::LogThread::start(
+        logger::Logger {
+            rec,
+            sink,
+            cams,
+            ds: Arc::clone(&ds),
+            tool: tool.clone(),
+            template: template.clone(),
+            rrd_every: args.rrd_every,
+            export_meshes: args.export_meshes.clone(),
+            snapshots,
+        },
+        args.realtime,
+    )?;
     let pipeline = stages::spawn(stages::Setup {
-        ds: Arc::clone(&ds),
+        source,
         frames: frames.clone(),
         repeat: args.repeat,
         pass_span_ns,
@@ -530,9 +582,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         carver,
         template: template.clone(),
         tissue,
-        queue: args.queue,
-        policy,
-        dropped: Arc::clone(&dropped),
+        in_flight: args.queue,
         realtime: args.realtime,
         stop: Arc::clone(&stop),
     })?;
@@ -544,35 +594,31 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut counters = Counters { truth_poses_refused: truth_refused, ..Counters::default() };
     let mut pose_report = PoseReport::new(template.is_some());
     let mut times = StageTimes::default();
-    let mut logging = Vec::new();
-    let mut latency = Vec::new();
-    let mut surface_log = tissue::SurfaceLog::default();
+    let (mut latency, mut admission) = (Vec::new(), Vec::new());
     let mut tled_cells: Vec<usize> = Vec::new();
-    let mut flushed = Instant::now();
-    // The first error while logging or writing stops the run; what was processed until then is
-    // flushed and reported.
-    let mut consume = |work: Work| -> anyhow::Result<()> {
-        let clock = Instant::now();
+    // The results, in order: counted and scored here, logged on the logging thread.
+    for work in pipeline.output.iter() {
         counters.frame_sets_processed += 1;
         counters.views_missing += work.set.views.iter().filter(|v| v.is_none()).count() as u64;
-        let Work { frame, pass, set, occ, grids, estimate, tissue: step, times: t, started, .. } = work;
         // Where this frame set goes on the `frame` timeline (later passes follow the first).
-        let shown = frame.saturating_add(pass.saturating_mul(pass_frames));
-        times.extend(&t);
-        let truth_iso = truth.get(&frame);
+        let shown = work.frame.saturating_add(work.pass.saturating_mul(pass_frames));
+        times.extend(&work.times);
+        latency.push(work.latency());
+        admission.push(work.admission_wait());
+        let truth_iso = truth.get(&work.frame).copied();
         // A pose's error against the truth; none where there is no truth or a figure is not
         // finite (not measured, never a NaN in the report).
         let error = |p: Option<&hullcut_pose::BladePose>| -> Option<PoseError> {
-            let measured = match (&template, p, truth_iso) {
+            let measured = match (&template, p, &truth_iso) {
                 (Some(template), Some(p), Some(truth)) => Some(pose_error(p, template, truth)),
                 _ => None,
             };
             measured.filter(finite_error)
         };
-        if let Some(e) = &estimate {
-            pose_report.push(e, error(e.pose.as_ref()), error(e.fitted.as_ref()));
-        }
-        if let Some(e) = &estimate {
+        let mut logged_error = None;
+        if let Some(e) = &work.estimate {
+            logged_error = error(e.pose.as_ref());
+            pose_report.push(e, logged_error, error(e.fitted.as_ref()));
             if e.valid {
                 counters.poses_trusted += 1;
             } else {
@@ -580,12 +626,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 counters.poses_held += u64::from(e.held);
             }
         }
-        if let Some(step) = &step {
+        if let Some(step) = &work.tissue {
             counters.sweeps += u64::from(step.swept.is_some());
             counters.sweeps_skipped_after_refusal += u64::from(step.sweep_skipped);
             if let Some(reason) = &step.sweep_refused {
                 if counters.sweeps_refused == 0 {
-                    tracing::warn!("frame {frame}: a sweep was not cut: {reason}");
+                    tracing::warn!("frame {}: a sweep was not cut: {reason}", work.frame);
                 }
                 counters.sweeps_refused += 1;
             }
@@ -594,73 +640,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             counters.max_contact_nodes = counters.max_contact_nodes.max(step.contacts as u64);
             tled_cells.push(step.tled_cells);
         }
-        // rerun: everything on the frame and capture-time timelines.
-        hullcut_viz::set_frame(&rec, i64::try_from(shown).unwrap_or(i64::MAX));
-        hullcut_viz::set_capture_time_ns(&rec, set.timestamp_ns);
-        if let Some(occ) = &occ {
-            crate::commands::reconstruct::log_hull(
-                &rec,
-                &cams,
-                &set,
-                occ,
-                &grids,
-                shown,
-                args.rrd_every,
-                args.rrd_every,
-            )?;
-        }
-        if let (Some(tool), Some(iso)) = (&tool, truth_iso) {
-            log_tool(&rec, "truth", tool, &iso.to_homogeneous())?;
-        }
-        if let (Some(template), Some(iso)) = (&template, truth_iso) {
-            log_blade(&rec, "truth", &hullcut_pose::BladePose::new(template, *iso))?;
-        }
-        if let Some(e) = &estimate {
-            match e.pose.as_ref().filter(|p| p.is_finite()) {
-                Some(p) => log_blade(&rec, "estimate", p)?,
-                None => hullcut_viz::log_clear(&rec, "world/tool/estimate")?,
-            }
-            hullcut_viz::log_scalar(&rec, "metrics/pose/confidence", e.confidence)?;
-            if let Some(err) = error(e.pose.as_ref()) {
-                hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_normal_deg", err.normal_deg)?;
-                hullcut_viz::log_scalar(&rec, "metrics/accuracy/blade_tip_mm", err.tip_mm)?;
-            }
-        }
-        if let Some(step) = &step {
-            tissue::log(&rec, step, shown, args.rrd_every, &mut surface_log)?;
-            if let Some(dir) = &args.export_meshes {
-                counters.meshes_exported += tissue::export(dir, shown, &step.surfaces)?;
-            }
-        }
-        if let Some(snaps) = snapshots.as_mut().filter(|s| pass == 0 && s.wants(frame)) {
-            let blade = estimate.as_ref().and_then(|e| e.pose.as_ref()).filter(|p| p.is_finite());
-            let pieces = step.as_ref().map_or(&[][..], |s| &s.surfaces[..]);
-            snaps.write(ds.rig(), &set, &grids, blade, pieces)?;
-        }
-        for (name, ms) in t.last_ms() {
-            hullcut_viz::log_scalar(&rec, &format!("metrics/time/{name}"), ms)?;
-        }
-        // A file sink that cannot write (a full disk) shows only when flushed: flush now and
-        // then, and stop with its reason rather than log into nothing.
-        if let hullcut_viz::Sink::File(path) = &sink
-            && flushed.elapsed() >= FLUSH_EVERY
-        {
-            hullcut_viz::flush(&rec).with_context(|| format!("writing the recording {}", path.display()))?;
-            flushed = Instant::now();
-        }
-        logging.push(clock.elapsed());
-        latency.push(started.elapsed());
         if t0.elapsed() >= next_sample {
             memory.extend(MemorySample::now(t0.elapsed(), counters.frame_sets_processed));
             next_sample += MEMORY_SAMPLE;
         }
         pb.inc(1);
-        Ok(())
-    };
-    let mut stopped: Option<anyhow::Error> = None;
-    for work in pipeline.output.iter() {
-        if let Err(e) = consume(work) {
-            stopped = Some(e.context("stopped while logging the frame sets"));
+        if !log.push(logger::Item { work, shown, truth: truth_iso, error: logged_error }) || log.stopped() {
             break;
         }
     }
@@ -668,21 +653,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let wall = t0.elapsed();
     memory.extend(MemorySample::now(wall, counters.frame_sets_processed));
     let outcome = pipeline.join();
-    let error = stopped.or(outcome.error);
+    counters.log_dropped = log.dropped;
+    let log_wait = std::mem::take(&mut log.waited);
+    let (logged, log_result) = log.finish();
+    let error = log_result
+        .err()
+        .map(|e| e.context("stopped while logging the frame sets"))
+        .or(outcome.error.map(anyhow::Error::new));
     let interrupted = stop.load(Ordering::SeqCst) && outcome.read.read < total;
     counters.frame_sets_read = outcome.read.read;
-    counters.frame_sets_dropped = dropped.load(Ordering::Relaxed);
+    counters.frame_sets_dropped = outcome.read.dropped;
     counters.realtime_gaps_skipped = outcome.read.gaps_skipped;
-    counters.snapshots_written = snapshots.as_ref().map_or(0, |s| s.written);
-    counters.tissue_surfaces_logged = surface_log.logged;
-    counters.tissue_surfaces_unchanged = surface_log.skipped;
+    counters.snapshots_written = logged.snapshots_written;
+    counters.meshes_exported = logged.meshes_exported;
+    counters.tissue_surfaces_logged = logged.surfaces.logged;
+    counters.tissue_surfaces_unchanged = logged.surfaces.skipped;
     pose_report.finish();
-    // What was logged stays readable whatever stopped the run.
-    let error = match (error, hullcut_viz::flush(&rec)) {
-        (Some(e), _) => Some(e),
-        (None, Err(e)) => Some(anyhow::Error::new(e).context(format!("writing the recording ({sink})"))),
-        (None, Ok(())) => None,
-    };
     let faults = outcome.read.faults;
     let (faults_any, faults_summary) = (faults.any(), faults.summary());
     let processed = counters.frame_sets_processed;
@@ -755,6 +741,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             voxel_m: args.voxel,
             realtime: args.realtime,
             queue: args.queue,
+            queue_max: outcome.queue_max,
+            preloaded: preload,
             interrupted,
             stopped: error.as_ref().map(|e| format!("{e:#}")),
             wall_s: wall.as_secs_f64(),
@@ -809,8 +797,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 contact: timing(&times.contact),
                 deform: timing(&times.deform),
                 tissue_surface: timing(&times.tissue_surface),
-                log: timing(&logging),
+                log: timing(&logged.times),
+                log_wait: timing(&log_wait),
                 latency: timing(&latency),
+                admission_wait: timing(&admission),
+                decode: decode.as_deref().map(timing),
             },
             entities: ENTITIES.iter().map(|s| (*s).to_owned()).collect(),
             non_finite: Vec::new(),
@@ -852,8 +843,19 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// How often a run flushes a file recording, to find a sink that cannot write (a full disk).
-const FLUSH_EVERY: Duration = Duration::from_secs(2);
+/// Whether `frames` frame sets of `ds` (masks too unless segmented) decoded take at most
+/// `limit_mib` MiB (their images at 3 bytes a pixel, masks at 1).
+fn preload_fits(ds: &Dataset, frames: usize, with_masks: bool, limit_mib: u64) -> bool {
+    let per_pixel = if with_masks { 4 } else { 3 };
+    let bytes: u64 = ds
+        .rig()
+        .cameras
+        .iter()
+        .map(|c| u64::from(c.width) * u64::from(c.height) * per_pixel)
+        .sum::<u64>()
+        .saturating_mul(frames as u64);
+    bytes <= limit_mib.saturating_mul(1 << 20)
+}
 
 /// Whether a pose error is a number in every field (a NaN is not measured, not an error of 0).
 fn finite_error(e: &PoseError) -> bool {

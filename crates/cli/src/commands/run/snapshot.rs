@@ -19,7 +19,7 @@ use hullcut_synth::{CameraRenderer, Light, Part};
 use image::{Rgb, RgbImage};
 use nalgebra::Point3;
 
-use super::stages::LabelGrid;
+use hullcut_pipeline::LabelGrid;
 
 /// Widest tile of the views grid, pixels (larger images are shrunk by an integer factor).
 const TILE_WIDTH: u32 = 320;

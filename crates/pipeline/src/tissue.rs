@@ -1,9 +1,7 @@
-//! The organ `hullcut run` cuts: its set-up, one frame set's step, its logging and export.
+//! The organ the pipeline cuts: its set-up and one frame set's step.
 
-use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::Context as _;
 use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
@@ -12,7 +10,9 @@ use hullcut_sim::{
 };
 use nalgebra::{Isometry3, Point3};
 
-use super::stages::StageTimes;
+use crate::backend::GpuHandle;
+use crate::error::{Context as _, Error};
+use crate::stages::StageTimes;
 
 /// Young's modulus of the tissue, pascals (liver-like).
 pub const YOUNG_PA: f64 = 3e3;
@@ -25,11 +25,6 @@ pub const TABLE_FRICTION: f64 = 0.5;
 /// Simulated time the tissue settles under gravity before the first frame set, seconds.
 pub const SETTLE_S: f64 = 0.5;
 
-/// RGBA of the organ's surface.
-const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
-/// RGBA of the swept blade surface.
-const SWEPT_CYAN: [u8; 4] = [80, 220, 240, 160];
-
 /// A body's signed distance (negative inside), metres.
 type SignedDistance = dyn Fn(&Point3<f64>) -> f64 + Sync;
 
@@ -41,6 +36,17 @@ pub struct Tissue {
     pub cell: f64,
     /// Problems worked around while voxelizing a mesh (open, inward), naming the file.
     pub warnings: Vec<String>,
+}
+
+impl std::fmt::Debug for Tissue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Tissue")
+            .field("nodes", &self.sim.lattice().node_count())
+            .field("cells", &self.sim.cell_count())
+            .field("cell", &self.cell)
+            .field("warnings", &self.warnings)
+            .finish_non_exhaustive()
+    }
 }
 
 /// What the tissue did on one frame set.
@@ -174,12 +180,7 @@ fn sweep(template: &Template, path: &[Isometry3<f64>], cell: f64) -> Result<Opti
 /// friction, nothing held: a piece cut off falls onto the table and rests there), settled under
 /// gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere; with `gpu`, the
 /// TLED steps run there.
-pub fn build(
-    name: &str,
-    cell: f64,
-    hybrid: Option<HybridParams>,
-    gpu: Option<std::sync::Arc<hullcut_gpu::Gpu>>,
-) -> anyhow::Result<Tissue> {
+pub fn build(name: &str, cell: f64, hybrid: Option<HybridParams>, gpu: Option<GpuHandle>) -> Result<Tissue, Error> {
     let material = Material::from_young_poisson(YOUNG_PA, POISSON, DENSITY);
     let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
         (Body::Organ, Box::new(organ_sdf))
@@ -201,10 +202,15 @@ pub fn build(
     let params = CutSimParams { hybrid, table: Some(table), ..CutSimParams::default() };
     let mut sim = CutSim::new(lattice, &*signed, material, |_| false, params)
         .with_context(|| format!("setting up the tissue ({name})"))?;
+    #[cfg(feature = "gpu")]
     if let Some(gpu) = gpu {
         sim.use_gpu(gpu).context("--backend gpu")?;
     }
-    sim.advance(SETTLE_S).map_err(|d| anyhow::anyhow!("the tissue diverged while settling: {}", d.reason))?;
+    #[cfg(not(feature = "gpu"))]
+    if let Some(never) = gpu {
+        match never {}
+    }
+    sim.advance(SETTLE_S).map_err(|d| Error::msg(format!("the tissue diverged while settling: {}", d.reason)))?;
     Ok(Tissue { sim, cell, warnings: voxelized.warnings })
 }
 
@@ -217,9 +223,9 @@ impl Tissue {
         seconds: f64,
         hand: Option<&DenseGrid>,
         times: &mut StageTimes,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), Error> {
         if let Some(swept) = &step.swept {
-            let outcome = self.sim.cut(swept)?;
+            let outcome = self.sim.cut(swept).context("cutting")?;
             let ms = |ms: f64| Duration::from_secs_f64(ms * 1e-3);
             times.collide.push(ms(outcome.collide_ms));
             times.cut_topology.push(ms(outcome.topology_ms));
@@ -236,13 +242,10 @@ impl Tissue {
         // The operational region (hybrid model) follows the blade's sweep since the last frame.
         self.sim.set_tool(step.swept.as_ref().map_or(&[], |s| &s.vertices[..]));
         self.sim.advance(seconds).map_err(|d| {
-            anyhow::anyhow!(
+            Error::msg(format!(
                 "the tissue diverged at step {} (t = {:.3} s, node {}): {}",
-                d.step,
-                d.time,
-                d.node,
-                d.reason
-            )
+                d.step, d.time, d.node, d.reason
+            ))
         })?;
         // Contact (the hand's obstacle and the table, resolved after every step) counts apart.
         let contact = Duration::from_secs_f64(self.sim.contact_seconds());
@@ -300,93 +303,6 @@ impl Tissue {
 /// How far beyond the tissue's bounds a hull is taken as an obstacle, metres.
 pub const CONTACT_MARGIN_M: f64 = 0.01;
 
-/// The surface as last logged, to log it again only when it has changed visibly.
-#[derive(Debug, Default)]
-pub struct SurfaceLog {
-    vertices: Vec<[f32; 3]>,
-    triangles: Vec<[u32; 3]>,
-    /// Surfaces logged and skipped.
-    pub logged: u64,
-    pub skipped: u64,
-}
-
-/// A surface is logged again when a vertex has moved this far since it was last logged, metres.
-pub const SURFACE_LOG_TOLERANCE_M: f32 = 2e-4;
-
-impl SurfaceLog {
-    /// Whether `vertices`/`triangles` differ visibly from what was last logged.
-    fn changed(&self, vertices: &[[f32; 3]], triangles: &[[u32; 3]]) -> bool {
-        let tol2 = SURFACE_LOG_TOLERANCE_M * SURFACE_LOG_TOLERANCE_M;
-        triangles != self.triangles
-            || vertices.len() != self.vertices.len()
-            || vertices
-                .iter()
-                .zip(&self.vertices)
-                .any(|(a, b)| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2) > tol2)
-    }
-}
-
-/// Logs one step: the surface when it has changed (its topology, or a vertex moved by more than
-/// [`SURFACE_LOG_TOLERANCE_M`]: a tissue at rest costs nothing), the lattice nodes every
-/// `every`-th frame, the swept blade surface when there is one (else it is cleared), the piece
-/// count.
-pub fn log(
-    rec: &hullcut_viz::RecordingStream,
-    step: &TissueStep,
-    frame: u64,
-    every: u64,
-    last: &mut SurfaceLog,
-) -> anyhow::Result<()> {
-    let (vertices, triangles) = merged(&step.surfaces);
-    if last.changed(&vertices, &triangles) {
-        hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, &triangles, TISSUE_RED)?;
-        last.vertices = vertices;
-        last.triangles = triangles;
-        last.logged += 1;
-    } else {
-        last.skipped += 1;
-    }
-    if frame.is_multiple_of(every) {
-        let nodes: Vec<[f32; 3]> = step.nodes.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let colors: Vec<[u8; 4]> = step.roles.iter().map(|r| r.color()).collect();
-        hullcut_viz::log_points3d_colored(rec, "world/tissue/nodes", &nodes, &colors, 0.0008)?;
-    }
-    match &step.swept {
-        Some(swept) => {
-            let v: Vec<[f32; 3]> = swept.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
-            hullcut_viz::log_mesh3d(rec, "world/tissue/cut", &v, &swept.triangles, SWEPT_CYAN)?;
-        }
-        None => hullcut_viz::log_clear(rec, "world/tissue/cut")?,
-    }
-    hullcut_viz::log_scalar(rec, "metrics/tissue/pieces", step.pieces as f64)?;
-    hullcut_viz::log_scalar(rec, "metrics/tissue/table_contacts", step.table_contacts as f64)?;
-    hullcut_viz::log_scalar(rec, "metrics/tissue/piece_contacts", step.piece_contacts as f64)?;
-    Ok(())
-}
-
-/// The pieces' surfaces as one vertex and triangle list.
-fn merged(surfaces: &[TriMesh]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let mut vertices = Vec::new();
-    let mut triangles = Vec::new();
-    for mesh in surfaces {
-        let base = vertices.len() as u32;
-        vertices.extend(mesh.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]));
-        triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
-    (vertices, triangles)
-}
-
-/// Writes the pieces as DIR/NNNNNN/pieceK.ply; returns how many.
-pub fn export(dir: &Path, frame: u64, surfaces: &[TriMesh]) -> anyhow::Result<u64> {
-    let folder = dir.join(format!("{frame:06}"));
-    std::fs::create_dir_all(&folder).with_context(|| format!("creating {}", folder.display()))?;
-    for (k, mesh) in surfaces.iter().enumerate() {
-        let path = folder.join(format!("piece{k}.ply"));
-        mesh.write_ply(&path).with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(surfaces.len() as u64)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -398,7 +314,7 @@ mod tests {
     }
 
     fn estimate(template: &Template, valid: bool, x: f64) -> PoseEstimate {
-        let mut e = crate::pose_out::no_tool_estimate(0, 0);
+        let mut e = crate::no_tool_estimate(0, 0);
         e.valid = valid;
         e.pose = Some(hullcut_pose::BladePose::new(template, Isometry3::translation(x, 0.0, 0.05)));
         e

@@ -1,4 +1,4 @@
-//! Masks from a recording's images, for `segment`, `reconstruct` and `run`: the foreground from the
+//! Masks from a recording's images (`hullcut segment`, `reconstruct` and `run`): the foreground from the
 //! background model (empty-scene images, else the recording's own median), its labels from the
 //! known tool's geometry ([`ToolLabeller`]: the tool fitted into the foreground's hull and drawn
 //! into every view, the hand's occlusion respected), and where the tool cannot be fitted, or there
@@ -7,7 +7,6 @@
 
 use std::time::Instant;
 
-use anyhow::{Context as _, bail};
 use hullcut_capture::segment::{
     AppearanceModel, ColourLut, LearnedColour, Method, SHADOW_LIKE, SegmentParams, Segmenter,
 };
@@ -19,6 +18,7 @@ use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
+use crate::error::{Context as _, Error, fail};
 
 /// A trusted frame set's geometric labels teach the appearance model when its confidence is at
 /// least this.
@@ -50,9 +50,10 @@ const EXPLAINED: u8 = 254;
 const SHADOW_DEPTH: f64 = 0.8;
 
 /// Which evidence labels the foreground (`--labels`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
-pub(crate) enum LabelMethod {
+pub enum LabelMethod {
     /// The fitted tool's geometry, sharpened by the learned colours near the tool, and the colours
     /// alone where the tool cannot be fitted.
     #[default]
@@ -78,7 +79,7 @@ impl LabelMethod {
 /// Where a frame set's labels came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub(crate) enum LabelSource {
+pub enum LabelSource {
     /// The fitted tool drawn into the views.
     Geometry,
     /// The colours learned from the recording.
@@ -92,7 +93,7 @@ pub(crate) enum LabelSource {
 
 /// Counts per label source, and what was learned.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub(crate) struct LabelCounters {
+pub struct LabelCounters {
     /// Frame sets labelled by the tool's geometry.
     pub geometry: u64,
     /// Frame sets labelled by the learned colours.
@@ -120,7 +121,7 @@ pub(crate) struct LabelCounters {
 
 /// What the labelling of a run did, for its report.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub(crate) struct LabellingReport {
+pub struct LabellingReport {
     /// How each camera found its foreground: `background` (empty-scene images), `median` (the
     /// recording's median), `mog2`.
     pub foreground: Vec<Option<Method>>,
@@ -140,7 +141,8 @@ pub(crate) struct LabellingReport {
 }
 
 /// One frame set's labels.
-pub(crate) struct Labelled {
+#[derive(Debug)]
+pub struct Labelled {
     /// Per view: 0 background, 1 hand, 2 scalpel, 255 unknown.
     pub masks: Vec<Option<GrayImage>>,
     /// The foreground's hull with the tool's cells labelled, when the geometry ran (no need to
@@ -170,7 +172,7 @@ struct MaskCounts {
 }
 
 /// Labels frame sets (see the module docs).
-pub(crate) struct Labelling {
+pub struct Labelling {
     method: LabelMethod,
     segmenter: Segmenter,
     tool: Option<ToolLabeller>,
@@ -189,6 +191,17 @@ pub(crate) struct Labelling {
     history: Vec<std::collections::VecDeque<(usize, usize)>>,
 }
 
+impl std::fmt::Debug for Labelling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Labelling")
+            .field("method", &self.method)
+            .field("tool", &self.tool.is_some())
+            .field("label_frames", &self.label_frames)
+            .field("counters", &self.counters)
+            .finish_non_exhaustive()
+    }
+}
+
 impl Labelling {
     /// Sets up the foreground models, the tool's labeller and the colours of `label_frames`' masks,
     /// for `method`. Without a tool and without masked frames there is nothing to tell hand from
@@ -199,13 +212,13 @@ impl Labelling {
         hull: HullParams,
         label_frames: &[u64],
         method: LabelMethod,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, Error> {
         let tool = if method == LabelMethod::Colour { None } else { tool };
         if method == LabelMethod::Geometry && tool.is_none() {
-            bail!("{}: --labels geometry needs the scalpel's tool.json", ds.root().display());
+            fail!("{}: --labels geometry needs the scalpel's tool.json", ds.root().display());
         }
         if method == LabelMethod::Colour && label_frames.is_empty() {
-            bail!(
+            fail!(
                 "{}: --labels colour learns the colours from masks/: name a few frames with --label-frames",
                 ds.root().display()
             );
@@ -218,7 +231,7 @@ impl Labelling {
         let mut appearance = AppearanceModel::default();
         for &frame in label_frames {
             if !ds.has_masks() {
-                bail!("--label-frames: {} has no masks/ to learn the colours from", ds.root().display());
+                fail!("--label-frames: {} has no masks/ to learn the colours from", ds.root().display());
             }
             let set = ds.read_frame_set(frame, true).with_context(|| format!("--label-frames: frame {frame}"))?;
             for view in set.views.iter().flatten() {
@@ -241,7 +254,7 @@ impl Labelling {
             .transpose()
             .context("tool.json cannot serve to label the tool")?;
         if tool.is_none() && colours.is_none() {
-            bail!(
+            fail!(
                 "{}: nothing tells the hand from the scalpel: add the scalpel's tool.json (its mesh, tip and cutting \
                  edge; README, \"From your rig to hullcut run\"), or draw masks/ for a few frames and name them with \
                  --label-frames (both labels must appear)",
@@ -270,7 +283,7 @@ impl Labelling {
     }
 
     /// Labels one frame set.
-    pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> anyhow::Result<Labelled> {
+    pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();
         let mut fg = std::mem::take(&mut self.masks);
@@ -345,7 +358,7 @@ impl Labelling {
             .zip(&fg)
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
-        let Some(labeller) = &mut self.tool else { bail!("no tool to label frame {frame} with") };
+        let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
         let labelled = labeller.label(frame, set.timestamp_ns, &occ, &inputs);
         let estimate = labelled.estimate;
         let colours = self.method == LabelMethod::Both;
@@ -397,7 +410,7 @@ impl Labelling {
     /// any method but [`LabelMethod::Both`]), for a frame set that the tool could not label with
     /// trust before later frames taught the colours.
     /// The counters count it as `relabelled`, nothing else.
-    pub fn relabel_by_colour(&mut self, set: &FrameSet, carver: &mut Carver) -> anyhow::Result<Option<Labelled>> {
+    pub fn relabel_by_colour(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Option<Labelled>, Error> {
         if self.method != LabelMethod::Both || self.colours.is_none() {
             return Ok(None);
         }
@@ -452,7 +465,7 @@ impl Labelling {
         occ: Occupancy,
         views: &[Option<Silhouette>],
         fg: &mut [Option<GrayImage>],
-    ) -> anyhow::Result<Occupancy> {
+    ) -> Result<Occupancy, Error> {
         let sure: Vec<Option<GrayImage>> = fg
             .iter()
             .map(|m| {
@@ -464,7 +477,7 @@ impl Labelling {
             })
             .collect();
         let refs: Vec<Option<&GrayImage>> = sure.iter().map(Option::as_ref).collect();
-        let sure = silhouettes(&self.rig, &refs)?;
+        let sure = silhouettes(&self.rig, &refs).context("the sure foreground's silhouettes")?;
         let (occ, dropped) = keep_supported(&occ, views, &sure, self.hull.margin_px, self.rig.world_frame.is_table());
         self.counters.shadow_cells_dropped += dropped as u64;
         for (view, mask) in views.iter().zip(fg.iter_mut()) {

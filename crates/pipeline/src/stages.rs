@@ -1,5 +1,12 @@
 //! The pipeline's stages as threads joined by bounded channels: read → hull → pose → tissue.
 //!
+//! At most [`Setup::in_flight`] frame sets are in the stages at once: the reader takes a credit
+//! for each frame set it lets in, the tissue stage gives it back when the frame set's cut surface
+//! is done. No queue can hold more than that, however slow a stage is. Without live pacing the
+//! reader waits for a credit (every frame set is processed); with it, a frame set that finds no
+//! credit waits in the reader's one slot until one frees, and a newer one takes its place: the
+//! older is dropped and counted ([`ReadOutcome::dropped`]), never queued.
+//!
 //! Each stage owns its state (the labelling, the tracker, the simulation) and hands a [`Work`] on;
 //! nothing is shared but the dataset. A stage that fails returns its error and sets the
 //! pipeline's abort flag: the reader stops reading, the stages after it finish what they hold,
@@ -9,25 +16,25 @@
 //!
 //! The reader goes on past a camera image it cannot use (a corrupt PNG, a camera whose files stop
 //! mid-recording, a mask with unknown labels): the frame set goes on without that view, or is left
-//! out when no view is left; every such fault is counted and listed ([`checks::Faults`]).
+//! out when no view is left; every such fault is counted and listed ([`Faults`]).
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, anyhow, bail};
-use crossbeam_channel::{Receiver, Sender, TrySendError, bounded};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, bounded};
 use hullcut_dataset::{Dataset, FrameSet, Mesh, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, silhouettes};
 use hullcut_pose::{PoseEstimate, Template, Tracker, TrackerParams, ViewInput};
 use hullcut_sim::CutSim;
 
-use super::tissue::{Sweeper, Tissue, TissueStep};
 use crate::backend::Carver;
-use crate::commands::reconstruct::checks::{self, Faults};
+use crate::error::{Context as _, Error};
 use crate::labelling::{Labelling, LabellingReport};
-use crate::pose_out::no_tool_estimate;
+use crate::no_tool_estimate;
+use crate::read::{Faults, ViewFault, camera_name, read_frame_set};
+use crate::tissue::{Sweeper, Tissue, TissueStep};
 
 /// The longest `--realtime` waits between two frame sets, seconds. A longer gap in the capture
 /// times (a paused recording, a clock jump, a corrupt timestamp 31 years on), or one backwards,
@@ -38,19 +45,74 @@ pub const MAX_REALTIME_GAP_S: f64 = 5.0;
 /// The longest one sleep of the paced reader, so that Ctrl-C and a failed stage stop it soon.
 const SLEEP_SLICE: Duration = Duration::from_millis(50);
 
-/// What a full queue does to the reader.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Policy {
-    /// Wait: every frame set is processed.
-    Block,
-    /// Drop the oldest queued frame set and count it (live pacing).
-    DropOldest,
+/// Where the reader takes frame sets from.
+#[derive(Clone)]
+pub enum FrameSource {
+    /// Read (decoded) from the dataset as they are needed.
+    Dataset(Arc<Dataset>),
+    /// Decoded before the run ([`preload`]): reading is a copy.
+    Memory(Arc<Dataset>, Arc<Vec<Preloaded>>),
+}
+
+impl std::fmt::Debug for FrameSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FrameSource::Dataset(ds) => write!(f, "FrameSource::Dataset({})", ds.root().display()),
+            FrameSource::Memory(ds, sets) => {
+                write!(f, "FrameSource::Memory({}, {} frame sets)", ds.root().display(), sets.len())
+            }
+        }
+    }
+}
+
+/// One frame set decoded ahead: what [`read_frame_set`] gave for it.
+#[derive(Debug, Clone)]
+pub struct Preloaded {
+    /// Its frame number.
+    pub frame: u64,
+    /// The frame set (`None` when no camera's image could be used).
+    pub set: Option<FrameSet>,
+    /// The views left out, and why.
+    pub faults: Vec<ViewFault>,
+}
+
+/// Decodes `frames` of `ds` (masks too when `with_masks`) into memory, calling `progress` after
+/// each; the reader then hands them on without decoding (their faults counted as when read).
+pub fn preload(ds: &Dataset, frames: &[u64], with_masks: bool, progress: &dyn Fn()) -> Vec<Preloaded> {
+    frames
+        .iter()
+        .map(|&frame| {
+            let (set, faults) = read_frame_set(ds, frame, with_masks);
+            progress();
+            Preloaded { frame, set, faults }
+        })
+        .collect()
+}
+
+impl FrameSource {
+    /// The dataset the frame sets come from.
+    pub fn dataset(&self) -> &Arc<Dataset> {
+        match self {
+            FrameSource::Dataset(ds) | FrameSource::Memory(ds, _) => ds,
+        }
+    }
+
+    /// Frame set `frame` and its faults.
+    fn read(&self, frame: u64, with_masks: bool) -> (Option<FrameSet>, Vec<ViewFault>) {
+        match self {
+            FrameSource::Dataset(ds) => read_frame_set(ds, frame, with_masks),
+            FrameSource::Memory(ds, sets) => match sets.iter().find(|p| p.frame == frame) {
+                Some(p) => (p.set.clone(), p.faults.clone()),
+                None => read_frame_set(ds, frame, with_masks),
+            },
+        }
+    }
 }
 
 /// Everything the stages need.
 pub struct Setup {
     /// The frame sets' source.
-    pub ds: Arc<Dataset>,
+    pub source: FrameSource,
     /// Frame numbers to process, in order.
     pub frames: Vec<u64>,
     /// Times to replay them, each pass's capture times following the last pass's by
@@ -70,20 +132,66 @@ pub struct Setup {
     pub template: Option<Template>,
     /// The organ.
     pub tissue: Tissue,
-    /// Frame sets per queue.
-    pub queue: usize,
-    /// Full-queue policy of the reader.
-    pub policy: Policy,
-    /// Frame sets the reader dropped.
-    pub dropped: Arc<AtomicU64>,
-    /// Pace the reader to the capture timestamps.
+    /// Frame sets in the stages at once (at least 1): each queue's bound, and the latency's.
+    pub in_flight: usize,
+    /// Pace the reader to the capture timestamps, dropping the oldest frame set that could not be
+    /// let in (live capture); without it every frame set is processed, as fast as the stages go.
     pub realtime: bool,
     /// Set (by Ctrl-C) to stop reading; the frame sets in flight still go through.
     pub stop: Arc<AtomicBool>,
 }
 
+impl std::fmt::Debug for Setup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Setup")
+            .field("source", &self.source)
+            .field("frames", &self.frames.len())
+            .field("repeat", &self.repeat)
+            .field("use_files", &self.use_files)
+            .field("in_flight", &self.in_flight)
+            .field("realtime", &self.realtime)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Setup {
+    /// A replay of `frames` from `source` once, as fast as the stages go, with mask files
+    /// (`use_files`) or without a labelling yet (set [`Setup::labelling`] to segment), the
+    /// template from the dataset's tool.json when it has one (and it makes one), two frame sets
+    /// in flight.
+    pub fn new(
+        source: FrameSource,
+        frames: Vec<u64>,
+        use_files: bool,
+        hull: HullParams,
+        carver: Carver,
+        tissue: Tissue,
+    ) -> Self {
+        let template = source.dataset().tool().ok().flatten().and_then(|t| Template::new(&t).ok());
+        Setup {
+            source,
+            frames,
+            repeat: 1,
+            pass_span_ns: 0,
+            use_files,
+            labelling: None,
+            hull,
+            carver,
+            template,
+            tissue,
+            in_flight: DEFAULT_IN_FLIGHT,
+            realtime: false,
+            stop: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+/// Frame sets in the stages at once by default: one carving while the one before is fitted and
+/// cut (see docs/benchmarks.md, "The loop", for the measured trade of throughput and latency).
+pub const DEFAULT_IN_FLIGHT: usize = 2;
+
 /// What a stage hands back when it ends: what it has to report, and its error if it failed.
-type StageEnd<T> = (T, anyhow::Result<()>);
+type StageEnd<T> = (T, Result<(), Error>);
 
 /// What the reader did.
 #[derive(Debug, Default)]
@@ -95,6 +203,8 @@ pub struct ReadOutcome {
     /// Capture-time gaps over [`MAX_REALTIME_GAP_S`] (or backwards) that `--realtime` did not
     /// wait out.
     pub gaps_skipped: u64,
+    /// Frame sets read but dropped by live pacing: a newer one came while they waited for room.
+    pub dropped: u64,
 }
 
 /// A hull label's grid and surface.
@@ -120,21 +230,65 @@ pub struct Work {
     pub times: StageTimes,
     /// When the reader started on it.
     pub started: Instant,
+    /// When it was captured, as this run's clock reads it: with live pacing, when its capture
+    /// time came; without, when it was let in (a replay takes the next frame set when the stages
+    /// have room for it, as a camera triggered by the pipeline would).
+    pub captured: Instant,
+    /// When it was let into the stages (a credit was free).
+    pub admitted: Instant,
+    /// When its cut surface was done (the tissue stage's end).
+    pub finished: Option<Instant>,
 }
 
-/// Stage timings (one entry per frame set that went through the stage).
+impl Work {
+    /// From its capture to its cut surface ([`Work::captured`] to [`Work::finished`]); zero
+    /// before the tissue stage has finished it.
+    pub fn latency(&self) -> Duration {
+        self.finished.map_or(Duration::ZERO, |f| f.saturating_duration_since(self.captured))
+    }
+
+    /// How long it waited for room before the stages took it.
+    pub fn admission_wait(&self) -> Duration {
+        self.admitted.saturating_duration_since(self.captured)
+    }
+}
+
+impl std::fmt::Debug for Work {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Work")
+            .field("frame", &self.frame)
+            .field("pass", &self.pass)
+            .field("timestamp_ns", &self.set.timestamp_ns)
+            .field("latency", &self.latency())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Stage timings (one entry per frame set that went through the stage; the sweep's `collide`,
+/// `cut_topology` and `cut_surface` one per sweep).
 #[derive(Debug, Default, Clone)]
 pub struct StageTimes {
+    /// Reading (decoding, or copying a preloaded frame set).
     pub read: Vec<Duration>,
+    /// Segmentation and labelling, its carving left out.
     pub segment: Vec<Duration>,
+    /// Carving the hull.
     pub carve: Vec<Duration>,
+    /// The labels' grids and surfaces.
     pub surface: Vec<Duration>,
+    /// The blade's pose.
     pub pose: Vec<Duration>,
+    /// The sweep's collision test.
     pub collide: Vec<Duration>,
+    /// The virtual node algorithm's new topology.
     pub cut_topology: Vec<Duration>,
+    /// The pieces' cut surfaces.
     pub cut_surface: Vec<Duration>,
+    /// The hand's obstacle, the table and the pieces' contacts.
     pub contact: Vec<Duration>,
+    /// The deformation's time steps, contact left out.
     pub deform: Vec<Duration>,
+    /// The deformed pieces' surfaces and nodes.
     pub tissue_surface: Vec<Duration>,
 }
 
@@ -182,6 +336,7 @@ impl StageTimes {
 }
 
 /// What the stages hand back at the end.
+#[derive(Debug)]
 pub struct Outcome {
     /// What the reader did (empty when it panicked).
     pub read: ReadOutcome,
@@ -192,10 +347,14 @@ pub struct Outcome {
     /// How the segmented masks were labelled.
     pub labelling: Option<LabellingReport>,
     /// The first stage that failed, and why; its message, where one panicked.
-    pub error: Option<anyhow::Error>,
+    pub error: Option<Error>,
+    /// The most frame sets each queue held at once (read → hull, hull → pose, pose → tissue,
+    /// tissue → output): never more than [`Setup::in_flight`].
+    pub queue_max: [usize; 4],
 }
 
 /// The running stages.
+#[derive(Debug)]
 pub struct Pipeline {
     /// Finished frame sets, in order.
     pub output: Receiver<Work>,
@@ -205,6 +364,19 @@ pub struct Pipeline {
     tissue: JoinHandle<StageEnd<(CutSim, Option<String>)>>,
     /// Set when a stage fails (or the consumer stops): the reader stops reading.
     abort: Arc<AtomicBool>,
+    /// The most each queue held.
+    depth: Arc<QueueDepth>,
+}
+
+/// The most frame sets each queue held at once, as the stages saw after handing one on.
+#[derive(Debug, Default)]
+struct QueueDepth([AtomicUsize; 4]);
+
+impl QueueDepth {
+    /// Notes queue `k`'s length after a send.
+    fn note<T>(&self, k: usize, tx: &Sender<T>) {
+        self.0[k].fetch_max(tx.len(), Ordering::Relaxed);
+    }
 }
 
 impl Pipeline {
@@ -212,7 +384,7 @@ impl Pipeline {
     /// let go first, so the stages after the reader finish as soon as they try to hand on). Call
     /// it after draining [`Pipeline::output`], or at once to stop early.
     pub fn join(self) -> Outcome {
-        let Pipeline { output, reader, hull, pose, tissue, abort } = self;
+        let Pipeline { output, reader, hull, pose, tissue, abort, depth } = self;
         abort.store(true, Ordering::SeqCst);
         drop(output);
         let mut error = None;
@@ -223,21 +395,25 @@ impl Pipeline {
             Some((sim, failure)) => (Some(sim), failure),
             None => (None, None),
         };
-        Outcome { read, sim, failure, labelling, error }
+        let queue_max = std::array::from_fn(|k| depth.0[k].load(Ordering::Relaxed));
+        Outcome { read, sim, failure, labelling, error, queue_max }
     }
 }
 
 /// A stage's value once its thread has ended; its error (or its panic's message) becomes
 /// `error` unless an earlier stage's already has.
-fn joined<T>(name: &str, handle: JoinHandle<StageEnd<T>>, error: &mut Option<anyhow::Error>) -> Option<T> {
+fn joined<T>(name: &str, handle: JoinHandle<StageEnd<T>>, error: &mut Option<Error>) -> Option<T> {
     let (value, failed) = match handle.join() {
-        Ok((value, result)) => (Some(value), result.err().map(|e| e.context(format!("the {name} stage stopped")))),
+        Ok((value, result)) => (
+            Some(value),
+            result.err().map(|e| Error::Context { context: format!("the {name} stage stopped"), cause: Box::new(e) }),
+        ),
         Err(payload) => (
             None,
-            Some(anyhow!(
+            Some(Error::msg(format!(
                 "the {name} stage panicked: {} (a bug in hullcut: please report it with the command line)",
                 panic_message(&*payload)
-            )),
+            ))),
         ),
     };
     if error.is_none() {
@@ -272,7 +448,7 @@ fn stage<T: Send + 'static>(
     name: &'static str,
     abort: &Arc<AtomicBool>,
     body: impl FnOnce() -> StageEnd<T> + Send + 'static,
-) -> anyhow::Result<JoinHandle<StageEnd<T>>> {
+) -> Result<JoinHandle<StageEnd<T>>, Error> {
     let abort = Arc::clone(abort);
     std::thread::Builder::new()
         .name(name.into())
@@ -289,9 +465,9 @@ fn stage<T: Send + 'static>(
 }
 
 /// Starts the stages.
-pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
+pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
     let Setup {
-        ds,
+        source,
         frames,
         repeat,
         pass_span_ns,
@@ -301,47 +477,57 @@ pub fn spawn(setup: Setup) -> anyhow::Result<Pipeline> {
         carver,
         template,
         tissue,
-        queue,
-        policy,
-        dropped,
+        in_flight,
         realtime,
         stop,
     } = setup;
+    let in_flight = in_flight.max(1);
     let abort = Arc::new(AtomicBool::new(false));
-    let (read_tx, read_rx) = bounded::<Work>(queue);
-    let (hull_tx, hull_rx) = bounded::<Work>(queue);
-    let (pose_tx, pose_rx) = bounded::<Work>(queue);
-    let (out_tx, out_rx) = bounded::<Work>(queue);
+    let depth = Arc::new(QueueDepth::default());
+    let (read_tx, read_rx) = bounded::<Work>(in_flight);
+    let (hull_tx, hull_rx) = bounded::<Work>(in_flight);
+    let (pose_tx, pose_rx) = bounded::<Work>(in_flight);
+    let (out_tx, out_rx) = bounded::<Work>(in_flight);
+    // One credit per frame set let in, given back by the tissue stage.
+    let (credit_tx, credit_rx) = bounded::<()>(in_flight);
+    for _ in 0..in_flight {
+        credit_tx.try_send(()).map_err(|_| Error::msg("the pipeline's credits could not be issued"))?;
+    }
+    let ds = Arc::clone(source.dataset());
 
     let reader = {
-        let ds = Arc::clone(&ds);
-        // Only the dropping policy takes from the queue's far end; a blocked reader must see the
-        // queue close when the hull stage ends.
-        let oldest = (policy == Policy::DropOldest).then(|| read_rx.clone());
         let abort_flag = Arc::clone(&abort);
+        let depth = Arc::clone(&depth);
         stage("read", &abort, move || {
-            let pace = Pace { realtime, stop: &stop, abort: &abort_flag, dropped: &dropped };
+            let pace = Pace { realtime, stop: &stop, abort: &abort_flag };
             let passes = Passes { frames: &frames, repeat, span_ns: pass_span_ns };
+            let gate = Gate { credits: credit_rx, tx: read_tx, depth: &depth };
             let mut outcome = ReadOutcome::default();
-            let result = read_stage(&ds, &passes, use_files, &pace, &read_tx, oldest.as_ref(), &mut outcome);
+            let result = read_stage(&source, &passes, use_files, &pace, &gate, &mut outcome);
             (outcome, result)
         })?
     };
     let hull = {
         let ds = Arc::clone(&ds);
+        let depth = Arc::clone(&depth);
         stage("hull", &abort, move || {
             let mut labelling = labelling;
-            let result = hull_stage(&ds, labelling.as_mut(), (carver, &hull), &read_rx, &hull_tx);
+            let result = hull_stage(&ds, labelling.as_mut(), (carver, &hull), &read_rx, (&hull_tx, &depth));
             (labelling.as_ref().map(Labelling::report), result)
         })?
     };
     let pose = {
-        let ds = Arc::clone(&ds);
         let template = template.clone();
-        stage("pose", &abort, move || ((), pose_stage(&ds, template, &hull_rx, &pose_tx)))?
+        let depth = Arc::clone(&depth);
+        stage("pose", &abort, move || ((), pose_stage(&ds, template, &hull_rx, (&pose_tx, &depth))))?
     };
-    let tissue = stage("tissue", &abort, move || (tissue_stage(tissue, template.as_ref(), &pose_rx, &out_tx), Ok(())))?;
-    Ok(Pipeline { output: out_rx, reader, hull, pose, tissue, abort })
+    let tissue = {
+        let depth = Arc::clone(&depth);
+        stage("tissue", &abort, move || {
+            (tissue_stage(tissue, template.as_ref(), &pose_rx, (&out_tx, &depth), &credit_tx), Ok(()))
+        })?
+    };
+    Ok(Pipeline { output: out_rx, reader, hull, pose, tissue, abort, depth })
 }
 
 /// How the reader keeps time and when it stops.
@@ -350,7 +536,6 @@ struct Pace<'a> {
     realtime: bool,
     stop: &'a AtomicBool,
     abort: &'a AtomicBool,
-    dropped: &'a AtomicU64,
 }
 
 impl Pace<'_> {
@@ -358,15 +543,90 @@ impl Pace<'_> {
     fn stopping(&self) -> bool {
         self.stop.load(Ordering::Relaxed) || self.abort.load(Ordering::Relaxed)
     }
+}
 
-    /// Sleeps for `wait` (at most [`MAX_REALTIME_GAP_S`]) in slices, waking early to stop.
-    fn sleep(&self, wait: Duration) {
+/// The way into the stages: a credit per frame set let in.
+struct Gate<'a> {
+    credits: Receiver<()>,
+    tx: Sender<Work>,
+    depth: &'a QueueDepth,
+}
+
+/// Whether the reader goes on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flow {
+    Go,
+    /// The stages have ended (or are stopping): read no more.
+    End,
+}
+
+impl Gate<'_> {
+    /// Lets `work` in once a credit frees (waiting in slices, to stop soon when told).
+    fn admit(&self, mut work: Work, pace: &Pace) -> Flow {
+        loop {
+            if pace.stopping() {
+                return Flow::End;
+            }
+            match self.credits.recv_timeout(SLEEP_SLICE) {
+                Ok(()) => {
+                    work.admitted = Instant::now();
+                    if !pace.realtime {
+                        work.captured = work.admitted;
+                    }
+                    return self.send(work);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return Flow::End,
+            }
+        }
+    }
+
+    fn send(&self, work: Work) -> Flow {
+        if self.tx.send(work).is_err() {
+            return Flow::End;
+        }
+        self.depth.note(0, &self.tx);
+        Flow::Go
+    }
+
+    /// Waits `wait` (at most [`MAX_REALTIME_GAP_S`]), letting `pending` in as soon as a credit
+    /// frees.
+    fn wait_admitting(&self, wait: Duration, pending: &mut Option<Work>, pace: &Pace) -> Flow {
         let wait = wait.min(Duration::from_secs_f64(MAX_REALTIME_GAP_S));
         let start = Instant::now();
-        while !self.stopping() {
+        while !pace.stopping() {
             let Some(left) = wait.checked_sub(start.elapsed()).filter(|d| !d.is_zero()) else { break };
-            std::thread::sleep(left.min(SLEEP_SLICE));
+            let slice = left.min(SLEEP_SLICE);
+            if pending.is_none() {
+                std::thread::sleep(slice);
+                continue;
+            }
+            match self.credits.recv_timeout(slice) {
+                Ok(()) => {
+                    if let Some(mut work) = pending.take() {
+                        work.admitted = Instant::now();
+                        if self.send(work) == Flow::End {
+                            return Flow::End;
+                        }
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return Flow::End,
+            }
         }
+        Flow::Go
+    }
+
+    /// Lets `pending` in now if a credit is free.
+    fn try_admit(&self, pending: &mut Option<Work>) -> Flow {
+        if pending.is_some()
+            && self.credits.try_recv().is_ok()
+            && let Some(mut work) = pending.take()
+        {
+            work.admitted = Instant::now();
+            return self.send(work);
+        }
+        Flow::Go
     }
 }
 
@@ -414,24 +674,26 @@ impl Pacer {
     }
 }
 
-/// Reads frame sets into `outcome`; with `realtime` keeps to their timestamps (see [`Pacer`]).
+/// Reads frame sets into `outcome` and lets them into the stages ([`Gate`]); with live pacing
+/// keeps to their timestamps (see [`Pacer`]) and drops the oldest that found no room.
 fn read_stage(
-    ds: &Dataset,
+    source: &FrameSource,
     passes: &Passes<'_>,
     use_files: bool,
     pace: &Pace,
-    tx: &Sender<Work>,
-    oldest: Option<&Receiver<Work>>,
+    gate: &Gate<'_>,
     outcome: &mut ReadOutcome,
-) -> anyhow::Result<()> {
+) -> Result<(), Error> {
+    let ds = source.dataset();
     let mut pacer = Pacer::default();
+    let mut pending: Option<Work> = None;
     let replays = (0..passes.repeat).flat_map(|pass| passes.frames.iter().map(move |&frame| (pass, frame)));
     for (pass, frame) in replays {
         if pace.stopping() {
             break;
         }
         let started = Instant::now();
-        let (set, faults) = checks::read_frame_set(ds, frame, use_files);
+        let (set, faults) = source.read(frame, use_files);
         if pass == 0 {
             for fault in &faults {
                 tracing::warn!("left out: {fault}");
@@ -445,36 +707,46 @@ fn read_stage(
         if pace.realtime {
             let (wait, skipped) = pacer.wait(set.timestamp_ns, Instant::now());
             outcome.gaps_skipped += u64::from(skipped);
-            pace.sleep(wait);
-        }
-        let times = StageTimes { read: vec![took], ..StageTimes::default() };
-        let mut work =
-            Work { frame, pass, set, occ: None, grids: Vec::new(), estimate: None, tissue: None, times, started };
-        loop {
-            match (tx.try_send(work), oldest) {
-                (Ok(()), _) => break,
-                (Err(TrySendError::Disconnected(_)), _) => return Ok(()),
-                (Err(TrySendError::Full(w)), Some(oldest)) => {
-                    if oldest.try_recv().is_ok() {
-                        pace.dropped.fetch_add(1, Ordering::Relaxed);
-                    }
-                    work = w;
-                }
-                (Err(TrySendError::Full(w)), None) => {
-                    if tx.send(w).is_err() {
-                        return Ok(());
-                    }
-                    break;
-                }
+            if gate.wait_admitting(wait, &mut pending, pace) == Flow::End {
+                return Ok(());
             }
         }
+        let times = StageTimes { read: vec![took], ..StageTimes::default() };
+        let now = Instant::now();
+        let work = Work {
+            frame,
+            pass,
+            set,
+            occ: None,
+            grids: Vec::new(),
+            estimate: None,
+            tissue: None,
+            times,
+            started,
+            captured: now,
+            admitted: now,
+            finished: None,
+        };
+        let flow = if pace.realtime {
+            // The newest frame set takes the one slot; the one it replaces never got in.
+            outcome.dropped += u64::from(pending.replace(work).is_some());
+            gate.try_admit(&mut pending)
+        } else {
+            gate.admit(work, pace)
+        };
+        if flow == Flow::End {
+            return Ok(());
+        }
+    }
+    if let Some(work) = pending.take() {
+        gate.admit(work, pace);
     }
     Ok(())
 }
 
 /// The capture time of `set` in replay pass `pass` (each pass `span_ns` after the last); an
 /// overflow is an error naming the frame and the camera whose time the frame set's is.
-fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> anyhow::Result<i64> {
+fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> Result<i64, Error> {
     let shifted =
         i64::try_from(pass).ok().and_then(|p| p.checked_mul(span_ns)).and_then(|d| set.timestamp_ns.checked_add(d));
     let Some(ns) = shifted else {
@@ -483,8 +755,8 @@ fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> anyhow::Res
             .iter()
             .flatten()
             .find(|v| v.timestamp_ns == set.timestamp_ns)
-            .map_or_else(|| "no camera".to_owned(), |v| checks::camera_name(ds, v.camera));
-        bail!(
+            .map_or_else(|| "no camera".to_owned(), |v| camera_name(ds, v.camera));
+        crate::error::fail!(
             "{}: frame {}, camera {camera}: capture time {} ns cannot be moved on by replay pass {pass} ({span_ns} ns \
              a pass) without overflowing",
             ds.root().join("frames.csv").display(),
@@ -505,8 +777,8 @@ fn hull_stage(
     mut labelling: Option<&mut Labelling>,
     (mut carver, params): (Carver, &HullParams),
     rx: &Receiver<Work>,
-    tx: &Sender<Work>,
-) -> anyhow::Result<()> {
+    (tx, depth): (&Sender<Work>, &QueueDepth),
+) -> Result<(), Error> {
     for mut work in rx.iter() {
         let frame = work.frame;
         let mut labelled_hull = None;
@@ -551,12 +823,18 @@ fn hull_stage(
         if tx.send(work).is_err() {
             break;
         }
+        depth.note(1, tx);
     }
     Ok(())
 }
 
 /// The blade's pose from the scalpel silhouettes, tracked.
-fn pose_stage(ds: &Dataset, template: Option<Template>, rx: &Receiver<Work>, tx: &Sender<Work>) -> anyhow::Result<()> {
+fn pose_stage(
+    ds: &Dataset,
+    template: Option<Template>,
+    rx: &Receiver<Work>,
+    (tx, depth): (&Sender<Work>, &QueueDepth),
+) -> Result<(), Error> {
     let mut tracker = template.map(|t| Tracker::new(t, TrackerParams::default()));
     for mut work in rx.iter() {
         let clock = Instant::now();
@@ -584,6 +862,7 @@ fn pose_stage(ds: &Dataset, template: Option<Template>, rx: &Receiver<Work>, tx:
         if tx.send(work).is_err() {
             break;
         }
+        depth.note(2, tx);
     }
     Ok(())
 }
@@ -595,7 +874,8 @@ fn tissue_stage(
     mut tissue: Tissue,
     template: Option<&Template>,
     rx: &Receiver<Work>,
-    tx: &Sender<Work>,
+    (tx, depth): (&Sender<Work>, &QueueDepth),
+    credits: &Sender<()>,
 ) -> (CutSim, Option<String>) {
     let mut sweeper = Sweeper::default();
     let mut last_ts: Option<i64> = None;
@@ -609,12 +889,17 @@ fn tissue_stage(
             let hand = work.grids.iter().find(|g| g.0 == label::HAND).and_then(|g| g.2.as_ref());
             match tissue.step(&mut step, seconds, hand, &mut work.times) {
                 Ok(()) => work.tissue = Some(step),
-                Err(e) => failure = Some(format!("frame {}: {e:#}", work.frame)),
+                Err(e) => failure = Some(format!("frame {}: {e}", work.frame)),
             }
         }
+        work.finished = Some(Instant::now());
+        // Its cut surface is done: room for the next frame set (never blocks: a credit per frame
+        // set let in).
+        let _ = credits.try_send(());
         if tx.send(work).is_err() {
             break;
         }
+        depth.note(3, tx);
     }
     (tissue.sim, failure)
 }
