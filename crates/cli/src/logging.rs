@@ -26,8 +26,19 @@ const JPEG_QUALITY: u8 = 85;
 pub struct CameraLogger {
     names: Vec<String>,
     maps: Vec<UndistortMap>,
-    /// OpenCV's JPEG encoder and its buffers, reused from frame to frame.
-    jpeg: std::sync::Mutex<hullcut_capture::JpegEncoder>,
+    /// The encoder and buffers, reused from frame to frame.
+    scratch: std::sync::Mutex<Scratch>,
+}
+
+/// Buffers a frame set's logging reuses.
+#[derive(Debug)]
+struct Scratch {
+    /// OpenCV's JPEG encoder, with its own buffers.
+    jpeg: hullcut_capture::JpegEncoder,
+    /// An undistorted image.
+    rgb: Vec<u8>,
+    /// An undistorted label mask.
+    labels: Vec<u8>,
 }
 
 impl CameraLogger {
@@ -38,7 +49,11 @@ impl CameraLogger {
         Ok(CameraLogger {
             names: rig.cameras.iter().map(|c| c.name.clone()).collect(),
             maps: rig.cameras.iter().map(UndistortMap::new).collect(),
-            jpeg: std::sync::Mutex::new(hullcut_capture::JpegEncoder::new(JPEG_QUALITY)),
+            scratch: std::sync::Mutex::new(Scratch {
+                jpeg: hullcut_capture::JpegEncoder::new(JPEG_QUALITY),
+                rgb: Vec::new(),
+                labels: Vec::new(),
+            }),
         })
     }
 
@@ -52,16 +67,22 @@ impl CameraLogger {
             if (w, h) != (map.width(), map.height()) {
                 anyhow::bail!("camera {name}: image is {w}x{h}, the rig says {}x{}", map.width(), map.height());
             }
-            let rgb = map.remap(view.image.as_raw(), 3, true).context("remapping an image")?;
+            let mut scratch = self.scratch.lock().map_err(|_| anyhow::anyhow!("the logging buffers were poisoned"))?;
+            let Scratch { jpeg: encoder, rgb, labels } = &mut *scratch;
+            if !map.remap_into(view.image.as_raw(), 3, true, rgb) {
+                anyhow::bail!("camera {name}: remapping an image of the wrong size");
+            }
+            // rerun keeps the encoded bytes: a new buffer each time.
             let mut jpeg = Vec::new();
-            let mut encoder = self.jpeg.lock().map_err(|_| anyhow::anyhow!("the JPEG encoder was poisoned"))?;
             encoder
-                .encode(&rgb, w, h, &mut jpeg)
+                .encode(rgb, w, h, &mut jpeg)
                 .with_context(|| format!("camera {name}: encoding a JPEG for rerun"))?;
             hullcut_viz::log_image_jpeg(rec, name, jpeg)?;
             if let Some(mask) = &view.mask {
-                let labels = map.remap(mask.as_raw(), 1, false).context("remapping a mask")?;
-                hullcut_viz::log_labels(rec, name, w, h, &labels)?;
+                if !map.remap_into(mask.as_raw(), 1, false, labels) {
+                    anyhow::bail!("camera {name}: remapping a mask of the wrong size");
+                }
+                hullcut_viz::log_labels(rec, name, w, h, labels)?;
             }
         }
         Ok(())

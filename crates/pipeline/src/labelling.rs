@@ -277,6 +277,12 @@ impl Labelling {
         })
     }
 
+    /// Carves the foreground's hull in `workspace` from now on (a box within the working volume
+    /// it was made with, on its leaf grid: [`crate::region::CarveRegion`]).
+    pub fn set_workspace(&mut self, workspace: hullcut_hull::Aabb) {
+        self.hull.workspace = workspace;
+    }
+
     /// The foreground settings in use.
     pub fn params(&self) -> &SegmentParams {
         self.segmenter.params()

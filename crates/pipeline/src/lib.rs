@@ -17,9 +17,11 @@
 #![warn(missing_docs)]
 
 pub mod backend;
+pub mod budget;
 pub mod error;
 pub mod labelling;
 pub mod read;
+pub mod region;
 pub mod stages;
 pub mod tissue;
 

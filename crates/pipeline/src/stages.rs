@@ -34,6 +34,7 @@ use crate::error::{Context as _, Error};
 use crate::labelling::{Labelling, LabellingReport};
 use crate::no_tool_estimate;
 use crate::read::{Faults, ViewFault, camera_name, read_frame_set};
+use crate::region::{CarveRegion, RegionCounts};
 use crate::tissue::{Sweeper, Tissue, TissueStep};
 
 /// The longest `--realtime` waits between two frame sets, seconds. A longer gap in the capture
@@ -157,8 +158,8 @@ impl std::fmt::Debug for Setup {
 impl Setup {
     /// A replay of `frames` from `source` once, as fast as the stages go, with mask files
     /// (`use_files`) or without a labelling yet (set [`Setup::labelling`] to segment), the
-    /// template from the dataset's tool.json when it has one (and it makes one), two frame sets
-    /// in flight.
+    /// template from the dataset's tool.json when it has one (and it makes one),
+    /// [`DEFAULT_IN_FLIGHT`] frame sets in flight.
     pub fn new(
         source: FrameSource,
         frames: Vec<u64>,
@@ -186,9 +187,10 @@ impl Setup {
     }
 }
 
-/// Frame sets in the stages at once by default: one carving while the one before is fitted and
-/// cut (see docs/benchmarks.md, "The loop", for the measured trade of throughput and latency).
-pub const DEFAULT_IN_FLIGHT: usize = 2;
+/// Frame sets in the stages at once by default: one, the latency then the sum of the stages'
+/// times. On two cores a second one raised the built-in scene's throughput by a fifth and its
+/// latency by two thirds (docs/benchmarks.md, "The loop"); with more cores than stages it pays.
+pub const DEFAULT_IN_FLIGHT: usize = 1;
 
 /// What a stage hands back when it ends: what it has to report, and its error if it failed.
 type StageEnd<T> = (T, Result<(), Error>);
@@ -348,6 +350,8 @@ pub struct Outcome {
     pub labelling: Option<LabellingReport>,
     /// The first stage that failed, and why; its message, where one panicked.
     pub error: Option<Error>,
+    /// Where the frame sets were carved: around the last hull, or in the whole volume.
+    pub carve_region: RegionCounts,
     /// The most frame sets each queue held at once (read → hull, hull → pose, pose → tissue,
     /// tissue → output): never more than [`Setup::in_flight`].
     pub queue_max: [usize; 4],
@@ -359,7 +363,7 @@ pub struct Pipeline {
     /// Finished frame sets, in order.
     pub output: Receiver<Work>,
     reader: JoinHandle<StageEnd<ReadOutcome>>,
-    hull: JoinHandle<StageEnd<Option<LabellingReport>>>,
+    hull: JoinHandle<StageEnd<(Option<LabellingReport>, RegionCounts)>>,
     pose: JoinHandle<StageEnd<()>>,
     tissue: JoinHandle<StageEnd<(CutSim, Option<String>)>>,
     /// Set when a stage fails (or the consumer stops): the reader stops reading.
@@ -389,14 +393,14 @@ impl Pipeline {
         drop(output);
         let mut error = None;
         let read = joined("read", reader, &mut error).unwrap_or_default();
-        let labelling = joined("hull", hull, &mut error).flatten();
+        let (labelling, carve_region) = joined("hull", hull, &mut error).unwrap_or_default();
         joined("pose", pose, &mut error);
         let (sim, failure) = match joined("tissue", tissue, &mut error) {
             Some((sim, failure)) => (Some(sim), failure),
             None => (None, None),
         };
         let queue_max = std::array::from_fn(|k| depth.0[k].load(Ordering::Relaxed));
-        Outcome { read, sim, failure, labelling, error, queue_max }
+        Outcome { read, sim, failure, labelling, error, carve_region, queue_max }
     }
 }
 
@@ -512,8 +516,10 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         let depth = Arc::clone(&depth);
         stage("hull", &abort, move || {
             let mut labelling = labelling;
-            let result = hull_stage(&ds, labelling.as_mut(), (carver, &hull), &read_rx, (&hull_tx, &depth));
-            (labelling.as_ref().map(Labelling::report), result)
+            let mut region = CarveRegion::new(hull.workspace, hull.leaf_size);
+            let result =
+                hull_stage(&ds, labelling.as_mut(), (carver, &hull, &mut region), &read_rx, (&hull_tx, &depth));
+            ((labelling.as_ref().map(Labelling::report), region.counts), result)
         })?
     };
     let pose = {
@@ -775,16 +781,24 @@ fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> Result<i64,
 fn hull_stage(
     ds: &Dataset,
     mut labelling: Option<&mut Labelling>,
-    (mut carver, params): (Carver, &HullParams),
+    (mut carver, params, region): (Carver, &HullParams, &mut CarveRegion),
     rx: &Receiver<Work>,
     (tx, depth): (&Sender<Work>, &QueueDepth),
 ) -> Result<(), Error> {
     for mut work in rx.iter() {
         let frame = work.frame;
         let mut labelled_hull = None;
+        // Around the last hull (see [`CarveRegion`]).
+        let boxed = region.next_box();
         if let Some(labelling) = labelling.as_deref_mut() {
             let clock = Instant::now();
+            labelling.set_workspace(boxed);
             let labelled = labelling.label(&work.set, &mut carver)?;
+            if let Some(occ) = &labelled.occupancy {
+                // A clipped foreground hull stays (labelling a frame set twice would feed its
+                // track twice); the next frame set is carved in the whole volume.
+                region.update(&boxed, occ);
+            }
             let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
             work.times.segment.push(clock.elapsed().saturating_sub(carve));
             work.times.carve.push(carve);
@@ -804,7 +818,13 @@ fn hull_stage(
                 let masks: Vec<Option<&image::GrayImage>> =
                     work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
                 let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-                let occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
+                let here = HullParams { workspace: boxed, ..params.clone() };
+                let mut occ = carver.carve(&views, &here).with_context(|| format!("frame {frame}"))?;
+                if region.update(&boxed, &occ) {
+                    occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
+                    region.counts.redone += 1;
+                    region.update(&region.full(), &occ);
+                }
                 work.times.carve.push(clock.elapsed());
                 occ
             }

@@ -62,12 +62,17 @@ impl Drop for State {
 pub(crate) struct CheckedFileSink(Mutex<State>);
 
 impl CheckedFileSink {
-    /// Creates (or truncates) `path` and writes the stream header.
-    pub(crate) fn create(path: &Path) -> Result<Self, VizError> {
+    /// Creates (or truncates) `path` and writes the stream header; without `footer`, the file
+    /// ends without rerun's chunk index (see [`crate::open_recording_indexed`]).
+    pub(crate) fn create(path: &Path, footer: bool) -> Result<Self, VizError> {
         let open = |message: String| VizError::Create { path: path.display().to_string(), message };
         let file = Arc::new(File::create(path).map_err(|e| open(e.to_string()))?);
-        let encoder = Encoder::new_eager(CrateVersion::LOCAL, EncodingOptions::PROTOBUF_COMPRESSED, Arc::clone(&file))
-            .map_err(|e| open(format!("writing the header: {e}")))?;
+        let mut encoder =
+            Encoder::new_eager(CrateVersion::LOCAL, EncodingOptions::PROTOBUF_COMPRESSED, Arc::clone(&file))
+                .map_err(|e| open(format!("writing the header: {e}")))?;
+        if !footer {
+            encoder.do_not_emit_footer();
+        }
         let kept = file.metadata().map_err(|e| open(e.to_string()))?.len();
         Ok(Self(Mutex::new(State {
             path: path.to_owned(),

@@ -33,7 +33,8 @@ pub use log::{
 };
 pub use read::rrd_entities;
 pub use recording::{
-    CAPTURE_TIME_TIMELINE, FLUSH_TIMEOUT, FRAME_TIMELINE, Sink, flush, open_recording, set_capture_time_ns, set_frame,
+    CAPTURE_TIME_TIMELINE, FLUSH_TIMEOUT, FRAME_TIMELINE, Sink, flush, open_recording, open_recording_indexed,
+    set_capture_time_ns, set_frame,
 };
 pub use undistort::UndistortMap;
 // Re-exported so that callers need not depend on rerun themselves.

@@ -53,12 +53,20 @@ impl fmt::Display for Sink {
 /// Nothing is logged yet; call [`log_world`](crate::log_world) and [`log_rig`](crate::log_rig)
 /// next.
 pub fn open_recording(application_id: &str, sink: &Sink) -> Result<RecordingStream, VizError> {
+    open_recording_indexed(application_id, sink, true)
+}
+
+/// As [`open_recording`]; a file written without `index` has no footer (rerun's index of every
+/// chunk, written when the file is closed and kept in memory until then: some 10 KB for each
+/// frame set of `hullcut run`, 200 MB over ten minutes). The viewer reads such a file all the
+/// same, from the start; long runs should leave the index out to keep their memory flat.
+pub fn open_recording_indexed(application_id: &str, sink: &Sink, index: bool) -> Result<RecordingStream, VizError> {
     let id = ApplicationId::try_new(application_id).map_err(|_| VizError::ApplicationId)?;
     let builder = RecordingStreamBuilder::new(id).enabled(true);
     let open = |error| VizError::Open { sink: sink.to_string(), error };
     match sink {
         Sink::File(path) => {
-            let file_sink = CheckedFileSink::create(path)?;
+            let file_sink = CheckedFileSink::create(path, index)?;
             let rec = builder.buffered().map_err(open)?;
             rec.set_sink(Box::new(file_sink));
             Ok(rec)

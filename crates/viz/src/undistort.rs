@@ -47,11 +47,20 @@ impl UndistortMap {
     /// nearest otherwise (labels must not be blended). Pixels with no source are 0.
     /// Returns None when `pixels` is not `width × height × channels` long.
     pub fn remap(&self, pixels: &[u8], channels: usize, interpolate: bool) -> Option<Vec<u8>> {
+        let mut out = Vec::new();
+        self.remap_into(pixels, channels, interpolate, &mut out).then_some(out)
+    }
+
+    /// As [`UndistortMap::remap`], into `out` (resized; its allocation reused from one image to
+    /// the next). Returns false, `out` untouched, when `pixels` is not `width × height ×
+    /// channels` long.
+    pub fn remap_into(&self, pixels: &[u8], channels: usize, interpolate: bool, out: &mut Vec<u8>) -> bool {
         let (w, h) = (self.width as usize, self.height as usize);
         if pixels.len() != w * h * channels {
-            return None;
+            return false;
         }
-        let mut out = vec![0u8; pixels.len()];
+        out.clear();
+        out.resize(pixels.len(), 0);
         let at = |i: usize, j: usize, c: usize| f32::from(pixels[(j * w + i) * channels + c]);
         for (k, &[u, v]) in self.source.iter().enumerate() {
             if u.is_nan() {
@@ -74,7 +83,7 @@ impl UndistortMap {
                 }
             }
         }
-        Some(out)
+        true
     }
 }
 

@@ -103,6 +103,30 @@ mod file_sink {
     }
 
     #[test]
+    fn a_recording_without_its_index_reads_back_whole_and_is_smaller_by_it() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let write = |name: &str, index: bool| {
+            let path = dir.path().join(name);
+            let rec = hullcut_viz::open_recording_indexed("hullcut_viz_test", &Sink::File(path.clone()), index)
+                .expect("file opens");
+            for frame in 0..200 {
+                hullcut_viz::set_frame(&rec, frame);
+                hullcut_viz::log_scalar(&rec, "metrics/time/carve", frame as f64).expect("scalar");
+                hullcut_viz::flush(&rec).expect("flush");
+            }
+            drop(rec);
+            path
+        };
+        let (indexed, plain) = (write("indexed.rrd", true), write("plain.rrd", false));
+        for path in [&indexed, &plain] {
+            assert!(has(&rrd_contents(path), "/metrics/time/carve", "Scalars:scalars", false), "{}", path.display());
+        }
+        // The index has an entry per chunk (one per flush here): leaving it out saves as much.
+        let size = |p: &std::path::Path| std::fs::metadata(p).expect("exists").len();
+        assert!(size(&plain) < size(&indexed), "{} against {}", size(&plain), size(&indexed));
+    }
+
+    #[test]
     fn jpeg_images_are_logged_as_encoded_images() {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("jpeg.rrd");

@@ -35,6 +35,20 @@ use crate::progress::bar;
 ///                     against the tissue's nodes, per hull leaf;
 ///   pipeline_seed_table2.csv
 ///                     the seed paper's Table II stage times, to read beside ours.
+/// `loop` measures (the built-in resection scene, 150 frame sets, on three recordings: the default
+/// rig in its classic look, lab8 with a dark bare hand and the pointed scalpel, random:7 in the
+/// look random:23; the default one, 12 frame sets, with --quick) the loop as `hullcut run` runs
+/// it, its threads and bounded queues, frame sets in memory, nothing logged
+///   loop.csv          per recording, masks (files, segment), hull leaf (6.25, 3.1 mm), tissue
+///                     cell (6, 5 mm) and frame sets in flight (1, 2): sustained fps, latency from
+///                     capture to cut surface (p50, p95), ms per frame set of segmentation,
+///                     carving, pose, cutting, contact, deformation measured inside the loop, the
+///                     blade tip's error (trusted frames), the pieces, and the tissue's error: the
+///                     resected piece's volume against the one the true poses cut at 4 mm cells
+///                     (100% when it was not cut off);
+///   loop_speed.png, loop_accuracy.png
+///                     fps against latency p95, one point per configuration; blade tip error
+///                     and tissue error against ms per frame set.
 /// `hull` measures (a rendered cut-scene frame's truth masks on three rigs: the default six
 /// 640x480 cameras, lab8's eight 1280x720 cameras with the pointed scalpel, random:7)
 ///   hull.csv, hull_speed.png, hull_accuracy.png
@@ -114,8 +128,11 @@ enum Target {
     Hull,
     /// The blade pose.
     Pose,
-    /// The whole loop of `hullcut run` on frame sets in memory.
+    /// The whole loop of `hullcut run` on frame sets in memory, stage by stage on one thread.
     Pipeline,
+    /// The whole loop as `hullcut run` runs it (threads, bounded queues): fps and latency against
+    /// the blade's and the tissue's error, on several rigs, with mask files and segmenting.
+    Loop,
     /// Segmentation: the labelling methods on several rigs and looks.
     Segment,
     /// Cutting where it fails: the stress cases.
@@ -147,6 +164,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         Target::Pose => super::bench_pose::run(&args.out, quick)?,
         Target::Pipeline => super::bench_pipeline::run(&args.out, quick)?,
+        Target::Loop => super::bench_loop::run(&args.out, quick)?,
         Target::Segment => super::bench_segment::run(&args.out, quick)?,
         Target::Cut => super::bench_cut::run(&args.out, quick)?,
     }

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod bench_cut;
 pub mod bench_hull;
+pub mod bench_loop;
 pub mod bench_pipeline;
 pub mod bench_pose;
 pub mod bench_segment;

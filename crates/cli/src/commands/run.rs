@@ -76,9 +76,11 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// world/tool/{estimate,truth} and the swept blade surface under world/tissue/cut; the pieces'
 /// surfaces (cut faces included) under world/tissue/surface whenever they changed (a cut, or a
 /// vertex moved by more than 0.2 mm); stage timings under metrics/time/STAGE and accuracy under
-/// metrics/accuracy/NAME, on the `frame` and `capture_time` timelines. REPORT (JSON) with
-/// --report: per-stage timings, sustained fps, pose accuracy where the dataset has truth, every
-/// drop, refusal and skipped sweep counted, the tissue's pieces. With --export-meshes DIR:
+/// metrics/accuracy/NAME, on the `frame` and `capture_time` timelines (a file of more than 3,600
+/// frame sets is written without rerun's chunk index, which would grow in memory all run long:
+/// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
+/// fps, latency, each stage against its 60 fps budget, pose accuracy where the dataset has truth,
+/// every drop, refusal and skipped sweep counted, the tissue's pieces, memory every minute. With --export-meshes DIR:
 /// DIR/NNNNNN/pieceK.ply, the organ's pieces at every frame (world metres, closed). With
 /// --snapshots DIR: PNGs drawn by hullcut itself at chosen frames, without a viewer.
 #[derive(Debug, clap::Args)]
@@ -333,10 +335,19 @@ struct Report {
     tissue: Option<TissueReport>,
     /// Resident memory at every full minute of the run and at its end (Linux; empty elsewhere).
     memory: Vec<MemorySample>,
+    /// Resident memory at the end against its level after the first minute, percent (null for a
+    /// run shorter than a minute): a loop that reuses its buffers stays within a few percent.
+    memory_growth_pct: Option<f64>,
     /// How the segmented masks were labelled (null with mask files).
     labelling: Option<crate::labelling::LabellingReport>,
     pose: PoseReport,
     timings: Timings,
+    /// Each stage against its budget for 60 fps, measured inside the loop (hullcut_pipeline's
+    /// `budget`): over_ms > 0 is a miss by that much.
+    budget: Vec<hullcut_pipeline::budget::Line>,
+    /// Where the frame sets were carved: in a box around the last hull, in the whole working
+    /// volume, and hulls that reached the box's side (carved again in the whole volume).
+    carve_region: hullcut_pipeline::region::RegionCounts,
     /// Entities logged to the recording.
     entities: Vec<String>,
     /// Figures of this report that were not finite numbers (written as null): the run exits
@@ -377,8 +388,12 @@ impl MemorySample {
     }
 }
 
+/// Runs of up to this many frame sets (two minutes at 30 fps) write their recording with rerun's
+/// index of its chunks; longer ones without (the viewer reads them from the start).
+const INDEXED_FRAME_SETS: u64 = 3600;
+
 /// How far below `ORGAN_TOP` the built-in scene's strokes press the blade's tip, metres.
-const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
+pub(crate) const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
 
 /// The rerun entities a run logs (DESIGN's tree).
 pub const ENTITIES: [&str; 13] = [
@@ -534,7 +549,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let rec = hullcut_viz::open_recording("hullcut-run", &sink)?;
+    // rerun's index of a file's chunks grows in memory until the file is closed (some 10 KB a
+    // frame set): a long run's file goes without it, and its memory stays flat.
+    let indexed = (frames.len() as u64).saturating_mul(args.repeat) <= INDEXED_FRAME_SETS;
+    let rec = hullcut_viz::open_recording_indexed("hullcut-run", &sink, indexed)?;
     hullcut_viz::log_world(&rec)?;
     crate::volume::log(&rec, &volume)?;
     let cams = CameraLogger::new(&rec, ds.rig())?;
@@ -692,10 +710,24 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         [] => {}
         [last] => println!("memory: {:.0} MiB resident at the end (peak {:.0} MiB)", last.rss_mib, last.peak_rss_mib),
         [first, .., last] => println!(
-            "memory: {:.0} MiB resident after {:.0} s, {:.0} MiB at the end, {:.0} s (peak {:.0} MiB)",
-            first.rss_mib, first.wall_s, last.rss_mib, last.wall_s, last.peak_rss_mib
+            "memory: {:.0} MiB resident after {:.0} s, {:.0} MiB at the end, {:.0} s ({:+.1}%; peak {:.0} MiB)",
+            first.rss_mib,
+            first.wall_s,
+            last.rss_mib,
+            last.wall_s,
+            memory_growth_pct(&memory).unwrap_or(f64::NAN),
+            last.peak_rss_mib
         ),
     }
+    let budget = hullcut_pipeline::budget::check(&times);
+    let latency_timing = StageTiming::from_durations(&latency);
+    println!(
+        "loop: latency from capture to cut surface {:.1} ms p50, {:.1} p95 (goal {:.0}); {}",
+        latency_timing.p50_ms,
+        latency_timing.p95_ms,
+        hullcut_pipeline::budget::LATENCY_P95_MS,
+        hullcut_pipeline::budget::summary(&budget)
+    );
     println!("{}", pose_report.summary());
     let pieces_at_end = sim.map(hullcut_sim::CutSim::piece_states);
     if let Some(sim) = sim {
@@ -750,6 +782,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             capture_fps: ds.meta().fps,
             counters,
             faults,
+            memory_growth_pct: memory_growth_pct(&memory),
             memory,
             tissue: sim.map(|sim| {
                 let topology = sim.topology();
@@ -785,6 +818,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             }),
             labelling: outcome.labelling.clone(),
             pose: pose_report,
+            budget,
+            carve_region: outcome.carve_region,
             timings: Timings {
                 read: timing(&times.read),
                 segment: (!times.segment.is_empty()).then(|| timing(&times.segment)),
@@ -841,6 +876,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         bail!("{faults_summary}");
     }
     Ok(())
+}
+
+/// Resident memory at the end of a run against its level after the first minute, percent
+/// (`None` without a sample at a minute or later before the end).
+fn memory_growth_pct(samples: &[MemorySample]) -> Option<f64> {
+    match samples {
+        [minute, .., last] if minute.rss_mib > 0.0 => Some(100.0 * (last.rss_mib / minute.rss_mib - 1.0)),
+        _ => None,
+    }
 }
 
 /// Whether `frames` frame sets of `ds` (masks too unless segmented) decoded take at most

@@ -62,11 +62,11 @@ pub struct Logged {
     pub surfaces: tissue_log::SurfaceLog,
 }
 
-/// The running logger and its queue.
-pub struct LogThread {
-    tx: Sender<Item>,
+/// The running logger and its queue of `T` (frame sets to log).
+pub struct LogThread<T> {
+    tx: Sender<T>,
     /// The queue's far end, to drop its oldest item under live pacing.
-    oldest: Receiver<Item>,
+    oldest: Receiver<T>,
     handle: JoinHandle<(Logged, anyhow::Result<()>)>,
     drop_oldest: bool,
     /// Items dropped for a full queue.
@@ -75,22 +75,37 @@ pub struct LogThread {
     pub waited: Vec<Duration>,
 }
 
-impl LogThread {
-    /// Starts the logger; with `drop_oldest` a full queue drops its oldest item instead of
-    /// waiting.
+impl LogThread<Item> {
+    /// Starts `logger` on its thread; with `drop_oldest` a full queue drops its oldest item
+    /// instead of waiting.
     pub fn start(logger: Logger, drop_oldest: bool) -> anyhow::Result<Self> {
-        let (tx, rx) = bounded::<Item>(LOG_QUEUE);
+        Self::spawn(move |rx| logger.run(rx), drop_oldest)
+    }
+}
+
+impl<T: Send + 'static> LogThread<T> {
+    /// Starts `body` on the logging thread, reading the queue until it closes.
+    fn spawn(
+        body: impl FnOnce(&Receiver<T>) -> (Logged, anyhow::Result<()>) + Send + 'static,
+        drop_oldest: bool,
+    ) -> anyhow::Result<Self> {
+        let (tx, rx) = bounded::<T>(LOG_QUEUE);
         let oldest = rx.clone();
         let handle = std::thread::Builder::new()
             .name("log".into())
-            .spawn(move || logger.run(&rx))
+            .spawn(move || body(&rx))
             .context("starting the logging thread")?;
         Ok(Self { tx, oldest, handle, drop_oldest, dropped: 0, waited: Vec::new() })
     }
 
     /// Hands a frame set over; `false` when the logger has stopped (its error comes with
     /// [`LogThread::finish`]).
-    pub fn push(&mut self, mut item: Item) -> bool {
+    pub fn push(&mut self, mut item: T) -> bool {
+        // The queue's far end is held here too (to drop from it): a stopped logger does not
+        // close it.
+        if self.stopped() {
+            return false;
+        }
         let clock = Instant::now();
         loop {
             match self.tx.try_send(item) {
@@ -205,5 +220,60 @@ impl Logger {
         }
         hullcut_viz::log_scalar(rec, "metrics/time/latency", work.latency().as_secs_f64() * 1e3)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A logger that takes `each` per item and counts them.
+    fn slow(each: Duration) -> impl FnOnce(&Receiver<u32>) -> (Logged, anyhow::Result<()>) + Send + 'static {
+        move |rx| {
+            let mut logged = Logged::default();
+            for _ in rx.iter() {
+                std::thread::sleep(each);
+                logged.times.push(each);
+            }
+            (logged, Ok(()))
+        }
+    }
+
+    #[test]
+    fn a_slow_logger_makes_the_loop_wait_without_pacing_and_drops_the_oldest_with_it() {
+        // Without live pacing: every item logged, the hand-over waited (and said how long).
+        let mut log = LogThread::spawn(slow(Duration::from_millis(5)), false).expect("started");
+        for k in 0..40 {
+            assert!(log.push(k));
+        }
+        let (dropped, waits) = (log.dropped, log.waited.len());
+        let (logged, result) = log.finish();
+        assert!(result.is_ok());
+        assert_eq!((logged.times.len(), dropped), (40, 0));
+        assert!(waits > 0, "40 items into a queue of {LOG_QUEUE} at 5 ms each: the loop must have waited");
+
+        // With it: the loop never waits; what the logger could not take is dropped and counted.
+        let mut log = LogThread::spawn(slow(Duration::from_millis(5)), true).expect("started");
+        for k in 0..40 {
+            assert!(log.push(k));
+        }
+        let (dropped, waits) = (log.dropped, log.waited.len());
+        let (logged, result) = log.finish();
+        assert!(result.is_ok());
+        assert_eq!(waits, 0);
+        assert!(dropped > 0, "nothing dropped");
+        assert_eq!(logged.times.len() as u64 + dropped, 40, "every item logged or counted as dropped");
+    }
+
+    #[test]
+    fn a_logger_that_stopped_refuses_the_next_item() {
+        let mut log = LogThread::<u32>::spawn(|_| (Logged::default(), Err(anyhow::anyhow!("disk full"))), false)
+            .expect("started");
+        while !log.stopped() {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(!log.push(1));
+        let (_, result) = log.finish();
+        assert!(result.is_err_and(|e| e.to_string().contains("disk full")));
     }
 }

@@ -1,0 +1,352 @@
+//! `hullcut bench loop`: the whole loop as `hullcut run` runs it (the hullcut-pipeline crate's
+//! threads and bounded queues, frame sets in memory, nothing logged), on several recordings, at
+//! several hull leaves, tissue cells and frame sets in flight, with mask files and segmenting:
+//! sustained fps and latency against the blade's error and the tissue's, so that a lab can pick
+//! its operating point.
+//!
+//! The tissue's error is the resected piece's volume against a reference: the same organ at a
+//! finer lattice ([`REFERENCE_CELL_M`]) cut by the true blade poses, so that it holds both the
+//! lattice's coarseness and the pose's error. A run that does not cut the piece off has an error
+//! of 100%.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use hullcut_dataset::Dataset;
+use hullcut_hull::HullParams;
+use hullcut_pipeline::{Carver, FrameSource, LabelMethod, Labelling, Setup, Sweeper, no_tool_estimate, tissue};
+use hullcut_pose::{BladePose, Template, pose_error, rigid_from_matrix};
+use hullcut_rig::RigPreset;
+use hullcut_synth::{Appearance, Scene, SceneConfig, SceneKind, ToolKind, synthesize};
+use nalgebra::Isometry3;
+
+use super::bench::Table;
+use crate::chart::{Scale, Series, scatter_chart};
+use crate::progress::bar;
+use crate::report::StageTiming;
+use crate::volume::MIN_VIEWS;
+
+/// The reference tissue's lattice spacing, metres (finer than every configuration's).
+pub const REFERENCE_CELL_M: f64 = 0.004;
+
+/// One recording: a rig, a look and a tool, in the built-in resection scene.
+struct Recording {
+    rig: RigPreset,
+    look: &'static str,
+    tool: ToolKind,
+}
+
+impl Recording {
+    fn name(&self) -> String {
+        format!("{} {} {}", self.rig.name(), self.look, self.tool.name())
+    }
+}
+
+/// The built-in scene's rig and look; lab8 (eight 1280x720 cameras, one overhead, one strongly
+/// distorted) with a dark bare hand and the pointed scalpel; a seeded random rig in a seeded
+/// random look.
+const RECORDINGS: [Recording; 3] = [
+    Recording { rig: RigPreset::Default, look: "classic", tool: ToolKind::Standard },
+    Recording { rig: RigPreset::Lab8, look: "skin-dark", tool: ToolKind::Pointed },
+    Recording { rig: RigPreset::Random(7), look: "random:23", tool: ToolKind::Standard },
+];
+
+/// One configuration of the loop.
+#[derive(Debug, Clone, Copy)]
+struct Config {
+    /// Hull leaf, metres.
+    voxel: f64,
+    /// Tissue lattice spacing, metres.
+    cell: f64,
+    /// Frame sets in flight.
+    in_flight: usize,
+    /// Segment the images (else the recording's mask files).
+    segment: bool,
+}
+
+/// What one run of the loop measured.
+struct Measured {
+    frames: u64,
+    fps: f64,
+    latency: StageTiming,
+    stage_ms: Vec<(&'static str, f64)>,
+    trusted: u64,
+    tip_mm: f64,
+    pieces: usize,
+    piece_ml: f64,
+}
+
+/// Runs the benchmark into `out`.
+pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
+    let frames: u64 = if quick { 12 } else { 150 };
+    let recordings = if quick { &RECORDINGS[..1] } else { &RECORDINGS[..] };
+    let extent = crate::volume::BENCH_SIDE_M;
+    let configs: Vec<Config> = if quick {
+        vec![
+            Config { voxel: extent / 64.0, cell: 0.006, in_flight: 1, segment: false },
+            Config { voxel: extent / 128.0, cell: 0.005, in_flight: 2, segment: false },
+            Config { voxel: extent / 128.0, cell: 0.005, in_flight: 1, segment: true },
+        ]
+    } else {
+        let mut c = Vec::new();
+        for voxel in [extent / 64.0, extent / 128.0] {
+            for cell in [0.006, 0.005] {
+                for in_flight in [1, 2] {
+                    c.push(Config { voxel, cell, in_flight, segment: false });
+                }
+            }
+        }
+        c.push(Config { voxel: extent / 128.0, cell: 0.005, in_flight: 1, segment: true });
+        c.push(Config { voxel: extent / 128.0, cell: 0.005, in_flight: 2, segment: true });
+        c
+    };
+    let tmp = tempfile::tempdir().context("creating a temporary folder for the recordings")?;
+    let mut table = Table::new(&[
+        "recording",
+        "cameras",
+        "width",
+        "height",
+        "masks",
+        "voxel_mm",
+        "cell_mm",
+        "in_flight",
+        "frames",
+        "fps",
+        "latency_p50_ms",
+        "latency_p95_ms",
+        "segment_ms",
+        "carve_ms",
+        "pose_ms",
+        "cut_ms",
+        "contact_ms",
+        "deform_ms",
+        "trusted",
+        "tip_mm_mean",
+        "pieces",
+        "piece_ml",
+        "reference_piece_ml",
+        "tissue_error_pct",
+    ]);
+    let (mut speed, mut accuracy) = (Vec::<Series>::new(), Vec::<Series>::new());
+    for recording in recordings {
+        let name = recording.name();
+        let look = Appearance::from_name(recording.look).with_context(|| format!("unknown look {}", recording.look))?;
+        let mut config = SceneConfig::new(SceneKind::Resect, 1, frames);
+        config.rig = recording.rig.rig();
+        config.tool = recording.tool;
+        config.appearance = look;
+        config.stroke_depth = super::run::BUILTIN_STROKE_DEPTH;
+        config.truth_meshes = false;
+        let scene = Scene::new(config)?;
+        let dir = tmp.path().join(name.replace([' ', ':'], "_"));
+        let pb = bar(frames, &format!("rendering {name}"));
+        synthesize(&scene, &dir, &name, false, &|| pb.inc(1)).with_context(|| format!("rendering {name}"))?;
+        pb.finish_and_clear();
+        let ds = Arc::new(Dataset::open(&dir)?);
+        let template = Template::new(&ds.tool()?.context("the rendered recording has a tool.json")?)?;
+        let truth = truth_poses(&ds)?;
+        let reference = reference_piece_ml(&ds, &template, &truth)?;
+        println!(
+            "{name}: the resected piece cut by the true poses at {} mm cells: {}",
+            REFERENCE_CELL_M * 1e3,
+            reference.map_or_else(|| "not cut off".to_owned(), |v| format!("{v:.1} ml"))
+        );
+        let frame_numbers = ds.frame_numbers();
+        let with_masks = hullcut_pipeline::stages::preload(&ds, &frame_numbers, true, &|| {});
+        let without_masks = hullcut_pipeline::stages::preload(&ds, &frame_numbers, false, &|| {});
+        let (with_masks, without_masks) = (Arc::new(with_masks), Arc::new(without_masks));
+        let volume = crate::volume::of_rig(ds.rig())?;
+        let (width, height) = ds.rig().cameras.first().map_or((0, 0), |c| (c.width, c.height));
+        for config in &configs {
+            let sets = if config.segment { &without_masks } else { &with_masks };
+            let source = FrameSource::Memory(Arc::clone(&ds), Arc::clone(sets));
+            let hull = HullParams { min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, config.voxel) };
+            let m = measure(&ds, source, &hull, config, &template, &truth)?;
+            let error = reference.map(|r| if m.pieces >= 2 { 100.0 * (m.piece_ml - r).abs() / r } else { 100.0 });
+            let masks = if config.segment { "segment" } else { "files" };
+            let stage = |name: &str| m.stage_ms.iter().find(|(n, _)| *n == name).map_or(0.0, |(_, ms)| *ms);
+            table.row([
+                name.clone(),
+                ds.rig().len().to_string(),
+                width.to_string(),
+                height.to_string(),
+                masks.to_owned(),
+                format!("{:.3}", config.voxel * 1e3),
+                format!("{}", config.cell * 1e3),
+                config.in_flight.to_string(),
+                m.frames.to_string(),
+                format!("{:.2}", m.fps),
+                format!("{:.2}", m.latency.p50_ms),
+                format!("{:.2}", m.latency.p95_ms),
+                format!("{:.2}", stage("segment")),
+                format!("{:.2}", stage("carve")),
+                format!("{:.2}", stage("pose")),
+                format!("{:.2}", stage("collide") + stage("cut_topology") + stage("cut_surface")),
+                format!("{:.2}", stage("contact")),
+                format!("{:.2}", stage("deform")),
+                m.trusted.to_string(),
+                format!("{:.3}", m.tip_mm),
+                m.pieces.to_string(),
+                format!("{:.2}", m.piece_ml),
+                reference.map_or_else(String::new, |r| format!("{r:.2}")),
+                error.map_or_else(String::new, |e| format!("{e:.2}")),
+            ]);
+            println!(
+                "{name}, {masks}, hull {:.2} mm, cell {} mm, {} in flight: {:.1} fps, latency {:.1} ms p50 / {:.1} p95; \
+                 tip {:.2} mm ({} of {} trusted); {} piece(s), tissue error {}",
+                config.voxel * 1e3,
+                config.cell * 1e3,
+                config.in_flight,
+                m.fps,
+                m.latency.p50_ms,
+                m.latency.p95_ms,
+                m.tip_mm,
+                m.trusted,
+                m.frames,
+                m.pieces,
+                error.map_or_else(|| "not measured".to_owned(), |e| format!("{e:.1}%"))
+            );
+            let label = format!("{}, {masks}", recording.rig.name());
+            push(&mut speed, &label, (m.latency.p95_ms, m.fps));
+            push(&mut accuracy, &format!("{label}, blade tip mm"), (1e3 / m.fps, m.tip_mm));
+            if let Some(e) = error {
+                push(&mut accuracy, &format!("{label}, tissue error %"), (1e3 / m.fps, e));
+            }
+        }
+    }
+    table.write(&out.join("loop.csv"))?;
+    scatter_chart(
+        &out.join("loop_speed.png"),
+        "The whole loop on 2 cores: throughput against latency (hull leaf, tissue cell, frame sets in flight)",
+        "latency from capture to cut surface, p95 (ms)",
+        "frame sets per second, sustained",
+        (Scale::Linear, Scale::Linear),
+        &speed,
+    )?;
+    scatter_chart(
+        &out.join("loop_accuracy.png"),
+        "The whole loop: blade tip error (mm) and resected volume error (%) against time per frame set",
+        "ms per frame set (1 / fps)",
+        "blade tip error, mm; tissue error, %",
+        (Scale::Linear, Scale::Log),
+        &accuracy,
+    )?;
+    println!("wrote {}, loop_speed.png, loop_accuracy.png", out.join("loop.csv").display());
+    Ok(())
+}
+
+fn push(series: &mut Vec<Series>, label: &str, point: (f64, f64)) {
+    match series.iter_mut().find(|s| s.label == label) {
+        Some(s) => s.points.push(point),
+        None => series.push(Series { label: label.to_owned(), points: vec![point] }),
+    }
+}
+
+/// The recording's true tool poses by frame.
+fn truth_poses(ds: &Dataset) -> anyhow::Result<std::collections::BTreeMap<u64, Isometry3<f64>>> {
+    let mut truth = std::collections::BTreeMap::new();
+    for p in ds.truth_poses()?.context("the rendered recording has true poses")? {
+        truth.insert(p.frame, rigid_from_matrix(&p.tool_to_world)?);
+    }
+    Ok(truth)
+}
+
+/// The volume of the smallest piece, millilitres, when there are two or more.
+fn resected_ml(sim: &hullcut_sim::CutSim) -> Option<f64> {
+    let states = sim.piece_states();
+    (states.len() >= 2).then(|| states.iter().map(|s| s.volume_m3 * 1e6).fold(f64::INFINITY, f64::min))
+}
+
+/// The piece the true poses cut off the organ at [`REFERENCE_CELL_M`] (none if they do not).
+fn reference_piece_ml(
+    ds: &Dataset,
+    template: &Template,
+    truth: &std::collections::BTreeMap<u64, Isometry3<f64>>,
+) -> anyhow::Result<Option<f64>> {
+    let mut organ = tissue::build("organ", REFERENCE_CELL_M, None, None)?;
+    let mut sweeper = Sweeper::default();
+    let mut last_ts = None;
+    let mut times = hullcut_pipeline::StageTimes::default();
+    for frame in ds.frame_numbers() {
+        let ts = ds.frame_timestamp(frame).unwrap_or(0);
+        let seconds = last_ts.map_or(0.0, |t: i64| (ts.saturating_sub(t) as f64 * 1e-9).clamp(0.0, 0.2));
+        last_ts = Some(ts);
+        let mut estimate = no_tool_estimate(frame, ts);
+        if let Some(iso) = truth.get(&frame) {
+            estimate.valid = true;
+            estimate.pose = Some(BladePose::new(template, *iso));
+        }
+        let mut step = sweeper.next(Some(&estimate), Some(template), organ.cell);
+        organ.step(&mut step, seconds, None, &mut times).with_context(|| format!("the reference, frame {frame}"))?;
+    }
+    Ok(resected_ml(&organ.sim))
+}
+
+/// One run of the loop.
+fn measure(
+    ds: &Arc<Dataset>,
+    source: FrameSource,
+    hull: &HullParams,
+    config: &Config,
+    template: &Template,
+    truth: &std::collections::BTreeMap<u64, Isometry3<f64>>,
+) -> anyhow::Result<Measured> {
+    let organ = tissue::build("organ", config.cell, None, None)?;
+    let labelling = if config.segment {
+        let tool = ds.tool()?;
+        Some(Labelling::new(ds, tool.as_ref(), hull.clone(), &[], LabelMethod::Both)?)
+    } else {
+        None
+    };
+    let mut setup = Setup::new(source, ds.frame_numbers(), !config.segment, hull.clone(), Carver::Cpu, organ);
+    setup.labelling = labelling;
+    setup.in_flight = config.in_flight;
+    let clock = Instant::now();
+    let pipeline = hullcut_pipeline::spawn(setup)?;
+    let (mut latency, mut tips) = (Vec::<Duration>::new(), Vec::new());
+    let mut times = hullcut_pipeline::StageTimes::default();
+    let (mut frames, mut trusted) = (0u64, 0u64);
+    for work in pipeline.output.iter() {
+        frames += 1;
+        latency.push(work.latency());
+        times.extend(&work.times);
+        if let (Some(e), Some(iso)) = (&work.estimate, truth.get(&work.frame))
+            && let (true, Some(p)) = (e.valid, &e.pose)
+        {
+            trusted += 1;
+            tips.push(pose_error(p, template, iso).tip_mm);
+        }
+    }
+    let wall = clock.elapsed().as_secs_f64();
+    let outcome = pipeline.join();
+    if let Some(e) = outcome.error {
+        return Err(anyhow::Error::new(e).context("the loop stopped"));
+    }
+    if let Some(f) = outcome.failure {
+        anyhow::bail!("the tissue stopped: {f}");
+    }
+    let sim = outcome.sim.context("the tissue stage ended without its simulation")?;
+    let mean = |d: &[Duration]| StageTiming::from_durations(d).mean_ms;
+    let per_frame = |d: &[Duration]| d.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3 / frames.max(1) as f64;
+    Ok(Measured {
+        frames,
+        fps: frames as f64 / wall.max(1e-9),
+        latency: StageTiming::from_durations(&latency),
+        stage_ms: vec![
+            ("segment", mean(&times.segment)),
+            ("carve", mean(&times.carve)),
+            ("pose", mean(&times.pose)),
+            ("collide", per_frame(&times.collide)),
+            ("cut_topology", per_frame(&times.cut_topology)),
+            ("cut_surface", per_frame(&times.cut_surface)),
+            ("contact", mean(&times.contact)),
+            ("deform", mean(&times.deform)),
+        ],
+        trusted,
+        tip_mm: if tips.is_empty() { f64::NAN } else { tips.iter().sum::<f64>() / tips.len() as f64 },
+        pieces: sim.pieces(),
+        piece_ml: resected_ml(&sim).unwrap_or(0.0),
+    })
+}
