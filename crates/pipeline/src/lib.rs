@@ -11,6 +11,9 @@
 //! [`Pipeline::output`] in order; a consumer (rerun logging in `hullcut run`, or a lab's own
 //! program) takes them from there, off the stages' path.
 //!
+//! [`measure`] runs the loop against a synthetic recording's truth (fps and latency beside the
+//! blade's and the resected piece's errors), as `hullcut bench loop` does.
+//!
 //! `examples/replay.rs` drives it from a few lines: open a dataset, build the organ, spawn, and
 //! read the results as they come.
 
@@ -20,6 +23,7 @@ pub mod backend;
 pub mod budget;
 pub mod error;
 pub mod labelling;
+pub mod measure;
 pub mod read;
 pub mod region;
 pub mod stages;

@@ -12,7 +12,7 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim`, `hull`, `pose`, `segment`, `pipeline` and `cut`.
+/// Targets: `sim`, `hull`, `pose`, `segment`, `pipeline`, `loop`, `cut` and `backends`.
 /// `cut` measures (the cutting stress cases: a 6 x 4 x 3 cm block of 5 mm cells on a table, stroked
 /// at 30 fps: speed up to 2 m/s, tilt, lattice phase, two passes beside each other, depth, a flat
 /// blade, grazing, crossing and repeated cuts, cuts a cell and half a cell apart, 24 fragments)
@@ -96,6 +96,8 @@ use crate::progress::bar;
 ///                     lattice size, on the CPU (rayon) and on the GPU (wgpu, batches of 100 steps
 ///                     with the state read back after each, as `hullcut sim --backend gpu` runs);
 ///                     the GPU line is left out, with a warning, when there is no adapter.
+/// `backends` measures backends.csv/png alone, as in `sim`, up to a million TLED cells (8 to 100
+/// cells a side), for a machine with a GPU.
 /// Timings are wall clock on this machine: run on an idle machine, and compare ratios within one run.
 /// HULLCUT_BENCH_QUICK=1 (or --quick) shrinks every size so CI can smoke-run it.
 ///
@@ -137,6 +139,8 @@ enum Target {
     Segment,
     /// Cutting where it fails: the stress cases.
     Cut,
+    /// TLED steps on the CPU against the GPU, up to a million cells (a part of `sim`).
+    Backends,
 }
 
 /// Runs the command.
@@ -152,8 +156,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             ratio(&args.out, quick)?;
             stability_edge(&args.out, quick)?;
             collision(&args.out)?;
-            backends(&args.out, quick)
+            backends(&args.out, if quick { &[4, 8] } else { &[8, 16, 24, 32, 40] }, quick)
         })?,
+        Target::Backends => {
+            rayon::scope(|_| backends(&args.out, if quick { &[4, 8] } else { &[8, 16, 32, 64, 100] }, quick))?
+        }
         Target::Hull => {
             let open3d = args
                 .open3d_python
@@ -349,8 +356,7 @@ fn scaling(out: &Path, quick: bool) -> anyhow::Result<()> {
 }
 
 /// TLED whole steps per second on the CPU and on the GPU against lattice size.
-fn backends(out: &Path, quick: bool) -> anyhow::Result<()> {
-    let sizes: &[usize] = if quick { &[4, 8] } else { &[8, 16, 24, 32, 40] };
+fn backends(out: &Path, sizes: &[usize], quick: bool) -> anyhow::Result<()> {
     let gpu = match hullcut_gpu::Gpu::new(&hullcut_gpu::AdapterChoice::from_env()) {
         Ok(g) => Some(std::sync::Arc::new(g)),
         Err(e) => {

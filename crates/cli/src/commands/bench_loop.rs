@@ -11,16 +11,15 @@
 
 use std::path::Path;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::Context as _;
 use hullcut_dataset::Dataset;
 use hullcut_hull::HullParams;
-use hullcut_pipeline::{Carver, FrameSource, LabelMethod, Labelling, Setup, Sweeper, no_tool_estimate, tissue};
-use hullcut_pose::{BladePose, Template, pose_error, rigid_from_matrix};
+use hullcut_pipeline::measure::{Measured, reference_resection_ml, run_measured, truth_and_template};
+use hullcut_pipeline::{Carver, FrameSource, LabelMethod, Labelling, Setup, tissue};
 use hullcut_rig::RigPreset;
 use hullcut_synth::{Appearance, Scene, SceneConfig, SceneKind, ToolKind, synthesize};
-use nalgebra::Isometry3;
 
 use super::bench::Table;
 use crate::chart::{Scale, Series, scatter_chart};
@@ -64,18 +63,6 @@ struct Config {
     in_flight: usize,
     /// Segment the images (else the recording's mask files).
     segment: bool,
-}
-
-/// What one run of the loop measured.
-struct Measured {
-    frames: u64,
-    fps: f64,
-    latency: StageTiming,
-    stage_ms: Vec<(&'static str, f64)>,
-    trusted: u64,
-    tip_mm: f64,
-    pieces: usize,
-    piece_ml: f64,
 }
 
 /// Runs the benchmark into `out`.
@@ -145,9 +132,8 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         synthesize(&scene, &dir, &name, false, &|| pb.inc(1)).with_context(|| format!("rendering {name}"))?;
         pb.finish_and_clear();
         let ds = Arc::new(Dataset::open(&dir)?);
-        let template = Template::new(&ds.tool()?.context("the rendered recording has a tool.json")?)?;
-        let truth = truth_poses(&ds)?;
-        let reference = reference_piece_ml(&ds, &template, &truth)?;
+        let (template, truth) = truth_and_template(&ds)?;
+        let reference = reference_resection_ml(&ds, &template, &truth, REFERENCE_CELL_M)?;
         println!(
             "{name}: the resected piece cut by the true poses at {} mm cells: {}",
             REFERENCE_CELL_M * 1e3,
@@ -163,10 +149,12 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             let sets = if config.segment { &without_masks } else { &with_masks };
             let source = FrameSource::Memory(Arc::clone(&ds), Arc::clone(sets));
             let hull = HullParams { min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, config.voxel) };
-            let m = measure(&ds, source, &hull, config, &template, &truth)?;
-            let error = reference.map(|r| if m.pieces >= 2 { 100.0 * (m.piece_ml - r).abs() / r } else { 100.0 });
+            let m = run_measured(loop_setup(&ds, source, &hull, config)?, &template, &truth)
+                .with_context(|| format!("{name}, hull {:.2} mm, cell {} mm", config.voxel * 1e3, config.cell * 1e3))?;
+            let error = reference.map(|r| m.tissue_error_pct(r));
+            let (fps, tip_mm, latency) = (m.fps(), m.tip_mm_mean(), StageTiming::from_durations(&m.latencies));
             let masks = if config.segment { "segment" } else { "files" };
-            let stage = |name: &str| m.stage_ms.iter().find(|(n, _)| *n == name).map_or(0.0, |(_, ms)| *ms);
+            let stage = |name: &str| stage_ms(&m, name);
             table.row([
                 name.clone(),
                 ds.rig().len().to_string(),
@@ -177,9 +165,9 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 format!("{}", config.cell * 1e3),
                 config.in_flight.to_string(),
                 m.frames.to_string(),
-                format!("{:.2}", m.fps),
-                format!("{:.2}", m.latency.p50_ms),
-                format!("{:.2}", m.latency.p95_ms),
+                format!("{fps:.2}"),
+                format!("{:.2}", latency.p50_ms),
+                format!("{:.2}", latency.p95_ms),
                 format!("{:.2}", stage("segment")),
                 format!("{:.2}", stage("carve")),
                 format!("{:.2}", stage("pose")),
@@ -187,9 +175,9 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 format!("{:.2}", stage("contact")),
                 format!("{:.2}", stage("deform")),
                 m.trusted.to_string(),
-                format!("{:.3}", m.tip_mm),
+                format!("{tip_mm:.3}"),
                 m.pieces.to_string(),
-                format!("{:.2}", m.piece_ml),
+                format!("{:.2}", m.resected_ml.unwrap_or(0.0)),
                 reference.map_or_else(String::new, |r| format!("{r:.2}")),
                 error.map_or_else(String::new, |e| format!("{e:.2}")),
             ]);
@@ -199,20 +187,20 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 config.voxel * 1e3,
                 config.cell * 1e3,
                 config.in_flight,
-                m.fps,
-                m.latency.p50_ms,
-                m.latency.p95_ms,
-                m.tip_mm,
+                fps,
+                latency.p50_ms,
+                latency.p95_ms,
+                tip_mm,
                 m.trusted,
                 m.frames,
                 m.pieces,
                 error.map_or_else(|| "not measured".to_owned(), |e| format!("{e:.1}%"))
             );
             let label = format!("{}, {masks}", recording.rig.name());
-            push(&mut speed, &label, (m.latency.p95_ms, m.fps));
-            push(&mut accuracy, &format!("{label}, blade tip mm"), (1e3 / m.fps, m.tip_mm));
+            push(&mut speed, &label, (latency.p95_ms, fps));
+            push(&mut accuracy, &format!("{label}, blade tip mm"), (1e3 / fps, tip_mm));
             if let Some(e) = error {
-                push(&mut accuracy, &format!("{label}, tissue error %"), (1e3 / m.fps, e));
+                push(&mut accuracy, &format!("{label}, tissue error %"), (1e3 / fps, e));
             }
         }
     }
@@ -233,7 +221,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         (Scale::Linear, Scale::Log),
         &accuracy,
     )?;
-    println!("wrote {}, loop_speed.png, loop_accuracy.png", out.join("loop.csv").display());
+    println!("wrote {} and {}", out.join("loop_speed.png").display(), out.join("loop_accuracy.png").display());
     Ok(())
 }
 
@@ -244,55 +232,9 @@ fn push(series: &mut Vec<Series>, label: &str, point: (f64, f64)) {
     }
 }
 
-/// The recording's true tool poses by frame.
-fn truth_poses(ds: &Dataset) -> anyhow::Result<std::collections::BTreeMap<u64, Isometry3<f64>>> {
-    let mut truth = std::collections::BTreeMap::new();
-    for p in ds.truth_poses()?.context("the rendered recording has true poses")? {
-        truth.insert(p.frame, rigid_from_matrix(&p.tool_to_world)?);
-    }
-    Ok(truth)
-}
-
-/// The volume of the smallest piece, millilitres, when there are two or more.
-fn resected_ml(sim: &hullcut_sim::CutSim) -> Option<f64> {
-    let states = sim.piece_states();
-    (states.len() >= 2).then(|| states.iter().map(|s| s.volume_m3 * 1e6).fold(f64::INFINITY, f64::min))
-}
-
-/// The piece the true poses cut off the organ at [`REFERENCE_CELL_M`] (none if they do not).
-fn reference_piece_ml(
-    ds: &Dataset,
-    template: &Template,
-    truth: &std::collections::BTreeMap<u64, Isometry3<f64>>,
-) -> anyhow::Result<Option<f64>> {
-    let mut organ = tissue::build("organ", REFERENCE_CELL_M, None, None)?;
-    let mut sweeper = Sweeper::default();
-    let mut last_ts = None;
-    let mut times = hullcut_pipeline::StageTimes::default();
-    for frame in ds.frame_numbers() {
-        let ts = ds.frame_timestamp(frame).unwrap_or(0);
-        let seconds = last_ts.map_or(0.0, |t: i64| (ts.saturating_sub(t) as f64 * 1e-9).clamp(0.0, 0.2));
-        last_ts = Some(ts);
-        let mut estimate = no_tool_estimate(frame, ts);
-        if let Some(iso) = truth.get(&frame) {
-            estimate.valid = true;
-            estimate.pose = Some(BladePose::new(template, *iso));
-        }
-        let mut step = sweeper.next(Some(&estimate), Some(template), organ.cell);
-        organ.step(&mut step, seconds, None, &mut times).with_context(|| format!("the reference, frame {frame}"))?;
-    }
-    Ok(resected_ml(&organ.sim))
-}
-
-/// One run of the loop.
-fn measure(
-    ds: &Arc<Dataset>,
-    source: FrameSource,
-    hull: &HullParams,
-    config: &Config,
-    template: &Template,
-    truth: &std::collections::BTreeMap<u64, Isometry3<f64>>,
-) -> anyhow::Result<Measured> {
+/// The loop of one configuration on `source`: the organ at the configuration's cell, segmenting
+/// with the tool's geometry and the learned colours when it does not read mask files.
+fn loop_setup(ds: &Arc<Dataset>, source: FrameSource, hull: &HullParams, config: &Config) -> anyhow::Result<Setup> {
     let organ = tissue::build("organ", config.cell, None, None)?;
     let labelling = if config.segment {
         let tool = ds.tool()?;
@@ -303,50 +245,25 @@ fn measure(
     let mut setup = Setup::new(source, ds.frame_numbers(), !config.segment, hull.clone(), Carver::Cpu, organ);
     setup.labelling = labelling;
     setup.in_flight = config.in_flight;
-    let clock = Instant::now();
-    let pipeline = hullcut_pipeline::spawn(setup)?;
-    let (mut latency, mut tips) = (Vec::<Duration>::new(), Vec::new());
-    let mut times = hullcut_pipeline::StageTimes::default();
-    let (mut frames, mut trusted) = (0u64, 0u64);
-    for work in pipeline.output.iter() {
-        frames += 1;
-        latency.push(work.latency());
-        times.extend(&work.times);
-        if let (Some(e), Some(iso)) = (&work.estimate, truth.get(&work.frame))
-            && let (true, Some(p)) = (e.valid, &e.pose)
-        {
-            trusted += 1;
-            tips.push(pose_error(p, template, iso).tip_mm);
-        }
-    }
-    let wall = clock.elapsed().as_secs_f64();
-    let outcome = pipeline.join();
-    if let Some(e) = outcome.error {
-        return Err(anyhow::Error::new(e).context("the loop stopped"));
-    }
-    if let Some(f) = outcome.failure {
-        anyhow::bail!("the tissue stopped: {f}");
-    }
-    let sim = outcome.sim.context("the tissue stage ended without its simulation")?;
+    Ok(setup)
+}
+
+/// A stage's milliseconds per frame set: the mean of its runs for the stages that run once a
+/// frame set, the sum over the run divided by the frame sets for the cut's parts (which run only
+/// on frame sets that cut).
+fn stage_ms(m: &Measured, name: &str) -> f64 {
+    let t = &m.times;
     let mean = |d: &[Duration]| StageTiming::from_durations(d).mean_ms;
-    let per_frame = |d: &[Duration]| d.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3 / frames.max(1) as f64;
-    Ok(Measured {
-        frames,
-        fps: frames as f64 / wall.max(1e-9),
-        latency: StageTiming::from_durations(&latency),
-        stage_ms: vec![
-            ("segment", mean(&times.segment)),
-            ("carve", mean(&times.carve)),
-            ("pose", mean(&times.pose)),
-            ("collide", per_frame(&times.collide)),
-            ("cut_topology", per_frame(&times.cut_topology)),
-            ("cut_surface", per_frame(&times.cut_surface)),
-            ("contact", mean(&times.contact)),
-            ("deform", mean(&times.deform)),
-        ],
-        trusted,
-        tip_mm: if tips.is_empty() { f64::NAN } else { tips.iter().sum::<f64>() / tips.len() as f64 },
-        pieces: sim.pieces(),
-        piece_ml: resected_ml(&sim).unwrap_or(0.0),
-    })
+    let per_frame = |d: &[Duration]| d.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3 / m.frames.max(1) as f64;
+    match name {
+        "segment" => mean(&t.segment),
+        "carve" => mean(&t.carve),
+        "pose" => mean(&t.pose),
+        "collide" => per_frame(&t.collide),
+        "cut_topology" => per_frame(&t.cut_topology),
+        "cut_surface" => per_frame(&t.cut_surface),
+        "contact" => mean(&t.contact),
+        "deform" => mean(&t.deform),
+        _ => 0.0,
+    }
 }
