@@ -265,6 +265,8 @@ struct TissueReport {
     copies: usize,
     virtual_nodes: usize,
     copies_dropped: usize,
+    /// Sliver copies torn off after they diverged (also in `copies_dropped`).
+    copies_torn: usize,
     inverted_cells: usize,
     kinetic_energy_j: f64,
     simulated_s: f64,
@@ -798,6 +800,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     copies: topology.copies.len(),
                     virtual_nodes: topology.virtual_of.len(),
                     copies_dropped: sim.dropped_copies(),
+                    copies_torn: sim.torn_copies(),
                     inverted_cells: sim.inverted_cells(),
                     kinetic_energy_j: sim.kinetic_energy(),
                     simulated_s: sim.time(),

@@ -19,6 +19,7 @@
 //! the tool ([`CutSim::set_tool`]) and FLSM moves the rest, with regions rebuilt from the cut
 //! lattice's connectivity (see [`crate::operational`]).
 
+use std::collections::BTreeSet;
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
@@ -176,6 +177,9 @@ pub struct CutSim {
     steps: Option<HybridSteps>,
     /// Interface anchors of the current FLSM step: node, goal − rest, β × velocity.
     anchors: Vec<(usize, Vector3<f32>, Vector3<f32>)>,
+    /// Sliver copies torn off after they diverged ([`CellCopy::key`](crate::vna::CellCopy::key)):
+    /// left out of the cut lattice from then on.
+    torn: BTreeSet<(u32, u8)>,
     /// The GPU backend, once [`CutSim::use_gpu`] chose it.
     #[cfg(feature = "gpu")]
     gpu: Option<crate::gpu::GpuRun>,
@@ -211,7 +215,7 @@ impl CutSim {
         let fixed: Vec<bool> = lattice.rest.iter().map(fixed).collect();
         let samples = BodySamples::new(&lattice, params.samples_per_cell, signed);
         let topology = CutTopology::rebuild(&lattice, []);
-        let (cut, dropped) = topology.to_lattice(&lattice, params.min_fraction);
+        let (cut, dropped) = topology.to_lattice(&lattice, params.min_fraction, &BTreeSet::new());
         let mut tled = Tled::new(&cut, None, &material, params.tled)?;
         let mass: Vec<f32> = cut.lumped_masses(material.density).iter().map(|&m| m as f32).collect();
         let free: Vec<[bool; 3]> = (0..cut.node_count()).map(|n| [!fixed[n]; 3]).collect();
@@ -254,6 +258,7 @@ impl CutSim {
             region_changes: 0,
             steps,
             anchors: Vec::new(),
+            torn: BTreeSet::new(),
             #[cfg(feature = "gpu")]
             gpu: None,
         };
@@ -495,7 +500,7 @@ impl CutSim {
         self.flush_flsm();
         let (u, u_prev) = self.carry_over(&topology);
         let old = std::mem::replace(&mut self.topology, topology);
-        let (cut, dropped) = self.topology.to_lattice(&self.lattice, self.params.min_fraction);
+        let (cut, dropped) = self.topology.to_lattice(&self.lattice, self.params.min_fraction, &self.torn);
         if let Err(e) = self.install(cut, u, u_prev) {
             self.topology = old;
             return Err(e);
@@ -547,7 +552,58 @@ impl CutSim {
     ///
     /// With the hybrid model the operational region is updated first (see
     /// [`crate::operational`]), and time advances in FLSM steps of `substeps` TLED steps.
+    ///
+    /// A sliver that diverges is torn off: when the node that diverged belongs to copies holding
+    /// less than [`TEAR_ON_DIVERGENCE`] of a cell, those copies leave the cut lattice (counted by
+    /// [`Self::torn_copies`]) and the advance starts again from where it began, up to
+    /// [`MAX_TEARS_PER_ADVANCE`] times. Re-cutting cut cells (a blade stroked again through its
+    /// own groove) leaves copies of a few percent of a cell whose stiffness the mass floor no
+    /// longer matches once they are crushed into the nonlinear range; tissue tears such shreds.
+    /// Any other divergence is returned as it is.
     pub fn advance(&mut self, seconds: f64) -> Result<usize, Divergence> {
+        let start = (self.integrator.u.clone(), self.integrator.u_prev.clone(), self.integrator.step);
+        let mut tears = 0;
+        loop {
+            match self.advance_once(seconds) {
+                Err(d) if tears < MAX_TEARS_PER_ADVANCE && self.tear_sliver_at(d.node, &start) => tears += 1,
+                result => return result,
+            }
+        }
+    }
+
+    /// Tears off the sliver copies (under [`TEAR_ON_DIVERGENCE`] of a cell) that hold `node` and
+    /// puts the state back to `start` (displacements now and a step before, the step count);
+    /// false when `node` is in no sliver, or the cut lattice could not be set up without them.
+    fn tear_sliver_at(&mut self, node: usize, start: &(Vec<Vector3<f32>>, Vec<Vector3<f32>>, u64)) -> bool {
+        let slivers: Vec<(u32, u8)> = self
+            .topology
+            .copies
+            .iter()
+            .filter(|c| c.nodes.contains(&(node as u32)) && !self.torn.contains(&c.key()))
+            .filter(|c| f64::from(self.lattice.cells[c.parent as usize].fraction) * c.share < TEAR_ON_DIVERGENCE)
+            .map(crate::vna::CellCopy::key)
+            .collect();
+        if slivers.is_empty() {
+            return false;
+        }
+        self.torn.extend(slivers.iter().copied());
+        let (cut, dropped) = self.topology.to_lattice(&self.lattice, self.params.min_fraction, &self.torn);
+        self.integrator.step = start.2;
+        if self.install(cut, start.0.clone(), start.1.clone()).is_err() {
+            return false;
+        }
+        self.dropped = dropped;
+        tracing::debug!(node, copies = slivers.len(), "a diverged sliver torn off");
+        true
+    }
+
+    /// Copies torn off after they diverged (see [`Self::advance`]), so far.
+    pub fn torn_copies(&self) -> usize {
+        self.torn.len()
+    }
+
+    /// One try of [`Self::advance`].
+    fn advance_once(&mut self, seconds: f64) -> Result<usize, Divergence> {
         let substeps = self.substeps();
         if self.params.hybrid.is_some() {
             let wanted = self.wanted_region();
@@ -907,6 +963,12 @@ pub const PIECE_REFRESH_S: f64 = 1.0 / 30.0;
 /// How far the pieces' planes move a node after a batch of GPU steps, in lattice cells.
 #[cfg(feature = "gpu")]
 const PIECE_BATCH_MOVE: f64 = 0.5;
+
+/// Share of a cell below which a copy whose node diverged is torn off (see [`CutSim::advance`]).
+pub const TEAR_ON_DIVERGENCE: f64 = 0.25;
+
+/// Slivers torn off in one [`CutSim::advance`] before a divergence is given up on.
+pub const MAX_TEARS_PER_ADVANCE: usize = 4;
 /// Coulomb friction between pieces (tissue on tissue).
 pub const PIECE_FRICTION: f32 = 0.5;
 

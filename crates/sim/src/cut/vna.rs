@@ -15,7 +15,7 @@
 //! lattice's node count are the lattice's nodes; virtual nodes follow, each with the lattice node
 //! it copies (its rest position).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use nalgebra::{Matrix3, Point3, Vector3};
 
@@ -45,6 +45,14 @@ pub struct CellCopy {
     pub nodes: [u32; 8],
     /// Share of the parent cell's material it owns, in [0, 1] (the copies of a cell sum to 1).
     pub share: f64,
+}
+
+impl CellCopy {
+    /// What names the copy across re-cuts of other cells: its parent and its corners. A copy of
+    /// a cell that is cut again has other corners, so it is another copy.
+    pub fn key(&self) -> (u32, u8) {
+        (self.parent, self.material)
+    }
 }
 
 /// The lattice's topology after cuts.
@@ -278,17 +286,18 @@ impl CutTopology {
     }
 
     /// The cut lattice: one cell per copy (its parent's fraction times its share of the material;
-    /// copies holding less than `min_fraction` are dropped, and counted in the second value) over
-    /// the lattice's nodes and the virtual nodes. It feeds [`crate::Tled::new`] and the lumped
-    /// masses as a lattice does: each copy has its parent's cube geometry, so the precomputed
-    /// shape derivatives are the parent's and the volume weights the copy's material.
-    pub fn to_lattice(&self, lattice: &Lattice, min_fraction: f32) -> (Lattice, usize) {
+    /// copies holding less than `min_fraction` are dropped, and so are those `torn` names by
+    /// [`CellCopy::key`], all counted in the second value) over the lattice's nodes and the
+    /// virtual nodes. It feeds [`crate::Tled::new`] and the lumped masses as a lattice does: each
+    /// copy has its parent's cube geometry, so the precomputed shape derivatives are the parent's
+    /// and the volume weights the copy's material.
+    pub fn to_lattice(&self, lattice: &Lattice, min_fraction: f32, torn: &BTreeSet<(u32, u8)>) -> (Lattice, usize) {
         let mut cells = Vec::with_capacity(self.copies.len());
         let mut dropped = 0;
         for copy in &self.copies {
             let parent = &lattice.cells[copy.parent as usize];
             let fraction = parent.fraction * copy.share as f32;
-            if fraction < min_fraction {
+            if fraction < min_fraction || torn.contains(&copy.key()) {
                 dropped += 1;
                 continue;
             }
@@ -514,7 +523,7 @@ pub(crate) mod tests {
         .expect("surface");
         let topology = CutTopology::rebuild(&l, cut_edges(&l, &l.rest, &hash, &s).edges);
         assert_eq!(topology.pieces, 2);
-        let (cut, dropped) = topology.to_lattice(&l, 1e-3);
+        let (cut, dropped) = topology.to_lattice(&l, 1e-3, &BTreeSet::new());
         assert_eq!(dropped, 0);
         assert!((cut.volume() - l.volume()).abs() < 1e-12);
 
