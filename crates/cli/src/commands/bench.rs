@@ -45,7 +45,8 @@ use crate::progress::bar;
 ///                     carving, pose, cutting, contact, deformation measured inside the loop, the
 ///                     blade tip's error (trusted frames), the pieces, and the tissue's error: the
 ///                     resected piece's volume against the one the true poses cut at 4 mm cells
-///                     (100% when it was not cut off);
+///                     (100% when it was not cut off), and the piece the true poses cut off at
+///                     the configuration's own cell ("not cut off": the lattice alone loses it);
 ///   loop_speed.png, loop_accuracy.png
 ///                     fps against latency p95, one point per configuration; blade tip error
 ///                     and tissue error against ms per frame set.

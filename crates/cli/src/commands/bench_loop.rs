@@ -7,7 +7,9 @@
 //! The tissue's error is the resected piece's volume against a reference: the same organ at a
 //! finer lattice ([`REFERENCE_CELL_M`]) cut by the true blade poses, so that it holds both the
 //! lattice's coarseness and the pose's error. A run that does not cut the piece off has an error
-//! of 100%.
+//! of 100%. Beside it, the piece the true poses cut off at the configuration's own cell tells the
+//! lattice's share apart: where they cut nothing off either, the lattice lost the piece, not the
+//! pose.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -115,6 +117,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         "piece_ml",
         "reference_piece_ml",
         "tissue_error_pct",
+        "same_cell_reference_ml",
     ]);
     let (mut speed, mut accuracy) = (Vec::<Series>::new(), Vec::<Series>::new());
     for recording in recordings {
@@ -134,6 +137,14 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let ds = Arc::new(Dataset::open(&dir)?);
         let (template, truth) = truth_and_template(&ds)?;
         let reference = reference_resection_ml(&ds, &template, &truth, REFERENCE_CELL_M)?;
+        // The true poses at each configuration's own cell: what the lattice alone gives.
+        let mut same_cell = std::collections::BTreeMap::new();
+        for config in &configs {
+            let key = (config.cell * 1e6).round() as u64;
+            if let std::collections::btree_map::Entry::Vacant(e) = same_cell.entry(key) {
+                e.insert(reference_resection_ml(&ds, &template, &truth, config.cell)?);
+            }
+        }
         println!(
             "{name}: the resected piece cut by the true poses at {} mm cells: {}",
             REFERENCE_CELL_M * 1e3,
@@ -180,6 +191,11 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 format!("{:.2}", m.resected_ml.unwrap_or(0.0)),
                 reference.map_or_else(String::new, |r| format!("{r:.2}")),
                 error.map_or_else(String::new, |e| format!("{e:.2}")),
+                same_cell
+                    .get(&((config.cell * 1e6).round() as u64))
+                    .copied()
+                    .flatten()
+                    .map_or_else(|| "not cut off".to_owned(), |r| format!("{r:.2}")),
             ]);
             println!(
                 "{name}, {masks}, hull {:.2} mm, cell {} mm, {} in flight: {:.1} fps, latency {:.1} ms p50 / {:.1} p95; \
