@@ -382,6 +382,44 @@ fn bench_sim_quick_writes_tables_and_charts() {
 }
 
 #[test]
+fn bench_backends_quick_writes_the_cpu_and_gpu_lines_alone() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "backends", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (_, rows) = read_csv(&dir.path().join("backends.csv"));
+    let on = |b: &str| rows.iter().filter(|r| r[0] == b).count();
+    assert_eq!(on("cpu"), 2, "{rows:?}");
+    if std::env::var_os("CI").is_some() || on("gpu") > 0 {
+        assert_eq!(on("gpu"), 2, "{rows:?}");
+    }
+    // Only the backends part of `bench sim`.
+    assert!(!dir.path().join("scaling.csv").exists());
+}
+
+#[test]
+fn bench_loop_quick_measures_speed_beside_the_blade_and_the_tissue() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "loop", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (header, rows) = read_csv(&dir.path().join("loop.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap_or_else(|| panic!("{name} in {header:?}"));
+    // Mask files at two leaves, and segmenting: every frame set through, every one timed.
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    assert_eq!(rows.iter().filter(|r| r[col("masks")] == "segment").count(), 1, "{rows:?}");
+    for r in &rows {
+        let f = |name: &str| r[col(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name} in {r:?}"));
+        assert_eq!(r[col("frames")], "12", "{r:?}");
+        assert!(f("fps") > 0.0 && f("latency_p95_ms") >= f("latency_p50_ms"), "{r:?}");
+        assert!(f("carve_ms") > 0.0 && f("deform_ms") > 0.0, "{r:?}");
+        // Truth masks: the blade fitted within a millimetre where it was trusted.
+        assert!(f("trusted") >= 10.0 && f("tip_mm_mean") < 1.0, "{r:?}");
+    }
+    for png in ["loop_speed.png", "loop_accuracy.png"] {
+        assert!(std::fs::read(dir.path().join(png)).expect("png").starts_with(b"\x89PNG"), "{png}");
+    }
+}
+
+#[test]
 fn bench_cut_quick_runs_one_stress_case_of_each_family_and_charts_them() {
     let dir = tempfile::tempdir().expect("tempdir");
     let o = hullcut(&["bench", "cut", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
