@@ -186,7 +186,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 format!("{:.2}", stage("contact")),
                 format!("{:.2}", stage("deform")),
                 m.trusted.to_string(),
-                format!("{tip_mm:.3}"),
+                if tip_mm.is_finite() { format!("{tip_mm:.3}") } else { String::new() },
                 m.pieces.to_string(),
                 format!("{:.2}", m.resected_ml.unwrap_or(0.0)),
                 reference.map_or_else(String::new, |r| format!("{r:.2}")),
@@ -214,7 +214,9 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             );
             let label = format!("{}, {masks}", recording.rig.name());
             push(&mut speed, &label, (latency.p95_ms, fps));
-            push(&mut accuracy, &format!("{label}, blade tip mm"), (1e3 / fps, tip_mm));
+            if tip_mm.is_finite() {
+                push(&mut accuracy, &format!("{label}, blade tip mm"), (1e3 / fps, tip_mm));
+            }
             if let Some(e) = error {
                 push(&mut accuracy, &format!("{label}, tissue error %"), (1e3 / fps, e));
             }

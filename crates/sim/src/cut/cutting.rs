@@ -180,6 +180,8 @@ pub struct CutSim {
     /// Sliver copies torn off after they diverged ([`CellCopy::key`](crate::vna::CellCopy::key)):
     /// left out of the cut lattice from then on.
     torn: BTreeSet<(u32, u8)>,
+    /// The state at the start of the current advance, to take it again after a tear.
+    rewind: Rewind,
     /// The GPU backend, once [`CutSim::use_gpu`] chose it.
     #[cfg(feature = "gpu")]
     gpu: Option<crate::gpu::GpuRun>,
@@ -259,6 +261,7 @@ impl CutSim {
             steps,
             anchors: Vec::new(),
             torn: BTreeSet::new(),
+            rewind: Rewind::default(),
             #[cfg(feature = "gpu")]
             gpu: None,
         };
@@ -561,20 +564,26 @@ impl CutSim {
     /// a virtual node of a copy holding 8.8% of its cell reached 700 m/s, floored mass and all.
     /// Tissue tears such shreds. Any other divergence is returned as it is.
     pub fn advance(&mut self, seconds: f64) -> Result<usize, Divergence> {
-        let start = (self.integrator.u.clone(), self.integrator.u_prev.clone(), self.integrator.step);
+        // The state to start again from, in buffers kept across advances (no allocation a frame).
+        let mut start = std::mem::take(&mut self.rewind);
+        start.u.clone_from(&self.integrator.u);
+        start.u_prev.clone_from(&self.integrator.u_prev);
+        start.step = self.integrator.step;
         let mut tears = 0;
-        loop {
+        let result = loop {
             match self.advance_once(seconds) {
                 Err(d) if tears < MAX_TEARS_PER_ADVANCE && self.tear_sliver_at(d.node, &start) => tears += 1,
-                result => return result,
+                result => break result,
             }
-        }
+        };
+        self.rewind = start;
+        result
     }
 
     /// Tears off the sliver copies (under [`TEAR_ON_DIVERGENCE`] of a cell) that hold `node` and
-    /// puts the state back to `start` (displacements now and a step before, the step count);
-    /// false when `node` is in no sliver, or the cut lattice could not be set up without them.
-    fn tear_sliver_at(&mut self, node: usize, start: &(Vec<Vector3<f32>>, Vec<Vector3<f32>>, u64)) -> bool {
+    /// puts the state back to `start`; false when `node` is in no sliver, or the cut lattice could
+    /// not be set up without them.
+    fn tear_sliver_at(&mut self, node: usize, start: &Rewind) -> bool {
         let share = |c: &crate::vna::CellCopy| f64::from(self.lattice.cells[c.parent as usize].fraction) * c.share;
         let slivers: Vec<((u32, u8), f64)> = self
             .topology
@@ -589,8 +598,8 @@ impl CutSim {
         }
         self.torn.extend(slivers.iter().map(|(key, _)| *key));
         let (cut, dropped) = self.topology.to_lattice(&self.lattice, self.params.min_fraction, &self.torn);
-        self.integrator.step = start.2;
-        if self.install(cut, start.0.clone(), start.1.clone()).is_err() {
+        self.integrator.step = start.step;
+        if self.install(cut, start.u.clone(), start.u_prev.clone()).is_err() {
             for (key, _) in &slivers {
                 self.torn.remove(key);
             }
@@ -968,6 +977,14 @@ pub const PIECE_REFRESH_S: f64 = 1.0 / 30.0;
 /// How far the pieces' planes move a node after a batch of GPU steps, in lattice cells.
 #[cfg(feature = "gpu")]
 const PIECE_BATCH_MOVE: f64 = 0.5;
+
+/// Where an advance started: displacements now and a step before, and the step count.
+#[derive(Debug, Clone, Default)]
+struct Rewind {
+    u: Vec<Vector3<f32>>,
+    u_prev: Vec<Vector3<f32>>,
+    step: u64,
+}
 
 /// Share of a cell below which a copy whose node diverged is torn off (see [`CutSim::advance`]).
 pub const TEAR_ON_DIVERGENCE: f64 = 0.25;
