@@ -495,7 +495,22 @@ fn bench_hull_quick_compares_octree_and_dense_grid() {
         let iou = |r: &Vec<String>| r[6].parse::<f64>().expect("hand IoU");
         assert!(iou(t) > iou(o), "{t:?} vs {o:?}");
     }
-    for name in ["hull_speed.png", "hull_accuracy.png", "hull_robustness_noise.png", "hull_robustness_cameras.png"] {
+    // Carving the blade's leaves a level finer brings the scalpel closer to the exact hull on
+    // every rig and leaf.
+    let refined: Vec<_> = rows.iter().filter(|r| r[1] == "octree, blade refined a level").collect();
+    assert_eq!(refined.len(), 4, "{csv}");
+    for b in refined {
+        let o = octree(&b[0], &b[3]);
+        let iou = |r: &Vec<String>| r[7].parse::<f64>().expect("scalpel IoU");
+        assert!(iou(b) > iou(o), "{b:?} vs {o:?}");
+    }
+    for name in [
+        "hull_speed.png",
+        "hull_accuracy.png",
+        "hull_blade.png",
+        "hull_robustness_noise.png",
+        "hull_robustness_cameras.png",
+    ] {
         assert!(std::fs::read(dir.path().join(name)).expect("png").starts_with(b"\x89PNG"), "{name}");
     }
     // Robustness: the clean classic hull against itself is 1; noise and fewer cameras only lower it.

@@ -100,7 +100,17 @@ pub struct HullParams {
     /// slivers. Without it every leaf touching the hull is kept, which fattens it by half a leaf
     /// on average.
     pub trim_slivers: bool,
+    /// Leaves carrying the scalpel label are carved again this many octree levels finer after
+    /// carving ([`refine_label`]; 0: off, at most [`MAX_REFINE_LEVELS`]). A blade is thinner than
+    /// a leaf, so at the leaf size its hull is mostly leaves that the exact hull fills in part;
+    /// one level finer halves that error for the blade's few thousand leaves while the hand keeps
+    /// its leaf. The occupancy's `leaf_size` is then the finer one. [`carve_within`] does not
+    /// refine.
+    pub blade_levels: u32,
 }
+
+/// The most levels [`refine_label`] refines by (a leaf split into 8^3 = 512 cells).
+pub const MAX_REFINE_LEVELS: u32 = 3;
 
 /// The deepest octree carving accepts (65,536 leaves per side).
 pub const MAX_DEPTH: u32 = 16;
@@ -119,6 +129,7 @@ impl HullParams {
             start_level: 3,
             exclusive_labels: true,
             trim_slivers: false,
+            blade_levels: 0,
         }
     }
 
@@ -193,6 +204,8 @@ pub struct CarveStats {
     pub unseen_cells: u64,
     /// Leaves dropped as slivers beside solid leaves ([`HullParams::trim_slivers`]).
     pub slivers_trimmed: u64,
+    /// Leaves carved again at a finer leaf ([`refine_label`]).
+    pub leaves_refined: u64,
     /// Lone refutations per view, one entry per view passed to [`carve`] (rig camera order; 0
     /// for a missing view): cells (of any octree level) that this view refuted while every other
     /// present view saw foreground in the cell's footprint, so that the view disagreed with all
@@ -877,6 +890,7 @@ fn carver<'a>(views: &'a [Option<Silhouette>], params: &'a HullParams, leaf_leve
 /// Carves the hull of the views' silhouettes (`None` = a missing view, left out and counted).
 pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
     let (leaf_level, side) = check(views, params)?;
+    check_refine(params, leaf_level)?;
     let carver = carver(views, params, leaf_level);
     let start = params.start_level.min(leaf_level);
     let n = 1usize << start;
@@ -895,7 +909,64 @@ pub fn carve(views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupa
             local
         })
         .collect();
-    Ok(gather(views, &carver, locals, side))
+    let occ = gather(views, &carver, locals, side);
+    refine_label(views, params, occ, label::SCALPEL, params.blade_levels)
+}
+
+/// Checks that [`HullParams::blade_levels`] fits the octree.
+pub(crate) fn check_refine(params: &HullParams, leaf_level: u32) -> Result<(), HullError> {
+    if params.blade_levels > MAX_REFINE_LEVELS || leaf_level + params.blade_levels > MAX_DEPTH {
+        return Err(HullError::Params(format!(
+            "blade_levels must be at most {MAX_REFINE_LEVELS} and leave the octree within 2^{MAX_DEPTH} leaves per side, got {} on a depth of {leaf_level}",
+            params.blade_levels
+        )));
+    }
+    Ok(())
+}
+
+/// Carves the leaves of `occ` carrying label `l` again, `levels` octree levels finer, with the
+/// rules of [`carve`] ([`carve_within`] seeded by those leaves); every other cell stays as it is.
+/// The result's `leaf_size` is the finer leaf (`occ.leaf_size / 2^levels`) and its counters add
+/// the finer carving's. Larger uniform cells carrying the label are left whole (nothing in them
+/// is mixed). `levels` 0 returns `occ` unchanged.
+pub fn refine_label(
+    views: &[Option<Silhouette>],
+    params: &HullParams,
+    occ: Occupancy,
+    l: u8,
+    levels: u32,
+) -> Result<Occupancy, HullError> {
+    if levels == 0 {
+        return Ok(occ);
+    }
+    if levels > MAX_REFINE_LEVELS {
+        return Err(HullError::Params(format!(
+            "a leaf is refined by at most {MAX_REFINE_LEVELS} levels, got {levels}"
+        )));
+    }
+    let leaf = occ.leaf_size;
+    let fine = HullParams {
+        workspace: params.workspace,
+        leaf_size: leaf / f64::from(1u32 << levels),
+        trim_slivers: false,
+        blade_levels: 0,
+        ..params.clone()
+    };
+    let (seeds, mut cells): (Vec<Cell>, Vec<Cell>) =
+        occ.cells.into_iter().partition(|c| c.has(l) && c.size < 1.5 * leaf);
+    let refined = carve_within(views, &fine, &seeds)?;
+    let mut stats = occ.stats;
+    stats.footprint_tests += refined.stats.footprint_tests;
+    stats.cells_visited += refined.stats.cells_visited;
+    stats.kept_against_refutation += refined.stats.kept_against_refutation;
+    stats.unseen_cells += refined.stats.unseen_cells;
+    for (total, n) in stats.lone_refutations.iter_mut().zip(&refined.stats.lone_refutations) {
+        *total += n;
+    }
+    stats.leaves_refined += seeds.len() as u64;
+    cells.extend(refined.cells);
+    stats.unlabelled_cells = cells.iter().filter(|c| !c.hand && !c.scalpel).count() as u64;
+    Ok(Occupancy { cells, leaf_size: refined.leaf_size, origin: occ.origin, resolution: refined.resolution, stats })
 }
 
 /// Carves only inside `seeds`: cells of this octree (the same volume's lower corner and a leaf

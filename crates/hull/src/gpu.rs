@@ -410,9 +410,11 @@ impl GpuCarver {
         })
     }
 
-    /// Carves the hull of the views' silhouettes, as [`crate::carve`] does on the CPU.
+    /// Carves the hull of the views' silhouettes, as [`crate::carve`] does on the CPU (the blade's
+    /// refinement, [`HullParams::blade_levels`], runs on the CPU afterwards).
     pub fn carve(&mut self, views: &[Option<Silhouette>], params: &HullParams) -> Result<Occupancy, HullError> {
         let (leaf_level, extent) = crate::carve::check(views, params)?;
+        crate::carve::check_refine(params, leaf_level)?;
         let present: Vec<&Silhouette> = views.iter().flatten().collect();
         if present.len() > MAX_VIEWS {
             return Err(HullError::Gpu(format!("{} views; the GPU carver takes at most {MAX_VIEWS}", present.len())));
@@ -534,7 +536,8 @@ impl GpuCarver {
             current = 1 - current;
         }
         self.last = last;
-        Ok(crate::carve::finish(cells, stats, params, leaf_level, extent))
+        let occ = crate::carve::finish(cells, stats, params, leaf_level, extent);
+        crate::carve::refine_label(views, params, occ, hullcut_dataset::label::SCALPEL, params.blade_levels)
     }
 }
 

@@ -45,12 +45,19 @@ fn the_gpu_carves_what_the_cpu_carves_up_to_rounding() {
     for (name, rig) in [("default", default_rig()), ("lab8", hullcut_rig::lab8_rig())] {
         let masks = render(&rig, &parts);
         let mut all = views(&rig, &masks);
-        for (case, votes, drop) in [("default", 1, None), ("two votes", 2, None), ("camera 2 missing", 1, Some(2))] {
+        // The blade refined a level finer (on the CPU after the GPU's carving) before the missing
+        // view, which stays missing.
+        for (case, votes, drop, blade_levels) in [
+            ("default", 1, None, 0),
+            ("two votes", 2, None, 0),
+            ("blade refined", 1, None, 1),
+            ("camera 2 missing", 1, Some(2), 0),
+        ] {
             let case = format!("{name}, {case}");
             if let Some(k) = drop {
                 all[k] = None;
             }
-            let params = HullParams { carve_votes: votes, ..super::params(&rig, super::LEAF) };
+            let params = HullParams { carve_votes: votes, blade_levels, ..super::params(&rig, super::LEAF) };
             let cpu = carve(&all, &params).expect("cpu");
             let on_gpu = carver.carve(&all, &params).expect("gpu");
             let (a, b) = (leaves(&cpu), leaves(&on_gpu));

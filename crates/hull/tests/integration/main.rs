@@ -6,7 +6,10 @@ mod gpu;
 mod robustness;
 
 use hullcut_dataset::{Mesh, label};
-use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, is_watertight, silhouettes};
+use hullcut_hull::accuracy::grid_iou;
+use hullcut_hull::{
+    DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, carve_within, is_watertight, silhouettes,
+};
 use hullcut_rig::{Rig, default_rig, lab8_rig, random_rig};
 use hullcut_synth::{CameraRenderer, Light, Part, TriMesh};
 use image::GrayImage;
@@ -351,4 +354,50 @@ fn trimming_slivers_centres_the_hull_on_the_object_and_keeps_a_blade() {
         let blade_volume = |o: &Occupancy| o.volume(Some(label::SCALPEL));
         assert!(blade_volume(&trimmed) > 0.9 * blade_volume(&conservative), "{name}: blade trimmed away");
     }
+}
+
+#[test]
+fn refining_the_blade_brings_it_closer_to_the_exact_hull_and_leaves_the_hand_as_it_was() {
+    // A plate 0.4 mm thick: at 3.1 mm leaves its hull is mostly leaves that the exact hull fills
+    // in part; carved again one level finer, it is closer to the exact hull (the same rule at a
+    // quarter of the leaf), and every cell without the scalpel label is kept as it was.
+    let plate = TriMesh::cuboid(Point3::new(-0.019, -0.0045, -0.0002), Point3::new(0.019, 0.0045, 0.0002));
+    let pose = Isometry3::new(Vector3::new(0.0, 0.085, 0.05), Vector3::new(0.5, 0.2, 0.4));
+    let blade = Part { label: label::SCALPEL, albedo: [0.8; 3], mesh: plate.transformed(&pose) };
+    for (name, rig) in rigs() {
+        let v = views(&rig, &render(&rig, &[sphere(), blade.clone()]));
+        let p = params(&rig, LEAF);
+        let coarse = carve(&v, &p).expect("carve");
+        let refined = carve(&v, &HullParams { blade_levels: 1, ..p.clone() }).expect("carve");
+        let exact = carve_within(&v, &HullParams { leaf_size: LEAF / 4.0, ..p.clone() }, &coarse.cells).expect("carve");
+        let grid = |o: &Occupancy| DenseGrid::from_occupancy(o, Some(label::SCALPEL)).expect("a blade");
+        let exact_grid = grid(&exact);
+        let iou = |o: &Occupancy| grid_iou(&grid(o), &exact_grid, 200_000).expect("iou");
+        let (before, after) = (iou(&coarse), iou(&refined));
+        eprintln!("{name}: blade IoU with the exact hull {before:.3} at the leaf, {after:.3} refined");
+        assert!(after > before + 0.05, "{name}: {before:.3} -> {after:.3}");
+        assert_eq!(refined.leaf_size, LEAF / 2.0);
+        let blade_leaves = coarse.cells.iter().filter(|c| c.scalpel).count() as u64;
+        assert!(blade_leaves > 0 && refined.stats.leaves_refined == blade_leaves, "{name}");
+        let others = |o: &Occupancy| {
+            let mut cells: Vec<_> = o
+                .cells
+                .iter()
+                .filter(|c| !c.scalpel && c.size >= LEAF * 0.99)
+                .map(|c| ([c.min.x, c.min.y, c.min.z].map(f64::to_bits), c.size.to_bits(), c.hand))
+                .collect();
+            cells.sort_unstable();
+            cells
+        };
+        assert_eq!(others(&coarse), others(&refined), "{name}: cells off the blade changed");
+        // Refinement is seeded by the blade's leaves only: nothing of the hull is added outside them.
+        assert!(refined.volume(None) <= coarse.volume(None) + 1e-12, "{name}");
+    }
+    let v = views(&default_rig(), &render(&default_rig(), &[sphere()]));
+    let p = params(&default_rig(), LEAF);
+    let refined = carve(&v, &HullParams { blade_levels: 1, ..p.clone() }).expect("carve");
+    assert_eq!(refined.stats.leaves_refined, 0);
+    assert_eq!(refined.cells.len(), carve(&v, &p).expect("carve").cells.len());
+    let too_deep = HullParams { blade_levels: hullcut_hull::MAX_REFINE_LEVELS + 1, ..p };
+    assert!(carve(&v, &too_deep).is_err());
 }
