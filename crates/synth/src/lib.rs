@@ -36,7 +36,7 @@ pub use scalpel::{
 };
 pub use scene::{DEFAULT_STROKE_DEPTH, DepthImage, RenderedView, START_NS, Scene, SceneConfig};
 pub use synthesize::{SynthSummary, synthesize};
-pub use trajectory::{Key, ORGAN_TOP, SceneKind, ToolState, Trajectory, tool_rotation};
+pub use trajectory::{Key, ORGAN_TOP, Resection, SceneKind, ToolState, Trajectory, tool_rotation};
 
 /// Why a synthesis failed.
 #[derive(Debug, thiserror::Error)]

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use crate::render::{CameraRenderer, Layers, Part, ShadowMap};
 use crate::sensor::expose_channels;
 use crate::texture::mix64;
-use crate::{Appearance, Scalpel, SceneKind, SynthError, ToolKind, Trajectory, TriMesh, hand_mesh_on};
+use crate::{Appearance, Resection, Scalpel, SceneKind, SynthError, ToolKind, Trajectory, TriMesh, hand_mesh_on};
 
 /// Start of every synthetic recording: 2026-11-18 00:00:00 UTC, in nanoseconds since the epoch.
 pub const START_NS: i64 = 1_795_478_400_000_000_000;
@@ -131,13 +131,14 @@ impl Scene {
         // The cameras' azimuths about the working area (the hard scene strokes edge-on to them).
         let azimuths: Vec<f64> =
             config.rig.cameras.iter().map(|c| c.centre().y.atan2(c.centre().x).to_degrees()).collect();
-        let trajectory = Trajectory::for_scene(
+        let trajectory = Trajectory::for_scene_with(
             config.kind,
             config.seed,
             duration,
             scalpel.geometry.tip,
             config.stroke_depth,
             &azimuths,
+            Resection::for_tool(config.tool),
         );
         let (light, background) = (config.appearance.light, config.appearance.background);
         let renderers =

@@ -10,6 +10,8 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 
+use crate::scalpel::ToolKind;
+
 /// Height of the top of the virtual organ resting on the table (a 6 cm thick liver), metres.
 pub const ORGAN_TOP: f64 = 0.06;
 
@@ -74,11 +76,35 @@ pub struct ToolState {
     pub grip: f64,
 }
 
-/// The resection of [`SceneKind::Resect`] from time 0, across the left lobe at x = 5.5 cm along +y
-/// at 10 cm/s, blade pitched 60°: a first stroke with the tip 12 mm above the table, back, and a
-/// second stroke with the tip 2 mm below it (the cutting edge rises 26 mm above the tip, so two
-/// passes reach through the lobe's 35 mm, lattice included). Returns the last key.
-fn resection(keys: &mut Vec<Key>, hover: &dyn Fn(Point3<f64>) -> Point3<f64>) -> Key {
+/// How the resection of [`SceneKind::Resect`] holds the blade: its pitch and the first pass's
+/// height. Both passes run along one line across the left lobe (x = 5.5 cm, along +y, 10 cm/s),
+/// the second with the tip 2 mm below the table; the first must be high enough that its cutting
+/// edge reaches past the lobe's 35 mm (lattice included), and low enough that the two passes'
+/// edges overlap.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resection {
+    /// The tool axis below the horizontal, degrees.
+    pub pitch_deg: f64,
+    /// The first pass's tip above the table, metres.
+    pub first_pass_m: f64,
+}
+
+impl Resection {
+    /// The resection for a tool. The standard blade's curved edge rises 26 mm above the tip at
+    /// 60°: a first pass at 12 mm reaches 38 mm. The pointed No. 11 blade's straight edge rises
+    /// only 21 mm at 60° (a first pass at 12 mm reached 33 mm: the true poses left the lobe
+    /// joined by its top at 6 mm cells), so it is held steeper, at 70° (24 mm), with the first
+    /// pass at 16 mm: it reaches 40 mm and the passes overlap by 6 mm.
+    pub fn for_tool(tool: ToolKind) -> Self {
+        match tool {
+            ToolKind::Standard => Resection { pitch_deg: 60.0, first_pass_m: 0.012 },
+            ToolKind::Pointed => Resection { pitch_deg: 70.0, first_pass_m: 0.016 },
+        }
+    }
+}
+
+/// The resection of [`SceneKind::Resect`] from time 0 (see [`Resection`]). Returns the last key.
+fn resection(keys: &mut Vec<Key>, hover: &dyn Fn(Point3<f64>) -> Point3<f64>, how: Resection) -> Key {
     const X: f64 = 0.055;
     let (y0, y1) = (-0.035, 0.055);
     let stroke_s = (y1 - y0) / 0.1;
@@ -88,7 +114,7 @@ fn resection(keys: &mut Vec<Key>, hover: &dyn Fn(Point3<f64>) -> Point3<f64>) ->
         time: 0.0,
         tip: hover(at(y0, 0.0)),
         azimuth: std::f64::consts::FRAC_PI_2,
-        pitch: 60f64.to_radians(),
+        pitch: how.pitch_deg.to_radians(),
         roll: 0.0,
         grip: 0.6,
     };
@@ -100,7 +126,7 @@ fn resection(keys: &mut Vec<Key>, hover: &dyn Fn(Point3<f64>) -> Point3<f64>) ->
         Key { time: t, tip, grip, ..base }
     };
     go(0.6, at(y0, above), 0.85);
-    for depth in [0.012f64, -0.002] {
+    for depth in [how.first_pass_m, -0.002] {
         go(0.35, at(y0, depth), 0.85);
         go(stroke_s, at(y1, depth), 0.85);
         go(0.35, at(y1, above), 0.85);
@@ -203,6 +229,20 @@ impl Trajectory {
         stroke_depth: [f64; 2],
         camera_azimuths: &[f64],
     ) -> Self {
+        let resection = Resection::for_tool(ToolKind::Standard);
+        Self::for_scene_with(kind, seed, duration, tip_in_tool, stroke_depth, camera_azimuths, resection)
+    }
+
+    /// As [`Self::for_scene`], with the resection of a tool ([`Resection::for_tool`]).
+    pub fn for_scene_with(
+        kind: SceneKind,
+        seed: u64,
+        duration: f64,
+        tip_in_tool: Point3<f64>,
+        stroke_depth: [f64; 2],
+        camera_azimuths: &[f64],
+        how: Resection,
+    ) -> Self {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x7a3c_91e5_0d42_b6f1);
         let deg = f64::to_radians;
         let mut keys = Vec::new();
@@ -231,7 +271,7 @@ impl Trajectory {
                 let mut cycle = 0usize;
                 let mut previous: Option<Key> = None;
                 if kind == SceneKind::Resect {
-                    let lifted = resection(&mut keys, &hover);
+                    let lifted = resection(&mut keys, &hover, how);
                     t = lifted.time;
                     previous = Some(lifted);
                 }
@@ -313,6 +353,32 @@ mod tests {
         // The quick descents to the table peak near 0.3 m/s; the strokes themselves at 0.15.
         assert!(tr.peak_tip_speed(8.0) < 0.35);
         assert!(tips[400..].iter().any(|p| p.x != 0.055 && p.z < ORGAN_TOP), "cut strokes follow");
+    }
+
+    #[test]
+    fn the_resections_two_passes_cut_through_the_lobe_with_either_tools_edge() {
+        // The lobe (35 mm, the lattice's top cells included); each pass's cutting edge spans a
+        // height range above the tip, and the two ranges must join with room to spare (a few
+        // millimetres of the fitted pose's error) and reach past the lobe's top.
+        for (kind, name) in ToolKind::ALL {
+            let geometry = crate::Scalpel::of(kind).geometry;
+            let how = Resection::for_tool(kind);
+            let tr =
+                Trajectory::for_scene_with(SceneKind::Resect, 1, 8.0, geometry.tip, DEFAULT_STROKE_DEPTH, &[], how);
+            let mut spans = Vec::new();
+            for i in 0..400 {
+                let (a, b) = (tr.state_at(i as f64 * 0.01), tr.state_at((i + 1) as f64 * 0.01));
+                let (ta, tb) = (a.tool_to_world * geometry.tip, b.tool_to_world * geometry.tip);
+                if ta.z < 0.02 && (ta.y - 0.01) * (tb.y - 0.01) <= 0.0 {
+                    let z: Vec<f64> = geometry.cutting_edge.iter().map(|p| (a.tool_to_world * p).z).collect();
+                    spans.push(z.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &z| (lo.min(z), hi.max(z))));
+                }
+            }
+            assert_eq!(spans.len(), 2, "{name}: two passes");
+            let (high, low) = (spans[0], spans[1]);
+            assert!(low.0 < 0.0 && high.1 > 0.036, "{name}: {low:?} {high:?}");
+            assert!(low.1 - high.0 > 0.004, "{name}: the passes overlap by {:.1} mm", (low.1 - high.0) * 1e3);
+        }
     }
 
     #[test]
