@@ -320,7 +320,7 @@ fn charts(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
     blade.sort_by_key(|s| s.label.contains("refined"));
     line_chart(
         &out.join("hull_blade.png"),
-        "Scalpel IoU with the exact hull against carve time: leaves, and blade leaves a level finer",
+        "The scalpel's IoU with the exact visual hull against carve time: leaves, and the blade a level finer",
         "carve ms",
         "scalpel IoU",
         (Scale::Log, Scale::Linear),
