@@ -131,12 +131,25 @@ fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
     let (mean, cells) = (t["tled_cells_mean"].as_f64().expect("mean"), t["cells"].as_f64().expect("cells"));
     assert!(mean > 0.0 && mean < 0.5 * cells, "TLED only near the blade: {mean} of {cells} cells");
     assert!(t["region_changes"].as_u64().expect("changes") >= 1, "{t}");
+    assert_eq!(t["far_field"].as_str(), Some("flsm"), "{t}");
+    // A frozen far field: no FLSM; the tissue starts all TLED, then cells at rest away from the
+    // blade sleep.
+    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02", "--far-field", "frozen"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = &r["tissue"];
+    assert_eq!(t["far_field"].as_str(), Some("frozen"), "{t}");
+    assert!(t["hybrid"].is_null() && t["failure"].is_null(), "{t}");
+    let (mean, cells) = (t["tled_cells_mean"].as_f64().expect("mean"), t["cells"].as_f64().expect("cells"));
+    assert!(mean > 0.0 && mean < 0.5 * cells, "TLED only near the blade: {mean} of {cells} cells");
+    // It needs the region's radius (bad usage).
+    let (o, _) = run_cut_small(dir.path(), &["--far-field", "frozen"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     // Without it, every cell is TLED.
     let (o, r) = run_cut_small(dir.path(), &[]);
     assert!(o.status.success(), "{}", text(&o));
     let t = &r["tissue"];
     assert_eq!(t["tled_cells_mean"].as_f64(), t["cells"].as_f64(), "{t}");
-    assert!(t["hybrid"].is_null(), "{t}");
+    assert!(t["hybrid"].is_null() && t["far_field"].is_null(), "{t}");
 }
 
 #[test]

@@ -46,7 +46,7 @@ pub use lattice::{CORNERS, Cell, Lattice};
 pub use material::Material;
 pub use mesh::{MeshError, TriMesh, WindingTree};
 pub use obstacle::Obstacle;
-pub use operational::{HybridParams, HybridSteps, MAX_SUBSTEPS, match_flsm};
+pub use operational::{FarField, HybridParams, HybridSteps, MAX_SUBSTEPS, match_flsm};
 pub use scenario::{MAX_LATTICE_CELLS, Scenario};
 pub use simulation::{MAX_STEPS, NodeRole, Simulation};
 pub use sliver::{TEAR_CELLS, Torn};

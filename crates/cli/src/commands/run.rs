@@ -15,7 +15,7 @@ use hullcut_dataset::Dataset;
 use hullcut_hull::HullParams;
 use hullcut_pipeline::{FrameSource, StageTimes, stages, tissue};
 use hullcut_pose::{PoseError, Template, pose_error, rigid_from_matrix};
-use hullcut_sim::{HybridParams, HybridSteps};
+use hullcut_sim::{FarField, HybridParams, HybridSteps};
 use hullcut_synth::{SceneConfig, SceneKind, synthesize};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
@@ -116,10 +116,14 @@ pub struct Args {
     #[arg(long, value_name = "METRES", default_value_t = 0.005, value_parser = super::positive)]
     cell: f64,
     /// The hybrid model: lattice cells within this distance of the blade's sweep (and cut cells
-    /// and their neighbours) run TLED, the others FLSM, matched to the material; cells return to
-    /// FLSM once the blade has left and they have come to rest. Without it every cell is TLED.
+    /// and their neighbours) run TLED, the others FLSM matched to the material, or sleep
+    /// (`--far-field frozen`); cells leave the region once the blade has left and they have come
+    /// to rest. Without it every cell is TLED.
     #[arg(long, value_name = "METRES", value_parser = non_negative)]
     operational_radius: Option<f64>,
+    /// With --operational-radius: what moves the cells outside the operational region.
+    #[arg(long, value_enum, value_name = "MODEL", default_value_t = FarFieldArg::Flsm, requires = "operational_radius")]
+    far_field: FarFieldArg,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
     masks: checks::MaskSource,
@@ -193,6 +197,16 @@ pub struct Args {
     /// The camera the organ snapshot is drawn through (default: the rig's first).
     #[arg(long, value_name = "NAME")]
     snapshot_camera: Option<String>,
+}
+
+/// `--far-field`: what moves the tissue outside the operational region.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum FarFieldArg {
+    /// FLSM matched to the material, stepping with TLED (the seed paper's hybrid).
+    Flsm,
+    /// Nothing: cells at rest away from the blade and the cuts sleep, their nodes held where they
+    /// are, until the region reaches them again (the tissue starts all TLED and settles first).
+    Frozen,
 }
 
 /// Counted events of a run.
@@ -280,6 +294,8 @@ struct TissueReport {
     failure: Option<String>,
     /// The hybrid model's operational radius, metres (absent: TLED everywhere).
     operational_radius_m: Option<f64>,
+    /// What moved the cells outside it (absent: TLED everywhere).
+    far_field: Option<FarField>,
     /// Its TLED steps per FLSM step, FLSM stiffness and interface pull.
     hybrid: Option<HybridSteps>,
     /// Lattice cells run by TLED per frame set (all of them without the hybrid).
@@ -522,7 +538,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
 
     let clock = Instant::now();
-    let hybrid = args.operational_radius.map(|radius| HybridParams { radius, ..HybridParams::default() });
+    let far_field = match args.far_field {
+        FarFieldArg::Flsm => FarField::Flsm,
+        FarFieldArg::Frozen => FarField::Frozen,
+    };
+    let hybrid = args.operational_radius.map(|radius| HybridParams { radius, far_field, ..HybridParams::default() });
     let gpu = args.backend.open()?;
     if let Some(g) = &gpu {
         println!("GPU backend: {}", g.summary.info.name);
@@ -813,6 +833,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     simulated_s: sim.time(),
                     failure: outcome.failure.clone(),
                     operational_radius_m: args.operational_radius,
+                    far_field: hybrid.map(|h| h.far_field),
                     hybrid: sim.hybrid_steps(),
                     tled_cells_mean: tled_cells.iter().sum::<usize>() as f64 / tled_cells.len().max(1) as f64,
                     tled_cells_max: tled_cells.iter().copied().max().unwrap_or(0),

@@ -31,7 +31,7 @@ use crate::flsm::FlsmParams;
 use crate::lattice::Lattice;
 use crate::mesh::TriMesh;
 use crate::obstacle::Obstacle;
-use crate::operational::{FlsmPart, HybridParams, HybridSteps, near_tool, node_roles};
+use crate::operational::{FarField, FlsmPart, HybridParams, HybridSteps, near_tool, node_roles};
 use crate::piece_contact::{self, PieceContacts};
 use crate::simulation::NodeRole;
 use crate::stability;
@@ -225,7 +225,10 @@ impl CutSim {
         let limit = stability::estimate(&mut tled, &mass, &free, &zeros, lattice.cell, 300, 1e-6);
         let dt_critical = limit.dt_critical.min(lone_cell_dt(&lattice, &material, params.tled)?);
         let dt = (params.dt_safety * dt_critical) as f32;
-        let steps = params.hybrid.map(|h| h.resolve(f64::from(dt), lattice.cell, &material));
+        let steps = params
+            .hybrid
+            .filter(|h| h.far_field == FarField::Flsm)
+            .map(|h| h.resolve(f64::from(dt), lattice.cell, &material));
         let integrator = Integrator::new(mass, Vec::new(), 0, params.damping, dt, speed_limit(&material));
         let mut sim = CutSim {
             lattice,
@@ -345,15 +348,36 @@ impl CutSim {
         let Some(h) = self.params.hybrid else {
             return vec![true; self.lattice.cells.len()];
         };
+        if h.far_field == FarField::Frozen && self.cell_tled.is_empty() {
+            // All TLED to begin with: the body settles before its cells sleep.
+            return vec![true; self.lattice.cells.len()];
+        }
         let u = &self.integrator.u;
         let near = near_tool(&self.lattice, u, &self.tool, h.radius);
         let near_leave = near_tool(&self.lattice, u, &self.tool, 1.5 * h.radius);
         let dt = self.integrator.dt;
+        // With a frozen far field a node also counts as moving while its forces are out of
+        // balance (at the start of a settle it has no speed yet, only gravity): above the
+        // acceleration that would take it to `rest_speed` in REST_TIME_S.
+        // Held nodes and the table's push (a node on it is pushed up as hard as it presses down)
+        // are left out of the balance.
+        let out_of_balance = |n: usize| {
+            let it = &self.integrator;
+            if h.far_field != FarField::Frozen || it.mass[n] <= 0.0 || it.frozen[n] || self.held[n] {
+                return false;
+            }
+            let mut residual = self.f_ext[n] - self.tled.node_force(n);
+            let on_table = self.params.table.is_some_and(|t| f64::from(self.rest[n].z + u[n].z) <= t.height + 1e-6);
+            if on_table {
+                residual.z = residual.z.max(0.0);
+            }
+            residual.norm() > it.mass[n] * h.rest_speed / REST_TIME_S
+        };
         let moving = |c: usize| {
-            self.lattice.cells[c]
-                .nodes
-                .iter()
-                .any(|&n| (u[n as usize] - self.integrator.u_prev[n as usize]).norm() > h.rest_speed * dt)
+            self.lattice.cells[c].nodes.iter().any(|&n| {
+                let n = n as usize;
+                (u[n] - self.integrator.u_prev[n]).norm() > h.rest_speed * dt || out_of_balance(n)
+            })
         };
         (0..self.lattice.cells.len())
             .map(|c| {
@@ -417,6 +441,22 @@ impl CutSim {
             for &p in &part.interface {
                 self.integrator.implicit_stiffness[part.node[p as usize] as usize] = steps.beta;
             }
+        }
+        if self.params.hybrid.is_some_and(|h| h.far_field == FarField::Frozen) {
+            // Sleeping cells hold their nodes, the region's nodes they share included.
+            let mut awake = vec![false; self.cut_lattice.cells.len()];
+            for &k in &cells {
+                awake[k] = true;
+            }
+            for (cell, _) in self.cut_lattice.cells.iter().zip(&awake).filter(|(_, a)| !**a) {
+                for &node in &cell.nodes {
+                    self.integrator.frozen[node as usize] = true;
+                }
+            }
+            // Steps and contacts then cost what the awake nodes cost.
+            let it = &self.integrator;
+            let active = (0..n).filter(|&i| !it.frozen[i] && it.mass[i] > 0.0).map(|i| i as u32).collect();
+            self.integrator.set_active(Some(active));
         }
         if !self.cell_tled.is_empty() && self.cell_tled != wanted {
             self.region_changes += 1;
@@ -694,8 +734,11 @@ impl CutSim {
                     self.contacts = self.resolve_contacts();
                 }
                 if let Some(table) = &self.params.table {
-                    let i = &mut self.integrator;
-                    self.table_contacts = table.resolve(&self.rest, &mut i.u, &mut i.u_prev, &self.held);
+                    let (rest, held) = (&self.rest, &self.held);
+                    self.table_contacts = self.integrator.with_active(|active, u, u_prev| match active {
+                        Some(nodes) => table.resolve_nodes(rest, u, u_prev, held, nodes.iter().map(|&n| n as usize)),
+                        None => table.resolve(rest, u, u_prev, held),
+                    });
                 }
                 self.enforce_piece_contacts();
                 self.contact_s += clock.elapsed().as_secs_f64();
@@ -789,25 +832,27 @@ impl CutSim {
         let (rest, held, obstacles) = (&self.rest, &self.held, &self.obstacles);
         let max_push = (MAX_PUSH_PER_STEP * self.lattice.cell) as f32;
         // Sequential: a voxel lookup per node is cheaper than spreading a few thousand of them
-        // over threads every step.
-        self.integrator
-            .u
-            .iter_mut()
-            .zip(self.integrator.u_prev.iter_mut())
-            .enumerate()
-            .filter(|(n, _)| !held[*n])
-            .map(|(n, (u, u_prev))| {
-                let x = rest[n] + *u;
-                match obstacles.iter().find_map(|o| o.push_at(&x)) {
+        // over threads every step. Only the nodes a step moves (all but a frozen far field's).
+        self.integrator.with_active(|active, u, u_prev| {
+            let count = u.len();
+            let mut push = |n: usize| -> usize {
+                if held[n] {
+                    return 0;
+                }
+                match obstacles.iter().find_map(|o| o.push_at(&(rest[n] + u[n]))) {
                     Some(push) => {
-                        *u += push * (max_push / push.norm().max(max_push));
-                        *u_prev = *u;
+                        u[n] += push * (max_push / push.norm().max(max_push));
+                        u_prev[n] = u[n];
                         1
                     }
                     None => 0,
                 }
-            })
-            .sum()
+            };
+            match active {
+                Some(nodes) => nodes.iter().map(|&n| push(n as usize)).sum(),
+                None => (0..count).map(push).sum(),
+            }
+        })
     }
 
     /// Each piece's volume, place and motion now, piece by piece: whether a piece cut free rests
@@ -1002,6 +1047,10 @@ pub const TEAR_ON_DIVERGENCE: f64 = 0.25;
 
 /// Slivers torn off in one [`CutSim::advance`] before a divergence is given up on.
 pub const MAX_TEARS_PER_ADVANCE: usize = 4;
+
+/// With a frozen far field, a node whose forces would take it from rest to the hybrid's
+/// `rest_speed` within this time is not at rest, seconds.
+const REST_TIME_S: f32 = 0.1;
 
 /// Coulomb friction between pieces (tissue on tissue).
 pub const PIECE_FRICTION: f32 = 0.5;
@@ -1254,6 +1303,48 @@ mod tests {
         let steps = whole.advance(0.1).expect("stable");
         again.advance(steps as f64 * again.dt() * 0.999).expect("stable");
         assert_eq!(whole.displacements(), again.displacements());
+    }
+
+    #[test]
+    fn a_frozen_far_field_settles_with_the_body_then_sleeps_and_wakes_where_the_tool_goes() {
+        // The block under gravity, bottom held, tool over its middle: it starts all TLED, so it
+        // sags as the all-TLED block does; once at rest the cells away from the tool sleep (their
+        // nodes held), and the sag under the tool stays the all-TLED one.
+        let size = Vector3::new(0.06, 0.02, 0.02);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let block = || Lattice::block(Point3::origin(), 0.005, [12, 4, 4]);
+        let frozen = || CutSimParams {
+            hybrid: Some(HybridParams { radius: 0.012, far_field: FarField::Frozen, ..HybridParams::default() }),
+            ..CutSimParams::default()
+        };
+        let mut all =
+            CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim");
+        all.advance(1.5).expect("stable");
+        let mut sim = CutSim::new(block(), &box_sdf(size), material, |p| p.z < 1e-9, frozen()).expect("sim");
+        assert_eq!(sim.tled_cells(), sim.lattice().cells.len(), "all TLED before it settles");
+        assert!(sim.hybrid_steps().is_none(), "no FLSM");
+        let tool = |x: f64| vec![Point3::new(x, 0.01, 0.025)];
+        sim.set_tool(&tool(0.03));
+        // Frame by frame (the region is chosen once an advance).
+        for _ in 0..45 {
+            sim.advance(1.0 / 30.0).expect("stable");
+        }
+        let cells = sim.lattice().cells.len();
+        assert!(sim.tled_cells() > 0 && sim.tled_cells() < cells / 2, "{} of {cells} awake", sim.tled_cells());
+        let (a, f) = (all.displacements(), sim.displacements());
+        let sag = a.iter().map(|d| d.z).fold(0.0f32, f32::min);
+        let worst = a.iter().zip(f).map(|(a, f)| (a - f).norm()).fold(0.0f32, f32::max);
+        eprintln!("{} of {cells} cells awake; sag {sag} m, largest difference {worst} m", sim.tled_cells());
+        assert!(sag < -1e-4 && worst < 0.02 * -sag, "sag {sag} m, largest difference {worst} m");
+        // Held: a sleeping node does not move over a further step.
+        let before = sim.displacements().to_vec();
+        sim.advance(0.05).expect("stable");
+        let far = (0..sim.lattice().node_count()).filter(|&n| sim.lattice().rest[n].x < 0.005);
+        assert!(far.clone().count() > 0 && far.clone().all(|n| sim.displacements()[n] == before[n]));
+        // The tool moves to the end: its cells wake.
+        sim.set_tool(&tool(0.0025));
+        sim.advance(0.05).expect("stable");
+        assert!(tled_centres(&sim).iter().any(|c| c.x < 0.005), "awake where the tool is");
     }
 
     #[test]

@@ -59,10 +59,22 @@ impl Table {
         u_prev: &mut [Vector3<f32>],
         skip: &[bool],
     ) -> usize {
+        self.resolve_nodes(rest, u, u_prev, skip, 0..u.len())
+    }
+
+    /// As [`Table::resolve`], for `nodes` only (the others are left as they are).
+    pub fn resolve_nodes(
+        &self,
+        rest: &[Point3<f32>],
+        u: &mut [Vector3<f32>],
+        u_prev: &mut [Vector3<f32>],
+        skip: &[bool],
+        nodes: impl Iterator<Item = usize>,
+    ) -> usize {
         let (half_space, pose) = self.shape();
         let top = self.height as f32;
         let mut contacts = 0;
-        for n in 0..u.len() {
+        for n in nodes {
             let x = rest[n] + u[n];
             // The broad phase: only nodes at or below the top can be in the half-space.
             if skip[n] || x.z > top {

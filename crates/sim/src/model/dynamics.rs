@@ -79,6 +79,11 @@ pub struct Integrator {
     /// Nodes that keep their displacement through a step (moved by another model, e.g. FLSM).
     pub frozen: Vec<bool>,
     next: Vec<Vector3<f32>>,
+    /// When set ([`Integrator::set_active`]): the only nodes a step updates; every other node is
+    /// held, with the same displacement in every buffer.
+    active: Option<Vec<u32>>,
+    /// The active nodes' new displacements, in the order of `active`.
+    active_next: Vec<Vector3<f32>>,
 }
 
 impl Integrator {
@@ -110,7 +115,41 @@ impl Integrator {
             implicit_stiffness: vec![0.0; n],
             frozen: vec![false; n],
             next: vec![Vector3::zeros(); n],
+            active: None,
+            active_next: Vec::new(),
         }
+    }
+
+    /// Steps only `active` nodes from now on (all nodes for `None`), in increasing order; every
+    /// other node is held where it is (its velocity dropped). With few nodes active in a large
+    /// body a step then costs what those nodes cost. The nodes left out must be frozen
+    /// ([`Integrator::frozen`]) or massless, as a full step would leave them.
+    pub fn set_active(&mut self, active: Option<Vec<u32>>) {
+        if let Some(nodes) = &active {
+            let mut on = vec![false; self.u.len()];
+            for &n in nodes {
+                on[n as usize] = true;
+            }
+            for (n, _) in on.iter().enumerate().filter(|(_, on)| !**on) {
+                self.u_prev[n] = self.u[n];
+                self.next[n] = self.u[n];
+            }
+        }
+        self.active = active;
+    }
+
+    /// The nodes a step updates, when not all ([`Integrator::set_active`]).
+    pub fn active(&self) -> Option<&[u32]> {
+        self.active.as_deref()
+    }
+
+    /// Calls `f` with the active nodes (`None`: all) and the displacements now and a step ago,
+    /// for a pass that moves nodes after a step (contacts).
+    pub fn with_active<R>(
+        &mut self,
+        f: impl FnOnce(Option<&[u32]>, &mut [Vector3<f32>], &mut [Vector3<f32>]) -> R,
+    ) -> R {
+        f(self.active.as_deref(), &mut self.u, &mut self.u_prev)
     }
 
     /// Simulated time, seconds.
@@ -136,19 +175,31 @@ impl Integrator {
         // Per node in parallel slabs; each slab reports its highest squared speed, and whether it
         // saw a non-finite one, without branches so the loop vectorizes. The fastest node is looked
         // up only when the step fails.
-        let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
-        let arch = pulp::Arch::new();
-        // Take the output out so the runs can read `self` while writing it.
-        let mut next = std::mem::take(&mut self.next);
-        let this = &*self;
-        let (max_speed2, finite) = next
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .map(|(c, next)| {
-                arch.dispatch(UpdateRun { it: this, f_int: &f_int, f_ext, coeffs: [a, b, dt2], first: c * chunk, next })
-            })
-            .reduce(|| (0.0, true), |p, q| (p.0.max(q.0), p.1 && q.1));
-        self.next = next;
+        let (max_speed2, finite) = if self.active.is_some() {
+            self.update_active(&f_int, f_ext, [a, b, dt2])
+        } else {
+            let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
+            let arch = pulp::Arch::new();
+            // Take the output out so the runs can read `self` while writing it.
+            let mut next = std::mem::take(&mut self.next);
+            let this = &*self;
+            let result = next
+                .par_chunks_mut(chunk)
+                .enumerate()
+                .map(|(c, next)| {
+                    arch.dispatch(UpdateRun {
+                        it: this,
+                        f_int: &f_int,
+                        f_ext,
+                        coeffs: [a, b, dt2],
+                        first: c * chunk,
+                        next,
+                    })
+                })
+                .reduce(|| (0.0, true), |p, q| (p.0.max(q.0), p.1 && q.1));
+            self.next = next;
+            result
+        };
         let max_speed2 = if finite { max_speed2 } else { f32::NAN };
         // Prescribed components, and the reactions they exert: r = m (ü + α u̇) + f_int − f_ext.
         let t_next = (self.step + 1) as f32 * dt;
@@ -179,6 +230,50 @@ impl Integrator {
         std::mem::swap(&mut self.u, &mut self.next);
         self.step += 1;
         Ok(())
+    }
+
+    /// The update of the active nodes alone ([`Integrator::set_active`]): their new displacements
+    /// computed in parallel runs, then written into `next`; the highest squared speed and whether
+    /// all were finite.
+    fn update_active<F>(&mut self, f_int: &F, f_ext: &[Vector3<f32>], [a, b, dt2]: [f32; 3]) -> (f32, bool)
+    where
+        F: Fn(usize) -> Vector3<f32> + Sync,
+    {
+        let active = self.active.take().unwrap_or_default();
+        let mut out = std::mem::take(&mut self.active_next);
+        out.resize(active.len(), Vector3::zeros());
+        let chunk = active.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(256);
+        let this = &*self;
+        let inv_dt = 1.0 / this.dt;
+        let result = active
+            .par_chunks(chunk)
+            .zip(out.par_chunks_mut(chunk))
+            .map(|(nodes, out)| {
+                let (mut worst, mut finite) = (0.0f32, true);
+                for (&i, out) in nodes.iter().zip(out) {
+                    let i = i as usize;
+                    let (m, u) = (this.mass[i], this.u[i]);
+                    let x = if m > 0.0 && !this.frozen[i] {
+                        let k = this.implicit_stiffness[i];
+                        let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
+                        ((f_ext[i] - f_int(i)) * (dt2 / m) + u * 2.0 - this.u_prev[i] * b) * denom
+                    } else {
+                        u
+                    };
+                    *out = x;
+                    let v2 = ((x - u) * inv_dt).norm_squared();
+                    finite &= v2.is_finite();
+                    worst = worst.max(v2);
+                }
+                (worst, finite)
+            })
+            .reduce(|| (0.0, true), |p, q| (p.0.max(q.0), p.1 && q.1));
+        for (&i, x) in active.iter().zip(&out) {
+            self.next[i as usize] = *x;
+        }
+        self.active_next = out;
+        self.active = Some(active);
+        result
     }
 
     /// The reactions of the prescribed components in the step from `u` to `next`

@@ -49,11 +49,37 @@ pub struct HybridParams {
     pub substeps: Option<usize>,
     /// A TLED cell returns to FLSM only when all its nodes are slower than this, m/s.
     pub rest_speed: f32,
+    /// What moves the cells outside the operational region.
+    #[serde(default)]
+    pub far_field: FarField,
+}
+
+/// What moves the cells outside the operational region of a [`crate::CutSim`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FarField {
+    /// FLSM matched to the material (the seed paper's hybrid), stepping with TLED.
+    #[default]
+    Flsm,
+    /// Nothing: a cell at rest and away from the tool and the cuts sleeps, its nodes held where
+    /// they are (the region's nodes it shares included) until the region reaches it again. The
+    /// body starts all TLED, so it settles before its cells sleep; a cell sleeps only when all its
+    /// nodes are slower than `rest_speed`. Exact where the far field is at rest (the tool's push
+    /// and the cuts leave it so); wrong by what the far field would have moved when the region
+    /// is too small.
+    Frozen,
 }
 
 impl Default for HybridParams {
     fn default() -> Self {
-        Self { radius: 0.02, flsm: FlsmParams::default(), beta: None, substeps: None, rest_speed: 2e-3 }
+        Self {
+            radius: 0.02,
+            flsm: FlsmParams::default(),
+            beta: None,
+            substeps: None,
+            rest_speed: 2e-3,
+            far_field: FarField::Flsm,
+        }
     }
 }
 

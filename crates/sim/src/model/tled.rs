@@ -352,10 +352,13 @@ impl pulp::WithSimd for SlabPass<'_> {
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> usize {
         let SlabPass { tled, first, batches, u, out } = self;
-        let SlabAccumulators { first_node, acc: [ax, ay, az] } = out;
+        let SlabAccumulators { first_node, acc: [ax, ay, az], touched } = out;
         let mut acc = [ax, ay, az];
         for a in &mut acc {
-            a.fill(0.0);
+            match touched {
+                Some(entries) => entries.iter().for_each(|&i| a[i as usize] = 0.0),
+                None => a.fill(0.0),
+            }
         }
         let consts = tled.one_point_constants();
         let cells = tled.cell_nodes.len();

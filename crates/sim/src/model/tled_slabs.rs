@@ -26,12 +26,18 @@ pub(crate) struct Slabs {
     /// Node → its accumulator slots (one per slab whose cells touch it), compressed rows.
     offsets: Vec<u32>,
     slots: Vec<u32>,
+    /// Per slab whose cells touch under a quarter of its run (a subset of a lattice's cells: an
+    /// operational region, whose cells in grid order span most of the nodes between them): the
+    /// run's entries they touch, the only ones the element pass zeroes and fills.
+    sparse: Vec<Option<Vec<u32>>>,
 }
 
 /// One slab's share of the accumulators: its first node and its three component runs.
 pub(crate) struct SlabAccumulators<'a> {
     pub first_node: usize,
     pub acc: [&'a mut [f32]; 3],
+    /// The entries of the run its cells touch, when few: only those need zeroing.
+    pub touched: Option<&'a [u32]>,
 }
 
 impl Slabs {
@@ -42,18 +48,23 @@ impl Slabs {
         let mut first_node = Vec::new();
         let mut start = vec![0];
         let mut pairs: Vec<(u32, u32)> = Vec::new();
+        let mut sparse = Vec::new();
         for cells in cell_nodes.chunks(per_slab) {
             let lo = cells.iter().flatten().copied().min().unwrap_or(0) as usize;
             let hi = cells.iter().flatten().copied().max().map_or(lo, |h| h as usize + 1);
             let base = start[start.len() - 1];
             let mut seen = vec![false; hi - lo];
+            let mut touched = Vec::new();
             for &n in cells.iter().flatten() {
                 let local = n as usize - lo;
                 if !seen[local] {
                     seen[local] = true;
+                    touched.push(local as u32);
                     pairs.push((n, (base + local) as u32));
                 }
             }
+            touched.sort_unstable();
+            sparse.push((touched.len() * 4 < hi - lo).then_some(touched));
             first_node.push(lo);
             start.push(base + hi - lo);
         }
@@ -71,7 +82,7 @@ impl Slabs {
             fill[n as usize] += 1;
         }
         let total = start[start.len() - 1];
-        Self { chunk, first_node, start, acc: std::array::from_fn(|_| vec![0.0; total]), offsets, slots }
+        Self { chunk, first_node, start, acc: std::array::from_fn(|_| vec![0.0; total]), offsets, slots, sparse }
     }
 
     /// Each slab's accumulators, in slab order, for the element pass to fill in parallel.
@@ -85,7 +96,7 @@ impl Slabs {
             let (ys, yr) = std::mem::take(&mut y).split_at_mut(len);
             let (zs, zr) = std::mem::take(&mut z).split_at_mut(len);
             (x, y, z) = (xr, yr, zr);
-            parts.push(SlabAccumulators { first_node, acc: [xs, ys, zs] });
+            parts.push(SlabAccumulators { first_node, acc: [xs, ys, zs], touched: self.sparse[k].as_deref() });
         }
         parts
     }
