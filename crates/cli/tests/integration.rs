@@ -614,6 +614,46 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
 }
 
 #[test]
+fn reconstruct_with_the_blade_refined_carves_its_leaves_finer_and_says_so() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let dataset = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+    let path = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let run = |levels: &str| {
+        let (out, report) = (dir.path().join(format!("rec{levels}")), dir.path().join(format!("rec{levels}.json")));
+        let o = hullcut(&[
+            "reconstruct",
+            "--dataset",
+            dataset,
+            "--out",
+            &path(&out),
+            "--frames",
+            "6:8",
+            "--masks",
+            "files",
+            "--blade-levels",
+            levels,
+            "--report",
+            &path(&report),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let ply = out.join("hull").join("scalpel").join("000006.ply");
+        let mesh = hullcut_dataset::read_ply(&ply).expect("mesh written");
+        assert!(hullcut_hull::is_watertight(&mesh), "{} is not closed", ply.display());
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+        r
+    };
+    let (plain, refined) = (run("0"), run("1"));
+    assert_eq!((plain["blade_levels"].as_u64(), refined["blade_levels"].as_u64()), (Some(0), Some(1)));
+    assert_eq!(plain["counters"]["leaves_refined"].as_u64(), Some(0));
+    assert!(refined["counters"]["leaves_refined"].as_u64().expect("refined") > 0, "{}", refined["counters"]);
+    // More than three levels is bad usage.
+    let o =
+        hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&dir.path().join("x")), "--blade-levels", "4"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
+
+#[test]
 fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report() {
     let dir = tempfile::tempdir().expect("tempdir");
     let dataset = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");

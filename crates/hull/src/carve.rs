@@ -946,7 +946,6 @@ pub fn refine_label(
     }
     let leaf = occ.leaf_size;
     let fine = HullParams {
-        workspace: params.workspace,
         leaf_size: leaf / f64::from(1u32 << levels),
         trim_slivers: false,
         blade_levels: 0,

@@ -335,6 +335,8 @@ struct Report {
     masks: String,
     workspace: hullcut_hull::WorkingVolume,
     voxel_m: f64,
+    /// Octree levels by which the scalpel's leaves were refined (`--blade-levels`).
+    blade_levels: u32,
     realtime: bool,
     /// Frame sets in the stages at once (`--queue`).
     queue: usize,
@@ -800,6 +802,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             masks: if use_files { "files" } else { "segment" }.to_owned(),
             workspace: volume,
             voxel_m: args.voxel,
+            blade_levels: args.blade_levels,
             realtime: args.realtime,
             queue: args.queue,
             queue_max: outcome.queue_max,
