@@ -100,15 +100,18 @@ impl CellIndex for SpatialHash {
 }
 
 /// parry's bounding volume hierarchy (binned SAH build) over the lattice's cells at their current
-/// positions.
+/// positions (all of them, or those near a box: [`CellTree::within`]).
 #[derive(Clone)]
 pub struct CellTree {
-    bvh: Bvh,
+    /// None when no cell is in it.
+    bvh: Option<Bvh>,
+    /// The lattice cell of each of the tree's leaves (the tree numbers its leaves densely).
+    cells: Vec<u32>,
 }
 
 impl std::fmt::Debug for CellTree {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CellTree").field("cells", &self.bvh.leaf_count()).finish()
+        f.debug_struct("CellTree").field("cells", &self.cells.len()).finish()
     }
 }
 
@@ -120,19 +123,44 @@ impl CellTree {
     /// The hierarchy over every cell of `lattice` with its nodes at `positions` (one per lattice
     /// node).
     pub fn new(lattice: &Lattice, positions: &[Point3<f64>]) -> Self {
-        let boxes = lattice.cells.iter().map(|cell| {
-            let (lo, hi) = bounds(cell.nodes.iter().map(|&i| positions[i as usize]));
-            Aabb::new(to_parry(&lo), to_parry(&hi))
-        });
-        CellTree { bvh: Bvh::from_iter(BvhBuildStrategy::Binned, boxes.enumerate()) }
+        let all = Point3::from(Vector3::repeat(f64::INFINITY));
+        Self::within(lattice, positions, &-all, &all)
+    }
+
+    /// The hierarchy over the cells whose boxes overlap the box `lo`..`hi` (the rest can never be
+    /// a candidate of a query inside that box): for a cut, the swept surface's box, so that a
+    /// large organ's tree holds the few thousand cells near the blade, not all of them.
+    pub fn within(lattice: &Lattice, positions: &[Point3<f64>], lo: &Point3<f64>, hi: &Point3<f64>) -> Self {
+        let mut cells = Vec::new();
+        let mut boxes = Vec::new();
+        for (k, cell) in lattice.cells.iter().enumerate() {
+            let (a, b) = bounds(cell.nodes.iter().map(|&i| positions[i as usize]));
+            if (0..3).all(|i| a[i] <= hi[i] && b[i] >= lo[i]) {
+                boxes.push((cells.len(), Aabb::new(to_parry(&a), to_parry(&b))));
+                cells.push(k as u32);
+            }
+        }
+        let bvh = (!boxes.is_empty()).then(|| Bvh::from_iter(BvhBuildStrategy::Binned, boxes));
+        CellTree { bvh, cells }
+    }
+
+    /// How many cells the tree holds.
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Whether the tree holds no cell.
+    pub fn is_empty(&self) -> bool {
+        self.cells.is_empty()
     }
 }
 
 impl CellIndex for CellTree {
     fn candidates(&self, lo: &Point3<f64>, hi: &Point3<f64>, out: &mut Vec<u32>) {
         out.clear();
+        let Some(bvh) = &self.bvh else { return };
         let query = Aabb::new(to_parry(lo), to_parry(hi));
-        out.extend(self.bvh.intersect_aabb(&query));
+        out.extend(bvh.intersect_aabb(&query).map(|leaf| self.cells[leaf as usize]));
         out.sort_unstable();
         out.dedup();
     }
@@ -220,6 +248,9 @@ pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &impl CellI
     let mut found: Vec<EdgeCut> = Vec::new();
     let mut candidates = Vec::new();
     let mut pairs_tested = 0;
+    // The cells whose boxes met a triangle's: every cell with a crossed edge is among them (the
+    // crossing lies in the triangle's box and in the box of each cell holding the edge).
+    let mut near = Vec::new();
     for t in 0..surface.triangles.len() {
         let tri = surface.triangle(t);
         let (lo, hi) = bounds(tri.iter().copied());
@@ -231,6 +262,7 @@ pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &impl CellI
                 continue;
             }
             pairs_tested += 1;
+            near.push(c);
             for [i, j] in CELL_EDGES {
                 let (a, b) = (cell.nodes[i].min(cell.nodes[j]), cell.nodes[i].max(cell.nodes[j]));
                 let (pa, pb) = (&positions[a as usize], &positions[b as usize]);
@@ -242,14 +274,17 @@ pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &impl CellI
     }
     found.sort_by(|x, y| (x.a, x.b).cmp(&(y.a, y.b)).then(x.t.total_cmp(&y.t)));
     found.dedup_by(|x, y| (x.a, x.b) == (y.a, y.b));
+    near.sort_unstable();
+    near.dedup();
     let mut cells = Vec::new();
-    for (c, cell) in lattice.cells.iter().enumerate() {
+    for c in near {
+        let cell = &lattice.cells[c as usize];
         let crossed = CELL_EDGES.iter().any(|&[i, j]| {
             let key = (cell.nodes[i].min(cell.nodes[j]), cell.nodes[i].max(cell.nodes[j]));
             found.binary_search_by(|e| (e.a, e.b).cmp(&key)).is_ok()
         });
         if crossed {
-            cells.push(c as u32);
+            cells.push(c);
         }
     }
     Cuts { edges: found, cells, pairs_tested }
@@ -275,6 +310,37 @@ mod tests {
         let hash = SpatialHash::new(lattice, positions, lattice.cell);
         let s = SweptSurface::between(&edge(), &from, &to, 0.005, 0.1).expect("surface");
         cut_edges(lattice, positions, &hash, &s)
+    }
+
+    #[test]
+    fn a_tree_of_the_cells_near_the_surface_finds_what_the_whole_lattices_tree_finds() {
+        // A tilted stroke through part of a larger block: the tree over the cells in the swept
+        // surface's box holds fewer cells and gives the same cuts as the hash and the whole tree.
+        let l = Lattice::block(Point3::origin(), 0.01, [24, 16, 6]);
+        let tilt = UnitQuaternion::from_euler_angles(0.3, 0.2, 0.5);
+        let (from, to) = (
+            Isometry3::from_parts(Translation3::new(0.01, 0.02, 0.08), tilt),
+            Isometry3::from_parts(Translation3::new(0.03, 0.04, 0.0), tilt),
+        );
+        let s = SweptSurface::between(&edge(), &from, &to, 0.005, 0.1).expect("surface");
+        let (mut lo, mut hi) = (Point3::from(Vector3::repeat(f64::MAX)), Point3::from(Vector3::repeat(f64::MIN)));
+        for v in &s.vertices {
+            lo = lo.inf(v);
+            hi = hi.sup(v);
+        }
+        let whole = cut_edges(&l, &l.rest, &CellTree::new(&l, &l.rest), &s);
+        let near_tree = CellTree::within(&l, &l.rest, &lo, &hi);
+        assert!(near_tree.len() < l.cells.len() / 2, "{} of {} cells", near_tree.len(), l.cells.len());
+        let near = cut_edges(&l, &l.rest, &near_tree, &s);
+        let hashed = cut_edges(&l, &l.rest, &SpatialHash::new(&l, &l.rest, l.cell), &s);
+        assert!(!whole.edges.is_empty());
+        assert_eq!((&near.edges, &near.cells), (&whole.edges, &whole.cells));
+        assert_eq!((&hashed.edges, &hashed.cells), (&whole.edges, &whole.cells));
+        // A surface away from every cell: an empty tree, no candidates, no cuts.
+        let far = Point3::new(5.0, 5.0, 5.0);
+        let empty = CellTree::within(&l, &l.rest, &far, &(far + Vector3::repeat(0.1)));
+        assert!(empty.is_empty());
+        assert!(cut_edges(&l, &l.rest, &empty, &s).edges.is_empty());
     }
 
     #[test]

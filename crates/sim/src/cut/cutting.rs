@@ -520,7 +520,14 @@ impl CutSim {
         let start = Instant::now();
         let positions: Vec<Point3<f64>> =
             self.lattice.rest.iter().zip(&self.integrator.u).map(|(p, u)| p + u.cast::<f64>()).collect();
-        let tree = CellTree::new(&self.lattice, &positions);
+        // Only the cells near the swept surface can be cut: the tree holds those.
+        let (mut lo, mut hi) =
+            (Point3::from(Vector3::repeat(f64::INFINITY)), Point3::from(Vector3::repeat(f64::NEG_INFINITY)));
+        for v in &surface.vertices {
+            lo = lo.inf(v);
+            hi = hi.sup(v);
+        }
+        let tree = CellTree::within(&self.lattice, &positions, &lo, &hi);
         let cuts = cut_edges(&self.lattice, &positions, &tree, surface);
         let new_edges =
             cuts.edges.iter().filter(|e| !self.topology.cut.contains_key(&(e.a.min(e.b), e.a.max(e.b)))).count();
