@@ -455,7 +455,8 @@ impl CutSim {
             }
             // Steps and contacts then cost what the awake nodes cost.
             let it = &self.integrator;
-            let active = (0..n).filter(|&i| !it.frozen[i] && it.mass[i] > 0.0).map(|i| i as u32).collect();
+            let active =
+                (0..n).filter(|&i| (!it.frozen[i] && it.mass[i] > 0.0) || self.held[i]).map(|i| i as u32).collect();
             self.integrator.set_active(Some(active));
         }
         if !self.cell_tled.is_empty() && self.cell_tled != wanted {

@@ -121,9 +121,10 @@ impl Integrator {
     }
 
     /// Steps only `active` nodes from now on (all nodes for `None`), in increasing order; every
-    /// other node is held where it is (its velocity dropped). With few nodes active in a large
-    /// body a step then costs what those nodes cost. The nodes left out must be frozen
-    /// ([`Integrator::frozen`]) or massless, as a full step would leave them.
+    /// other node is held where it is (its velocity dropped now), and a step leaves its `u` and
+    /// `u_prev` untouched. With few nodes active in a large body a step then costs what those
+    /// nodes cost. The nodes left out must be frozen ([`Integrator::frozen`]) or massless, as a
+    /// full step would leave them, and the prescribed nodes must be among the active ones.
     pub fn set_active(&mut self, active: Option<Vec<u32>>) {
         if let Some(nodes) = &active {
             let mut on = vec![false; self.u.len()];
@@ -132,7 +133,6 @@ impl Integrator {
             }
             for (n, _) in on.iter().enumerate().filter(|(_, on)| !**on) {
                 self.u_prev[n] = self.u[n];
-                self.next[n] = self.u[n];
             }
         }
         self.active = active;
@@ -210,7 +210,18 @@ impl Integrator {
         self.reactions_into(&f_int, f_ext, [&self.u_prev[..], &self.u[..], &self.next[..]], &mut reactions);
         self.reactions = reactions;
         if !max_speed2.is_finite() || max_speed2.sqrt() > self.speed_limit {
-            let fastest = fastest_node(&self.next, &self.u, dt);
+            let fastest = match &self.active {
+                // Only the active nodes' `next` is this step's.
+                Some(active) => {
+                    let speed2 = |&i: &u32| ((self.next[i as usize] - self.u[i as usize]) / dt).norm_squared();
+                    active
+                        .iter()
+                        .find(|i| !speed2(i).is_finite())
+                        .or_else(|| active.iter().max_by(|i, j| speed2(i).total_cmp(&speed2(j))))
+                        .map_or(0, |&i| i as usize)
+                }
+                None => fastest_node(&self.next, &self.u, dt),
+            };
             return Err(Divergence {
                 step: self.step + 1,
                 time: f64::from(t_next),
@@ -226,8 +237,21 @@ impl Integrator {
                 },
             });
         }
-        std::mem::swap(&mut self.u_prev, &mut self.u);
-        std::mem::swap(&mut self.u, &mut self.next);
+        match &self.active {
+            // Only the active nodes move: the others keep `u` and `u_prev` as they are, whatever
+            // another pass (a contact) wrote there.
+            Some(active) => {
+                for &i in active {
+                    let i = i as usize;
+                    self.u_prev[i] = self.u[i];
+                    self.u[i] = self.next[i];
+                }
+            }
+            None => {
+                std::mem::swap(&mut self.u_prev, &mut self.u);
+                std::mem::swap(&mut self.u, &mut self.next);
+            }
+        }
         self.step += 1;
         Ok(())
     }
@@ -377,6 +401,35 @@ mod tests {
         assert_eq!(ramp(2.0, 1.0), 1.0);
         assert!((ramp(0.5, 1.0) - 0.5).abs() < 1e-6);
         assert_eq!(ramp(0.3, 0.0), 1.0);
+    }
+
+    #[test]
+    fn active_nodes_step_as_a_full_step_does_and_the_others_keep_what_was_written() {
+        // Four nodes under gravity, node 1 frozen: stepping only nodes 0, 2 and 3 gives them the
+        // full step's displacements; node 1, moved by another pass between steps, stays there.
+        let gravity = [Vector3::new(0.0, 0.0, -9.81f32); 4];
+        let mut full = Integrator::new(vec![1.0, 1.0, 2.0, 0.5], Vec::new(), 0, 3.0, 1e-3, 1e3);
+        full.frozen[1] = true;
+        let mut part = full.clone();
+        part.set_active(Some(vec![0, 2, 3]));
+        assert_eq!(part.active(), Some(&[0u32, 2, 3][..]));
+        for step in 0..50 {
+            full.advance(&[Vector3::zeros(); 4], &gravity).expect("stable");
+            part.advance(&[Vector3::zeros(); 4], &gravity).expect("stable");
+            if step == 20 {
+                part.with_active(|_, u, u_prev| {
+                    u[1].x = 0.25;
+                    u_prev[1].x = 0.25;
+                });
+            }
+        }
+        for i in [0, 2, 3] {
+            assert_eq!(part.u[i], full.u[i], "node {i}");
+            assert_eq!(part.u_prev[i], full.u_prev[i], "node {i}");
+        }
+        assert_eq!(part.u[1], Vector3::new(0.25, 0.0, 0.0));
+        assert_eq!(part.u_prev[1], part.u[1]);
+        assert!(full.u[0].z < 0.0, "it fell");
     }
 
     #[test]
