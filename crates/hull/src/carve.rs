@@ -103,8 +103,8 @@ pub struct HullParams {
     /// Leaves carrying the scalpel label are carved again this many octree levels finer after
     /// carving ([`refine_label`]; 0: off, at most [`MAX_REFINE_LEVELS`]). A blade is thinner than
     /// a leaf, so at the leaf size its hull is mostly leaves that the exact hull fills in part;
-    /// one level finer halves that error for the blade's few thousand leaves while the hand keeps
-    /// its leaf. The occupancy's `leaf_size` is then the finer one. [`carve_within`] does not
+    /// one level finer brings it close to the exact hull (lab8's pointed blade at 1 mm: IoU 0.72
+    /// to 0.90) for the cost of the blade's few thousand leaves, while the hand keeps its leaf. The occupancy's `leaf_size` is then the finer one. [`carve_within`] does not
     /// refine.
     pub blade_levels: u32,
 }
