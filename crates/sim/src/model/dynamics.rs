@@ -212,15 +212,8 @@ impl Integrator {
         if !max_speed2.is_finite() || max_speed2.sqrt() > self.speed_limit {
             let fastest = match &self.active {
                 // Only the active nodes' `next` is this step's.
-                Some(active) => {
-                    let speed2 = |&i: &u32| ((self.next[i as usize] - self.u[i as usize]) / dt).norm_squared();
-                    active
-                        .iter()
-                        .find(|i| !speed2(i).is_finite())
-                        .or_else(|| active.iter().max_by(|i, j| speed2(i).total_cmp(&speed2(j))))
-                        .map_or(0, |&i| i as usize)
-                }
-                None => fastest_node(&self.next, &self.u, dt),
+                Some(active) => fastest_node(&self.next, &self.u, dt, active.iter().map(|&i| i as usize)),
+                None => fastest_node(&self.next, &self.u, dt, 0..self.u.len()),
             };
             return Err(Divergence {
                 step: self.step + 1,
@@ -256,6 +249,24 @@ impl Integrator {
         Ok(())
     }
 
+    /// Node `i`'s displacement after the step: the damped central difference (with its implicit
+    /// spring, if any), or where it is for a frozen or massless node. `[a, b, dt2]` are
+    /// 1 / (1 + αdt/2), 1 − αdt/2 and dt².
+    #[inline(always)]
+    fn updated<F>(&self, i: usize, f_int: &F, f_ext: &[Vector3<f32>], [a, b, dt2]: [f32; 3]) -> Vector3<f32>
+    where
+        F: Fn(usize) -> Vector3<f32>,
+    {
+        let (m, u) = (self.mass[i], self.u[i]);
+        if m > 0.0 && !self.frozen[i] {
+            let k = self.implicit_stiffness[i];
+            let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
+            ((f_ext[i] - f_int(i)) * (dt2 / m) + u * 2.0 - self.u_prev[i] * b) * denom
+        } else {
+            u
+        }
+    }
+
     /// The update of the active nodes alone ([`Integrator::set_active`]): their new displacements
     /// computed in parallel runs, then written into `next`; the highest squared speed and whether
     /// all were finite.
@@ -276,14 +287,7 @@ impl Integrator {
                 let (mut worst, mut finite) = (0.0f32, true);
                 for (&i, out) in nodes.iter().zip(out) {
                     let i = i as usize;
-                    let (m, u) = (this.mass[i], this.u[i]);
-                    let x = if m > 0.0 && !this.frozen[i] {
-                        let k = this.implicit_stiffness[i];
-                        let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
-                        ((f_ext[i] - f_int(i)) * (dt2 / m) + u * 2.0 - this.u_prev[i] * b) * denom
-                    } else {
-                        u
-                    };
+                    let (u, x) = (this.u[i], this.updated(i, f_int, f_ext, [a, b, dt2]));
                     *out = x;
                     let v2 = ((x - u) * inv_dt).norm_squared();
                     finite &= v2.is_finite();
@@ -365,15 +369,7 @@ impl<F: Fn(usize) -> Vector3<f32> + Sync> pulp::WithSimd for UpdateRun<'_, F> {
         let (mut worst, mut finite) = (0.0f32, true);
         for (j, out) in next.iter_mut().enumerate() {
             let i = first + j;
-            let m = it.mass[i];
-            let u = it.u[i];
-            let x = if m > 0.0 && !it.frozen[i] {
-                let k = it.implicit_stiffness[i];
-                let denom = if k > 0.0 { 1.0 / (1.0 / a + k * dt2 / m) } else { a };
-                ((f_ext[i] - f_int(i)) * (dt2 / m) + u * 2.0 - it.u_prev[i] * b) * denom
-            } else {
-                u
-            };
+            let (u, x) = (it.u[i], it.updated(i, f_int, f_ext, [a, b, dt2]));
             *out = x;
             let v2 = ((x - u) * inv_dt).norm_squared();
             finite &= v2.is_finite();
@@ -383,12 +379,18 @@ impl<F: Fn(usize) -> Vector3<f32> + Sync> pulp::WithSimd for UpdateRun<'_, F> {
     }
 }
 
-/// The node with a non-finite speed, or else the fastest one, between `u` and `next`.
-fn fastest_node(next: &[Vector3<f32>], u: &[Vector3<f32>], dt: f32) -> usize {
+/// Of `nodes`, the one with a non-finite speed, or else the fastest one, between `u` and `next`.
+fn fastest_node(
+    next: &[Vector3<f32>],
+    u: &[Vector3<f32>],
+    dt: f32,
+    nodes: impl Iterator<Item = usize> + Clone,
+) -> usize {
     let speed2 = |i: usize| ((next[i] - u[i]) / dt).norm_squared();
-    (0..u.len())
+    nodes
+        .clone()
         .find(|&i| !speed2(i).is_finite())
-        .unwrap_or_else(|| (0..u.len()).max_by(|&i, &j| speed2(i).total_cmp(&speed2(j))).unwrap_or(0))
+        .unwrap_or_else(|| nodes.max_by(|&i, &j| speed2(i).total_cmp(&speed2(j))).unwrap_or(0))
 }
 
 #[cfg(test)]
