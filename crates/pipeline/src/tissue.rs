@@ -5,8 +5,8 @@ use std::time::{Duration, Instant};
 use hullcut_hull::DenseGrid;
 use hullcut_pose::{PoseEstimate, Template};
 use hullcut_sim::{
-    Body, CutOutcome, CutSim, CutSimParams, HybridParams, Material, NodeRole, Obstacle, SweptSurface, Table, TriMesh,
-    VoxelizeParams, WindingTree, organ_sdf, reach_back, voxelize,
+    Body, CutOutcome, CutSim, CutSimParams, HybridParams, LARGE_ORGAN_SCALE, Material, NodeRole, Obstacle,
+    SweptSurface, Table, TriMesh, VoxelizeParams, WindingTree, reach_back, scaled_organ_sdf, voxelize,
 };
 use nalgebra::{Isometry3, Point3};
 
@@ -175,15 +175,22 @@ fn sweep(template: &Template, path: &[Isometry3<f64>], cell: f64) -> Result<Opti
     Ok(Some(swept))
 }
 
-/// Builds the tissue: `organ` (the built-in organ on the table) or a PLY/OBJ mesh in world metres,
+/// Builds the tissue: `organ` (the built-in organ on the table), `organ-large` (the same organ
+/// [`LARGE_ORGAN_SCALE`] times larger: an adult liver's size, 100k nodes at 2 mm) or a PLY/OBJ
+/// mesh in world metres,
 /// at lattice spacing `cell`, resting on a table at its lowest layer of nodes (contact with
 /// friction, nothing held: a piece cut off falls onto the table and rests there), settled under
 /// gravity; with `hybrid`, TLED runs only near the blade and FLSM elsewhere; with `gpu`, the
 /// TLED steps run there.
 pub fn build(name: &str, cell: f64, hybrid: Option<HybridParams>, gpu: Option<GpuHandle>) -> Result<Tissue, Error> {
     let material = Material::from_young_poisson(YOUNG_PA, POISSON, DENSITY);
-    let (body, signed): (Body, Box<SignedDistance>) = if name == "organ" {
-        (Body::Organ, Box::new(organ_sdf))
+    let organ_scale = match name {
+        "organ" => Some(1.0),
+        "organ-large" => Some(LARGE_ORGAN_SCALE),
+        _ => None,
+    };
+    let (body, signed): (Body, Box<SignedDistance>) = if let Some(scale) = organ_scale {
+        (Body::Organ { scale }, Box::new(move |p: &Point3<f64>| scaled_organ_sdf(p, scale)))
     } else {
         let mesh = TriMesh::load(name).context("--tissue")?;
         // Inside where the generalized winding number exceeds one half (robust to holes); the

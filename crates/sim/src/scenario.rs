@@ -55,6 +55,12 @@ pub const MAX_LOADS: usize = 256;
 pub const MAX_REACTIONS: usize = 32;
 /// Most points in `report.probes`.
 pub const MAX_PROBES: usize = 1000;
+/// Most points of the blade's cutting edge `cut.edge`.
+pub const MAX_EDGE_POINTS: usize = 64;
+/// Most keys of the blade's path `cut.path`.
+pub const MAX_PATH_KEYS: usize = 1000;
+/// Largest Coulomb friction `cut.table.friction`.
+pub const MAX_FRICTION: f64 = 10.0;
 
 /// A whole scenario.
 #[derive(Debug, Clone, Deserialize)]
@@ -86,6 +92,56 @@ pub struct Scenario {
     /// What to report.
     #[serde(default)]
     pub report: ReportSpec,
+    /// A blade that moves through the body and cuts it (the run is then a [`crate::CutSim`]).
+    pub cut: Option<CutSpec>,
+}
+
+/// `[cut]`: a blade's cutting edge moved along a path; every `report.interval` the surface it
+/// swept since the last is cut into the body, as `hullcut run` cuts with each frame set's pose.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CutSpec {
+    /// The cutting edge at offset zero, world metres, 2 to [`MAX_EDGE_POINTS`] points.
+    pub edge: Vec<[f64; 3]>,
+    /// Where the edge is: its offset from `edge` at simulated times, linear between keys, held
+    /// before the first and after the last; times increasing. 1 to [`MAX_PATH_KEYS`] keys.
+    pub path: Vec<PathKey>,
+    /// Cells within this distance of the blade's sweep (and the cut cells) run TLED, the others
+    /// `far_field`; absent: every cell TLED.
+    pub operational_radius: Option<f64>,
+    /// With `operational_radius`: `"flsm"` (FLSM, matched to the material unless `hybrid.substeps`
+    /// says otherwise) or `"frozen"` (cells at rest sleep).
+    #[serde(default = "far_field_default")]
+    pub far_field: String,
+    /// The table the body rests on, at its lowest layer of nodes; absent: no table.
+    pub table: Option<TableSpec>,
+}
+
+fn far_field_default() -> String {
+    "flsm".to_owned()
+}
+
+/// A key of `cut.path`: `{ time = s, offset = [x, y, z] }`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathKey {
+    /// Simulated time, seconds.
+    pub time: f64,
+    /// The edge's offset from `cut.edge`, metres.
+    pub offset: [f64; 3],
+}
+
+/// `[cut.table]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableSpec {
+    /// Coulomb friction between the body and the table, 0 to [`MAX_FRICTION`].
+    #[serde(default = "friction_default")]
+    pub friction: f64,
+}
+
+fn friction_default() -> f64 {
+    0.5
 }
 
 /// `[body]`.
@@ -98,7 +154,8 @@ pub struct BodySpec {
     pub size: Option<[f64; 3]>,
     /// A closed triangle mesh (PLY or OBJ), relative to the scenario file.
     pub mesh: Option<PathBuf>,
-    /// Scale applied to the mesh's coordinates to get metres.
+    /// Scale applied to the mesh's coordinates to get metres; for the organ, its size factor
+    /// ([`crate::body::LARGE_ORGAN_SCALE`] for an adult liver's size).
     #[serde(default = "one")]
     pub scale: f64,
     /// Lattice spacing, metres.
@@ -415,7 +472,8 @@ impl Scenario {
         self.validate_hybrid()?;
         self.validate_constraints()?;
         self.validate_run()?;
-        self.validate_report()
+        self.validate_report()?;
+        self.validate_cut()
     }
 
     fn validate_body(&self) -> Result<(), SimError> {
@@ -432,7 +490,7 @@ impl Scenario {
         let extent = match (b.shape.as_deref(), b.size, &b.mesh) {
             (Some("box"), Some(size), None) => Some(size),
             (Some("organ"), _, None) => {
-                let (lo, hi) = crate::Body::Organ.bounds();
+                let (lo, hi) = crate::Body::Organ { scale: b.scale }.bounds();
                 Some([hi.x - lo.x, hi.y - lo.y, hi.z - lo.z])
             }
             _ => None,
@@ -519,6 +577,79 @@ impl Scenario {
             position(&format!("report.probes[{i}]"), p)?;
         }
         in_range("report.interval", r.interval, 0.0, MAX_DURATION_S, " s")
+    }
+
+    /// `[cut]`: the edge and the path bounded and finite, times increasing, and nothing the cutting
+    /// simulation does not do (it holds nodes fixed, moves nothing by prescription, pushes with no
+    /// load, and steps at `run.safety` times the critical step).
+    fn validate_cut(&self) -> Result<(), SimError> {
+        let Some(c) = &self.cut else { return Ok(()) };
+        if !(2..=MAX_EDGE_POINTS).contains(&c.edge.len()) {
+            return Err(invalid("cut.edge", format!("2 to {MAX_EDGE_POINTS} points, got {}", c.edge.len())));
+        }
+        for (i, p) in c.edge.iter().enumerate() {
+            position(&format!("cut.edge[{i}]"), p)?;
+        }
+        if c.path.is_empty() {
+            return Err(invalid("cut.path", "at least one key `{ time = s, offset = [x, y, z] }`".to_owned()));
+        }
+        count("cut.path", c.path.len(), MAX_PATH_KEYS)?;
+        for (i, k) in c.path.iter().enumerate() {
+            in_range(&format!("cut.path[{i}].time"), k.time, 0.0, MAX_DURATION_S, " s")?;
+            position(&format!("cut.path[{i}].offset"), &k.offset)?;
+            if i > 0 && k.time <= c.path[i - 1].time {
+                return Err(invalid(
+                    &format!("cut.path[{i}].time"),
+                    format!("keys must come in increasing time: {} s after {} s", num(k.time), num(c.path[i - 1].time)),
+                ));
+            }
+        }
+        if let Some(r) = c.operational_radius {
+            in_range("cut.operational_radius", r, 0.0, MAX_POSITION_M, " m")?;
+        }
+        if !matches!(c.far_field.as_str(), "flsm" | "frozen") {
+            return Err(invalid(
+                "cut.far_field",
+                format!("unknown `{}` (expected \"flsm\" or \"frozen\")", c.far_field),
+            ));
+        }
+        if c.far_field != "flsm" && c.operational_radius.is_none() {
+            return Err(invalid(
+                "cut.far_field",
+                "needs `cut.operational_radius` (the region that stays awake)".to_owned(),
+            ));
+        }
+        if let Some(t) = &c.table {
+            in_range("cut.table.friction", t.friction, 0.0, MAX_FRICTION, "")?;
+        }
+        let unsupported = |key: &str, why: &str| Err(invalid(key, format!("not supported with [cut]: {why}")));
+        if self.dt().is_some() {
+            return unsupported(
+                "run.dt",
+                "the cutting simulation steps at `run.safety` times the critical step, recomputed as it is cut",
+            );
+        }
+        if self.run.safety >= 1.0 {
+            return unsupported("run.safety", "it must be below 1 (a cut makes new, lighter cells)");
+        }
+        for (i, b) in self.boundary.iter().enumerate() {
+            if b.displace.is_some() || b.components.is_some() || b.fix.len() != 3 {
+                return unsupported(
+                    &format!("boundary[{i}]"),
+                    "a boundary may only hold its nodes (`fix = [\"x\", \"y\", \"z\"]`)",
+                );
+            }
+        }
+        if !self.load.is_empty() {
+            return unsupported("load", "loads are not applied to a body being cut");
+        }
+        if !self.report.reaction.is_empty() || !self.report.probes.is_empty() {
+            return unsupported("report", "reactions and probes are not reported for a body being cut");
+        }
+        if self.hybrid.ratio != 1.0 || self.hybrid.operational.is_some() {
+            return unsupported("hybrid", "the operational region follows the blade: give `cut.operational_radius`");
+        }
+        Ok(())
     }
 }
 

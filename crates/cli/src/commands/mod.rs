@@ -15,6 +15,7 @@ pub mod rig;
 pub mod run;
 pub mod segment;
 pub mod sim;
+pub mod sim_cut;
 pub mod synth;
 
 /// Value parser of a flag that takes a positive, finite number (a length, a rate, a scale):

@@ -66,8 +66,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// written as null, named in the report's non_finite, and makes the run exit with an error.
 ///
 /// The tissue: --tissue organ (the built-in two-lobed liver-like organ, 15 x 10 x 6 cm, resting on
-/// the table at z = 0 under the tool) or a PLY/OBJ mesh in world metres; --cell sets its lattice
-/// spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
+/// the table at z = 0 under the tool), organ-large (the same organ 1.2 times larger, 18 x 12 x 7.2
+/// cm, an adult liver's size: 100k lattice nodes at --cell 0.002; with --operational-radius 0.03
+/// --far-field frozen only the cells near the blade are stepped) or a PLY/OBJ mesh in world
+/// metres; --cell sets its lattice spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
 ///
 /// Writes: the rerun recording (hullcut-run.rrd in the current folder unless --rrd, --spawn or
 /// --connect says otherwise): images (JPEG) and label masks under world/cams/NAME, hull leaves
@@ -109,7 +111,7 @@ pub struct Args {
     /// cell inverts is redone on the CPU, counted in the report's tissue.gpu.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     backend: Backend,
-    /// The tissue: `organ` or a PLY/OBJ mesh in world metres.
+    /// The tissue: `organ`, `organ-large` or a PLY/OBJ mesh in world metres.
     #[arg(long, value_name = "NAME|MESH", default_value = "organ")]
     tissue: String,
     /// Lattice spacing of the tissue, metres.

@@ -32,21 +32,30 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// (HULLCUT_GPU_ADAPTER=software forces Mesa's lavapipe), the state is read back every report
 /// interval, and a batch in which a cell inverted is redone on the CPU (counted in the report's
 /// `gpu` object).
+///
+/// A scenario with [cut] moves a blade's cutting edge along keyed offsets and cuts the surface it
+/// sweeps into the body every report.interval (1/60 s by default), as `hullcut run` cuts with
+/// each frame set's pose; the operational region follows the blade (cut.operational_radius, with
+/// cut.far_field "flsm" or "frozen") and the body may rest on a table ([cut.table]). Its report
+/// (kind "cut-simulation") gives the pieces, the cut's edges, copies and virtual nodes, ms per
+/// frame split into the cut's collision, topology and surfaces and the body's advance, and frames
+/// per wall second; its recording the pieces' surfaces (world/tissue/surface), the swept surface
+/// (world/tissue/cut) and the edge (world/tool/edge) every frame.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
     /// The scenario file (TOML).
     #[arg(long, value_name = "FILE.toml")]
-    scenario: PathBuf,
+    pub(super) scenario: PathBuf,
     /// Compute backend: `cpu` (rayon) or `gpu` (wgpu).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
-    backend: Backend,
+    pub(super) backend: Backend,
     /// Write a JSON report.
     #[arg(long, value_name = "FILE")]
-    report: Option<PathBuf>,
+    pub(super) report: Option<PathBuf>,
     /// Log the simulation to this rerun recording (.rrd).
     #[arg(long, value_name = "FILE")]
-    rrd: Option<PathBuf>,
+    pub(super) rrd: Option<PathBuf>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -130,6 +139,9 @@ struct Report {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let scenario = Scenario::load(&args.scenario)?;
+    if scenario.cut.is_some() {
+        return super::sim_cut::run(args, &scenario);
+    }
     let mut sim =
         Simulation::from_scenario(&scenario).with_context(|| format!("setting up {}", args.scenario.display()))?;
     if let Some(gpu) = args.backend.open()? {

@@ -27,9 +27,19 @@ pub enum Body {
     /// A triangle mesh, ideally closed and outward-oriented, and the file it was read from (for
     /// messages; `None` for a mesh built in memory).
     Mesh(TriMesh, Option<PathBuf>),
-    /// The built-in liver-like organ (see [`organ_sdf`]).
-    Organ,
+    /// The built-in liver-like organ (see [`organ_sdf`]), its size multiplied by `scale` about
+    /// the origin (it stays centred on the table): 1 is the built-in organ (0.435 l),
+    /// [`LARGE_ORGAN_SCALE`] an adult liver's size.
+    Organ {
+        /// Size factor, 1 for the built-in organ.
+        scale: f64,
+    },
 }
+
+/// Size factor of the large built-in organ (`--tissue organ-large`, `body.scale` of an organ
+/// scenario): 1.2 makes it 18 x 12 x 7.2 cm, 0.75 litres, a small adult liver, with more than
+/// 100,000 lattice nodes at 2 mm cells.
+pub const LARGE_ORGAN_SCALE: f64 = 1.2;
 
 /// Vertex spacing of the organ's surface mesh and the finest spacing of a box's surface, metres.
 pub const SURFACE_SPACING: f64 = 0.0025;
@@ -51,7 +61,7 @@ impl Body {
         match self {
             Self::Box { size } => (Point3::origin(), Point3::from(*size)),
             Self::Mesh(m, _) => m.bounds().unwrap_or((Point3::origin(), Point3::origin())),
-            Self::Organ => (Point3::from(ORGAN_MIN), Point3::from(ORGAN_MAX)),
+            Self::Organ { scale } => (Point3::from(ORGAN_MIN) * *scale, Point3::from(ORGAN_MAX) * *scale),
         }
     }
 
@@ -61,13 +71,13 @@ impl Body {
         match self {
             Self::Box { size } => (0..3).all(|a| p[a] >= 0.0 && p[a] <= size[a]),
             Self::Mesh(m, _) => m.winding_number(p).abs() > 0.5,
-            Self::Organ => organ_sdf(p) < 0.0,
+            Self::Organ { scale } => scaled_organ_sdf(p, *scale) < 0.0,
         }
     }
 
     /// The body's surface as a triangle mesh, for embedding in the lattice and display: the box's
     /// faces split into squares of at most [`SURFACE_SPACING`] (at most 64 per edge), the mesh itself,
-    /// or [`Body::organ_mesh`].
+    /// or [`Body::organ_mesh`] at the organ's scale.
     pub fn surface(&self) -> TriMesh {
         match self {
             Self::Box { size } => {
@@ -75,20 +85,21 @@ impl Body {
                 TriMesh::cuboid_grid(Point3::origin(), Point3::from(*size), n)
             }
             Self::Mesh(m, _) => m.clone(),
-            Self::Organ => Self::organ_mesh(),
+            Self::Organ { scale } => Self::organ_mesh(*scale),
         }
     }
 
-    /// The organ's surface: the zero set of [`organ_sdf`] extracted by surface nets on a
-    /// [`SURFACE_SPACING`] grid, vertices projected onto the zero set. Closed and outward-oriented
-    /// (about 14 000 triangles).
-    pub fn organ_mesh() -> TriMesh {
+    /// The surface of the organ at size factor `scale`: the zero set of [`organ_sdf`] extracted by
+    /// surface nets on a [`SURFACE_SPACING`] grid, vertices projected onto the zero set. Closed and
+    /// outward-oriented (about 14 000 triangles at scale 1).
+    pub fn organ_mesh(scale: f64) -> TriMesh {
         let h = SURFACE_SPACING;
         // Start 2.5 spacings below the bounds so that no grid node lies on the flat underside z = 0 and
         // the outermost nodes are all outside.
-        let start = Point3::from(ORGAN_MIN) - Vector3::repeat(2.5 * h);
-        let n = [0, 1, 2].map(|a| ((ORGAN_MAX[a] - ORGAN_MIN[a]) / h).ceil() as usize + 6);
-        surface_nets(&|p| organ_sdf(p), start, h, n)
+        let (lo, hi) = (Point3::from(ORGAN_MIN) * scale, Point3::from(ORGAN_MAX) * scale);
+        let start = lo - Vector3::repeat(2.5 * h);
+        let n = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / h).ceil() as usize + 6);
+        surface_nets(&|p| scaled_organ_sdf(p, scale), start, h, n)
     }
 }
 
@@ -98,7 +109,8 @@ impl fmt::Display for Body {
             Self::Box { size } => write!(f, "box {} x {} x {} m", size.x, size.y, size.z),
             Self::Mesh(_, Some(path)) => write!(f, "mesh {}", path.display()),
             Self::Mesh(m, None) => write!(f, "mesh ({} triangles)", m.triangles.len()),
-            Self::Organ => write!(f, "built-in organ"),
+            Self::Organ { scale } if *scale == 1.0 => write!(f, "built-in organ"),
+            Self::Organ { scale } => write!(f, "built-in organ at {scale} times its size"),
         }
     }
 }
@@ -158,6 +170,11 @@ pub fn box_sdf(size: Vector3<f64>) -> impl Fn(&Point3<f64>) -> f64 + Sync {
 pub fn organ_sdf(p: &Point3<f64>) -> f64 {
     let lobes = smooth_min(RIGHT_LOBE.sdf(p), LEFT_LOBE.sdf(p), LOBE_BLEND);
     lobes.max(-p.z)
+}
+
+/// [`organ_sdf`] of the organ made `scale` times larger about the origin (still on z = 0).
+pub fn scaled_organ_sdf(p: &Point3<f64>, scale: f64) -> f64 {
+    if scale == 1.0 { organ_sdf(p) } else { scale * organ_sdf(&(p / scale)) }
 }
 
 /// Extracts the zero set of `f` (negative inside) by naive surface nets over the grid of `n` nodes
@@ -444,7 +461,10 @@ pub fn voxelize(body: &Body, cell: f64, params: &VoxelizeParams) -> Result<Voxel
                 (0..3).map(|a| ((c[a] + cell).min(size[a]) - c[a].max(0.0)).max(0.0) / cell).product::<f64>() as f32
             })
             .collect(),
-        Body::Organ => (0..total).into_par_iter().map(|idx| sampled(cell_min(idx), &|p| organ_sdf(p) < 0.0)).collect(),
+        Body::Organ { scale } => (0..total)
+            .into_par_iter()
+            .map(|idx| sampled(cell_min(idx), &|p| scaled_organ_sdf(p, *scale) < 0.0))
+            .collect(),
         Body::Mesh(mesh, _) => {
             let open_edges = mesh.open_edges();
             if open_edges > 0 {

@@ -117,7 +117,7 @@ fn axis_of(name: &str, key: &str) -> Result<usize, SimError> {
 }
 
 /// Nodes on a lattice face (`x-` ... `z+`): rest coordinate within a tenth of a cell of the extreme.
-fn face_nodes(lattice: &Lattice, face: &str, key: &str) -> Result<Vec<u32>, SimError> {
+pub(crate) fn face_nodes(lattice: &Lattice, face: &str, key: &str) -> Result<Vec<u32>, SimError> {
     let (axis, upper) = match face {
         "x-" => (0, false),
         "x+" => (0, true),
@@ -133,7 +133,7 @@ fn face_nodes(lattice: &Lattice, face: &str, key: &str) -> Result<Vec<u32>, SimE
     Ok((0..lattice.node_count() as u32).filter(|&n| (lattice.rest[n as usize][axis] - extreme).abs() < tol).collect())
 }
 
-fn box_nodes(lattice: &Lattice, b: &BoxSpec) -> Vec<u32> {
+pub(crate) fn box_nodes(lattice: &Lattice, b: &BoxSpec) -> Vec<u32> {
     let tol = 1e-9;
     (0..lattice.node_count() as u32)
         .filter(|&n| {
@@ -146,10 +146,21 @@ fn box_nodes(lattice: &Lattice, b: &BoxSpec) -> Vec<u32> {
 /// The lattice of a scenario's body, with any warnings, and the body's surface mesh. Grids of more
 /// than [`MAX_LATTICE_CELLS`] cells are refused before they are allocated.
 pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), SimError> {
-    let b = &s.body;
+    let body = scenario_body(s)?;
     let params = crate::body::VoxelizeParams { max_cells: MAX_LATTICE_CELLS, ..Default::default() };
+    let key = if s.body.mesh.is_some() { "body.mesh" } else { "body" };
+    let vox = crate::body::voxelize(&body, s.body.cell, &params).map_err(|e| invalid(key, e.to_string()))?;
+    Ok((vox.lattice, vox.warnings, body.surface()))
+}
+
+/// The body a scenario's `[body]` describes (a mesh is read here).
+pub fn scenario_body(s: &Scenario) -> Result<crate::body::Body, SimError> {
+    let b = &s.body;
     if !(b.cell.is_finite() && b.cell > 0.0) {
         return Err(invalid("body.cell", format!("must be a positive length in metres, got {}", b.cell)));
+    }
+    if !(b.scale.is_finite() && b.scale > 0.0) {
+        return Err(invalid("body.scale", format!("must be a positive factor, got {}", b.scale)));
     }
     match (b.shape.as_deref(), &b.mesh) {
         (Some("box"), None) => {
@@ -157,22 +168,11 @@ pub fn build_lattice(s: &Scenario) -> Result<(Lattice, Vec<String>, TriMesh), Si
             if size.iter().any(|&x| !(x.is_finite() && x > 0.0)) {
                 return Err(invalid("body.size", format!("must be positive, got {size:?}")));
             }
-            let body = crate::body::Body::Box { size: Vector3::from(size) };
-            let vox = crate::body::voxelize(&body, b.cell, &params).map_err(|e| invalid("body", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings, body.surface()))
+            Ok(crate::body::Body::Box { size: Vector3::from(size) })
         }
-        (Some("organ"), None) => {
-            let vox = crate::body::voxelize(&crate::body::Body::Organ, b.cell, &params)
-                .map_err(|e| invalid("body", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings, crate::body::Body::Organ.surface()))
-        }
+        (Some("organ"), None) => Ok(crate::body::Body::Organ { scale: b.scale }),
         (None, Some(path)) => {
-            if !(b.scale.is_finite() && b.scale > 0.0) {
-                return Err(invalid("body.scale", format!("must be a positive factor, got {}", b.scale)));
-            }
-            let body = crate::body::Body::load_mesh(path, b.scale).map_err(|e| invalid("body.mesh", e.to_string()))?;
-            let vox = crate::body::voxelize(&body, b.cell, &params).map_err(|e| invalid("body.mesh", e.to_string()))?;
-            Ok((vox.lattice, vox.warnings, body.surface()))
+            crate::body::Body::load_mesh(path, b.scale).map_err(|e| invalid("body.mesh", e.to_string()))
         }
         (Some(other), None) => Err(invalid(
             "body.shape",

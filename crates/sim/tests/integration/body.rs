@@ -81,7 +81,7 @@ fn winding_numbers_of_a_closed_cube() {
 #[test]
 fn ply_round_trips() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let mesh = Body::organ_mesh();
+    let mesh = Body::organ_mesh(1.0);
     for ascii in [false, true] {
         let path = dir.path().join(if ascii { "organ_ascii.ply" } else { "organ.ply" });
         if ascii {
@@ -203,7 +203,7 @@ fn bunny_voxelizes_despite_holes() {
 
 #[test]
 fn organ_is_closed_and_liver_sized() {
-    let mesh = Body::organ_mesh();
+    let mesh = Body::organ_mesh(1.0);
     assert_eq!(mesh.open_edges(), 0);
     assert_eq!(mesh.orientation_conflicts(), 0);
     let (lo, hi) = mesh.bounds().expect("bounds");
@@ -223,12 +223,41 @@ fn organ_is_closed_and_liver_sized() {
     let volume = mesh.volume();
     assert!((volume - 4.35e-4).abs() < 0.01 * 4.35e-4, "{volume:.4e}");
     // The lattice agrees with the mesh: SDF sampling at 2.5 mm cells.
-    let v = voxelize(&Body::Organ, 0.0025, &VoxelizeParams::default()).expect("voxelize");
+    let v = voxelize(&Body::Organ { scale: 1.0 }, 0.0025, &VoxelizeParams::default()).expect("voxelize");
     let voxels = v.lattice.volume() + v.dropped_volume;
     assert!((voxels - volume).abs() < 0.01 * volume, "{voxels:.4e} vs {volume:.4e}");
     // Deep inside and outside.
     assert!((mesh.winding_number(&Point3::new(-0.025, 0.0, 0.03)) - 1.0).abs() < 1e-9);
     assert!(mesh.winding_number(&Point3::new(0.07, -0.045, 0.05)).abs() < 1e-9);
+}
+
+#[test]
+fn the_large_organ_is_the_organ_scaled_and_has_a_hundred_thousand_nodes_at_2_mm() {
+    use hullcut_sim::{LARGE_ORGAN_SCALE, organ_sdf, scaled_organ_sdf};
+    let s = LARGE_ORGAN_SCALE;
+    let large = Body::Organ { scale: s };
+    let mesh = large.surface();
+    assert_eq!(mesh.open_edges(), 0);
+    assert_eq!(mesh.orientation_conflicts(), 0);
+    let (lo, hi) = mesh.bounds().expect("bounds");
+    assert!(lo.z.abs() < 1e-9, "rests on the table: {}", lo.z);
+    for (got, want) in (hi - lo).iter().zip([0.15, 0.10, 0.06]) {
+        assert!((got - want * s).abs() < 0.0025, "size {}", hi - lo);
+    }
+    // Volume goes with the cube of the size: against the built-in organ's own mesh.
+    let ratio = mesh.volume() / Body::organ_mesh(1.0).volume();
+    assert!((ratio - s * s * s).abs() < 0.01 * s * s * s, "volume ratio {ratio}");
+    // The signed distance scales with the shape: a point and its image agree in sign and scale.
+    for p in [Point3::new(0.05, 0.01, 0.02), Point3::new(-0.03, 0.02, 0.05), Point3::new(0.07, -0.04, 0.01)] {
+        let (a, b) = (organ_sdf(&p), scaled_organ_sdf(&(p * s), s));
+        assert!((b - s * a).abs() < 1e-12, "{p}: {a} {b}");
+    }
+    // The large organ: at least 100,000 nodes at 2 mm cells (the built-in one has 63k).
+    let v = voxelize(&large, 0.002, &VoxelizeParams::default()).expect("voxelize");
+    let nodes = v.lattice.node_count();
+    assert!(nodes >= 100_000, "{nodes} nodes");
+    let small = voxelize(&Body::Organ { scale: 1.0 }, 0.002, &VoxelizeParams::default()).expect("voxelize");
+    assert!(small.lattice.node_count() < 100_000, "{}", small.lattice.node_count());
 }
 
 /// Node positions of the lattice at rest, as the simulators hold them.
@@ -238,7 +267,7 @@ fn rest(lattice: &hullcut_sim::Lattice) -> Vec<Vector3<f32>> {
 
 #[test]
 fn embedding_reproduces_the_rest_surface() {
-    for body in [Body::Box { size: Vector3::new(0.05, 0.03, 0.02) }, Body::Organ] {
+    for body in [Body::Box { size: Vector3::new(0.05, 0.03, 0.02) }, Body::Organ { scale: 1.0 }] {
         let v = voxelize(&body, 0.005, &VoxelizeParams::default()).expect("voxelize");
         let surface = body.surface();
         let e = Embedding::new(&v.lattice, &surface.vertices).expect("embed");
