@@ -419,6 +419,37 @@ fn sim_cut_scenarios_refuse_what_cutting_does_not_do_naming_the_key() {
 }
 
 #[test]
+fn bench_tissue_quick_compares_the_far_fields_with_all_tled() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = hullcut(&["bench", "tissue", "--quick", "--out", dir.path().to_str().expect("utf-8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for chart in ["tissue_cost.png", "tissue_error_near.png", "tissue_error_all.png", "tissue_speed.png"] {
+        assert!(dir.path().join(chart).metadata().expect(chart).len() > 1000, "{chart}");
+    }
+    let (header, rows) = read_csv(&dir.path().join("tissue.csv"));
+    let col = |name: &str| header.iter().position(|h| h == name).expect(name);
+    let (model, near, all, pieces, awake) =
+        (col("model"), col("rms_near_mm_worst"), col("rms_all_mm_worst"), col("pieces"), col("tled_cells_mean"));
+    let num = |r: &Vec<String>, c: usize| r[c].parse::<f64>().expect("number");
+    // Two organ sizes at a surgeon's pace, four models each; then the faster stroke.
+    assert_eq!(rows.iter().filter(|r| r[col("blade_m_s")] == "0.11").count(), 8);
+    for r in &rows {
+        assert_eq!(r[pieces], "2", "every model cuts the lobe's tip off: {r:?}");
+        assert!(r[col("failure")].is_empty(), "{r:?}");
+        match r[model].as_str() {
+            "tled" => assert_eq!((num(r, near), num(r, all)), (0.0, 0.0), "the reference"),
+            // The bounds for the far field that sleeps, on these small organs.
+            "frozen" => assert!(num(r, near) < 0.5 && num(r, all) < 2.0, "{r:?}"),
+            _ => assert!(num(r, near) > 0.0, "{r:?}"),
+        }
+    }
+    for organ in ["8 mm", "paper-size"] {
+        let of = |m: &str| rows.iter().find(|r| r[0] == organ && r[model] == m).map(|r| num(r, awake)).expect(m);
+        assert!(of("frozen") < 0.5 * of("tled"), "{organ}: the far field sleeps");
+    }
+}
+
+#[test]
 fn bench_sim_quick_writes_tables_and_charts() {
     let dir = tempfile::tempdir().expect("tempdir");
     let o = hullcut(&["bench", "sim", "--quick", "--out", dir.path().to_str().expect("utf-8")]);

@@ -12,7 +12,24 @@ use crate::progress::bar;
 
 /// Benchmark a stage: speed against accuracy, written as CSV tables and PNG charts.
 ///
-/// Targets: `sim`, `hull`, `pose`, `segment`, `pipeline`, `loop`, `cut` and `backends`.
+/// Targets: `sim`, `tissue`, `hull`, `pose`, `segment`, `pipeline`, `loop`, `cut` and `backends`.
+/// `tissue` measures (the built-in organ at 6 mm, the paper's size, about 3k nodes; at 2.6 mm,
+/// about 30k; the large organ at 2 mm, 106k; 8 and 6 mm with --quick) the organ's left lobe cut
+/// off by a scripted blade stroke (an upright edge drawn at 0.11 m/s, 60 Hz frames, as
+/// examples/scenarios/organ-resect.toml), the models run in lockstep frame by frame
+///   tissue.csv        per organ, model (all-TLED; the seed's hybrid, an FLSM step every 10 TLED
+///                     steps and beta 200 N/m; the hybrid with FLSM matched to the material; the
+///                     far field that sleeps; the hybrids with a 3 cm operational radius) and
+///                     blade speed: ms per frame (mean, p95; the advance and the cut apart), TLED
+///                     cells per frame, the RMS distance of the lattice nodes from the all-TLED
+///                     body's within 2 cm of the blade's edge (worst frame, mean) and everywhere
+///                     (worst frame), pieces at the end, and a failure if any;
+///   tissue_cost.png   ms per frame against nodes per model;
+///   tissue_error_near.png, tissue_error_all.png
+///                     ms per frame against RMS error near the blade and everywhere;
+///   tissue_speed.png  the far field's failure edge: the error of the matched hybrid and the far
+///                     field that sleeps against the blade's speed (0.33 to 10 m/s) on the
+///                     30k-node organ.
 /// `cut` measures (the cutting stress cases: a 6 x 4 x 3 cm block of 5 mm cells on a table, stroked
 /// at 30 fps: speed up to 2 m/s, tilt, lattice phase, two passes beside each other, depth, a flat
 /// blade, grazing, crossing and repeated cuts, cuts a cell and half a cell apart, 24 fragments)
@@ -127,6 +144,8 @@ pub struct Args {
 enum Target {
     /// The soft-tissue simulator.
     Sim,
+    /// The organ being cut: the far-field models' cost against their error, at three sizes.
+    Tissue,
     /// The visual hull.
     Hull,
     /// The blade pose.
@@ -175,6 +194,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         Target::Loop => super::bench_loop::run(&args.out, quick)?,
         Target::Segment => super::bench_segment::run(&args.out, quick)?,
         Target::Cut => super::bench_cut::run(&args.out, quick)?,
+        Target::Tissue => rayon::scope(|_| super::bench_tissue::run(&args.out, quick))?,
     }
     Ok(())
 }

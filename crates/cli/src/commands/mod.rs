@@ -7,6 +7,7 @@ pub mod bench_loop;
 pub mod bench_pipeline;
 pub mod bench_pose;
 pub mod bench_segment;
+pub mod bench_tissue;
 pub mod calibrate;
 pub mod gpu_info;
 pub mod import;

@@ -379,10 +379,20 @@ impl CutSim {
                 (u[n] - self.integrator.u_prev[n]).norm() > h.rest_speed * dt || out_of_balance(n)
             })
         };
+        // A cell the obstacles (the hand) reach into is awake: a sleeping or FLSM node is not
+        // pushed out of them, and the hand would pass through a far field that sleeps.
+        let touched = |c: usize| {
+            !self.obstacles.is_empty()
+                && self.lattice.cells[c].nodes.iter().any(|&n| {
+                    let p = self.rest[n as usize] + u[n as usize];
+                    self.obstacles.iter().any(|o| o.push_at(&p).is_some())
+                })
+        };
         (0..self.lattice.cells.len())
             .map(|c| {
                 self.band[c]
                     || near[c]
+                    || touched(c)
                     || (self.cell_tled.get(c).copied().unwrap_or(false) && (near_leave[c] || moving(c)))
             })
             .collect()
@@ -1353,6 +1363,45 @@ mod tests {
         sim.set_tool(&tool(0.0025));
         sim.advance(0.05).expect("stable");
         assert!(tled_centres(&sim).iter().any(|c| c.x < 0.005), "awake where the tool is");
+    }
+
+    #[test]
+    fn a_finger_pressed_into_a_sleeping_far_field_wakes_it_and_pushes_the_tissue_down() {
+        // The finger test's block with a far field that sleeps and the tool at a far corner: once
+        // settled the middle of the block sleeps; the finger pressed into it there wakes its
+        // cells and pushes them as in the all-TLED test, instead of passing through them.
+        let size = Vector3::new(0.04, 0.04, 0.03);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let params = CutSimParams {
+            hybrid: Some(HybridParams { radius: 0.008, far_field: FarField::Frozen, ..HybridParams::default() }),
+            ..CutSimParams::default()
+        };
+        let lattice = Lattice::block(Point3::origin(), 0.005, [8, 8, 6]);
+        let mut sim = CutSim::new(lattice, &box_sdf(size), material, |p| p.z < 1e-9, params).expect("sim");
+        sim.set_tool(&[Point3::new(0.0, 0.0, 0.03)]);
+        for _ in 0..30 {
+            sim.advance(1.0 / 30.0).expect("stable");
+        }
+        let centre_cell = |sim: &CutSim| {
+            tled_centres(sim).iter().any(|c| (c.x - 0.0225).abs() < 0.004 && (c.y - 0.0225).abs() < 0.004)
+        };
+        assert!(!centre_cell(&sim), "the middle sleeps before the finger comes");
+        let top_before = sim.node_positions().iter().map(|p| p.z).fold(f32::MIN, f32::max);
+        let (finger, h) = finger();
+        sim.set_obstacles(vec![finger.clone()]);
+        for _ in 0..9 {
+            sim.advance(1.0 / 30.0).expect("stable with contact");
+        }
+        assert!(centre_cell(&sim), "the finger woke the cells it reaches");
+        let nodes = sim.node_positions();
+        let deepest = nodes.iter().filter_map(|p| finger.push_at(p)).map(|d| d.norm()).fold(0.0f32, f32::max);
+        assert!(deepest <= 1.01 * h as f32, "a node {deepest} m inside the finger");
+        let centre = nodes
+            .iter()
+            .filter(|p| (p.x - 0.02).abs() < 1e-3 && (p.y - 0.02).abs() < 1e-3)
+            .map(|p| p.z)
+            .fold(f32::MIN, f32::max);
+        assert!(centre < top_before - 0.0028, "pressed: {centre} vs {top_before}");
     }
 
     #[test]
