@@ -249,10 +249,8 @@ impl Tissue {
         // The operational region (hybrid model) follows the blade's sweep since the last frame.
         self.sim.set_tool(step.swept.as_ref().map_or(&[], |s| &s.vertices[..]));
         self.sim.advance(seconds).map_err(|d| {
-            Error::msg(format!(
-                "the tissue diverged at step {} (t = {:.3} s, node {}): {}",
-                d.step, d.time, d.node, d.reason
-            ))
+            let node = self.sim.describe_node(d.node).unwrap_or_else(|| format!("node {}", d.node));
+            Error::msg(format!("the tissue diverged at step {} (t = {:.3} s, {node}): {}", d.step, d.time, d.reason))
         })?;
         // Contact (the hand's obstacle and the table, resolved after every step) counts apart.
         let contact = Duration::from_secs_f64(self.sim.contact_seconds());

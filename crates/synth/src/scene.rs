@@ -56,6 +56,10 @@ pub struct SceneConfig {
     pub appearance: Appearance,
     /// Which scalpel the hand holds.
     pub tool: ToolKind,
+    /// The organ the tool works on, times the built-in organ's size (its strokes, resection and
+    /// hovering scaled with it about the origin, the tool and hand unchanged): 1 for the built-in
+    /// organ, 1.2 for the large one (`hullcut run --tissue organ-large`).
+    pub organ_scale: f64,
 }
 
 /// Default of [`SceneConfig::stroke_depth`]: shallow strokes, the tool's pose being what these
@@ -84,6 +88,7 @@ impl SceneConfig {
             stroke_depth: DEFAULT_STROKE_DEPTH,
             appearance: Appearance::classic(),
             tool: ToolKind::Standard,
+            organ_scale: 1.0,
         }
     }
 }
@@ -123,6 +128,9 @@ impl Scene {
         if !(config.fps > 0.0 && config.fps.is_finite()) {
             return Err(SynthError::Config(format!("fps must be positive, got {}", config.fps)));
         }
+        if !(config.organ_scale.is_finite() && (0.1..=10.0).contains(&config.organ_scale)) {
+            return Err(SynthError::Config(format!("organ_scale must be 0.1 to 10, got {}", config.organ_scale)));
+        }
         if config.motion_blur_samples == 0 {
             return Err(SynthError::Config("motion_blur_samples must be at least 1".into()));
         }
@@ -139,7 +147,8 @@ impl Scene {
             config.stroke_depth,
             &azimuths,
             Resection::for_tool(config.tool),
-        );
+        )
+        .scaled(config.organ_scale);
         let (light, background) = (config.appearance.light, config.appearance.background);
         let renderers =
             config.rig.cameras.par_iter().map(|c| CameraRenderer::with_background(c, light, background)).collect();

@@ -167,6 +167,17 @@ impl Trajectory {
         Trajectory { keys, tip_in_tool }
     }
 
+    /// The same motion for an organ `s` times the built-in one's size: every key's tip position
+    /// scaled about the origin (the organ's centre on the table), times and orientations kept.
+    pub fn scaled(mut self, s: f64) -> Self {
+        if s != 1.0 {
+            for key in &mut self.keys {
+                key.tip = Point3::from(key.tip.coords * s);
+            }
+        }
+        self
+    }
+
     /// The keyframes.
     pub fn keys(&self) -> &[Key] {
         &self.keys

@@ -67,9 +67,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 ///
 /// The tissue: --tissue organ (the built-in two-lobed liver-like organ, 15 x 10 x 6 cm, resting on
 /// the table at z = 0 under the tool), organ-large (the same organ 1.2 times larger, 18 x 12 x 7.2
-/// cm, an adult liver's size: 100k lattice nodes at --cell 0.002; with --operational-radius 0.03
-/// --far-field frozen only the cells near the blade are stepped) or a PLY/OBJ mesh in world
-/// metres; --cell sets its lattice spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
+/// cm, an adult liver's size: 106k lattice nodes at --cell 0.002; with --operational-radius 0.03
+/// --far-field frozen only the cells near the blade are stepped; the built-in scene's strokes are
+/// then scaled with it) or a PLY/OBJ mesh in world metres; --cell sets its lattice spacing. Material: E = 3 kPa, ν = 0.45, 1000 kg/m³ (liver-like).
 ///
 /// Writes: the rerun recording (hullcut-run.rrd in the current folder unless --rrd, --spawn or
 /// --connect says otherwise): images (JPEG) and label masks under world/cams/NAME, hull leaves
@@ -485,6 +485,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             // The organ's top lies 5 to 15 mm below ORGAN_TOP where strokes run (it is domed, and
             // sags under gravity): strokes 18 to 35 mm below it cut about 5 to 25 mm deep.
             config.stroke_depth = BUILTIN_STROKE_DEPTH;
+            // The hand works on the organ it is shown: over the large one, higher and wider.
+            if args.tissue == "organ-large" {
+                config.organ_scale = hullcut_sim::LARGE_ORGAN_SCALE;
+            }
             let scene = hullcut_synth::Scene::new(config).context("preparing the built-in scene")?;
             let pb = bar(args.scene_frames, "rendering the built-in scene");
             synthesize(&scene, &path, &format!("builtin-cut-seed{}", args.seed), false, &|| pb.inc(1))

@@ -957,6 +957,33 @@ impl CutSim {
         &self.surfaces
     }
 
+    /// Where node `n` of the cut lattice is, at rest and now, whether it is a virtual node, the
+    /// material of the cell copies that hold it and whether an obstacle reaches it, for messages
+    /// about a node that diverged; `None` for a node the cut lattice does not have.
+    pub fn describe_node(&self, n: usize) -> Option<String> {
+        let u = self.integrator.u.get(n)?;
+        let rest = self.topology.rest(&self.lattice, n as u32);
+        let now = rest + u.cast::<f64>();
+        let shares: Vec<String> = self
+            .topology
+            .copies
+            .iter()
+            .filter(|c| c.nodes.contains(&(n as u32)))
+            .map(|c| format!("{:.2}", f64::from(self.lattice.cells[c.parent as usize].fraction) * c.share))
+            .collect();
+        let kind = if n >= self.lattice.node_count() { "virtual node" } else { "node" };
+        let mm = |p: Point3<f64>| format!("({:.1}, {:.1}, {:.1}) mm", p.x * 1e3, p.y * 1e3, p.z * 1e3);
+        let inside = self.obstacles.iter().any(|o| o.push_at(&now.cast::<f32>()).is_some());
+        Some(format!(
+            "{kind} {n} at rest {}, now {}, in {} cell copies holding [{}] of a cell{}",
+            mm(rest),
+            mm(now),
+            shares.len(),
+            shares.join(", "),
+            if inside { ", inside an obstacle" } else { "" }
+        ))
+    }
+
     /// Deformed position of every node of the cut lattice (lattice nodes first, then virtual ones).
     pub fn node_positions(&self) -> Vec<Point3<f32>> {
         (0..self.integrator.u.len())
@@ -1363,6 +1390,33 @@ mod tests {
         sim.set_tool(&tool(0.0025));
         sim.advance(0.05).expect("stable");
         assert!(tled_centres(&sim).iter().any(|c| c.x < 0.005), "awake where the tool is");
+    }
+
+    #[test]
+    fn a_node_is_described_by_where_it_is_and_what_holds_it() {
+        // A 2 x 2 x 3 cm block of 1 cm cells: its corner node is in one whole cell, an inner node
+        // in eight; the finger reaches its top corner at (2, 2, 3) cm.
+        let size = Vector3::new(0.02, 0.02, 0.03);
+        let lattice = Lattice::block(Point3::origin(), 0.01, [2, 2, 3]);
+        let material = Material::from_young_poisson(3.0e3, 0.45, 1000.0);
+        let mut sim =
+            CutSim::new(lattice, &box_sdf(size), material, |p| p.z < 1e-9, CutSimParams::default()).expect("sim");
+        let corner = sim.describe_node(0).expect("node 0");
+        assert_eq!(
+            corner,
+            "node 0 at rest (0.0, 0.0, 0.0) mm, now (0.0, 0.0, 0.0) mm, in 1 cell copies holding [1.00] of a cell"
+        );
+        let centre = (0..sim.lattice().node_count())
+            .find(|&n| (sim.lattice().rest[n] - Point3::new(0.01, 0.01, 0.01)).norm() < 1e-9)
+            .expect("centre");
+        assert!(sim.describe_node(centre).expect("centre").contains("in 8 cell copies"));
+        assert!(sim.describe_node(sim.lattice().node_count()).is_none());
+        let top = (0..sim.lattice().node_count())
+            .find(|&n| (sim.lattice().rest[n] - Point3::new(0.02, 0.02, 0.03)).norm() < 1e-9)
+            .expect("top");
+        let (finger, _) = finger();
+        sim.set_obstacles(vec![finger]);
+        assert!(sim.describe_node(top).expect("top").ends_with(", inside an obstacle"));
     }
 
     #[test]

@@ -242,7 +242,12 @@ impl ScriptedCut {
         let clock = Instant::now();
         // To the frame's end (whole steps: the body keeps within a step of the blade's clock).
         let seconds = (t1 - self.sim.time()).max(0.0);
-        outcome.steps = self.sim.advance(seconds).map_err(FrameError::Diverged)?;
+        outcome.steps = self.sim.advance(seconds).map_err(|mut d| {
+            if let Some(node) = self.sim.describe_node(d.node) {
+                d.reason = format!("{}; {node}", d.reason);
+            }
+            FrameError::Diverged(d)
+        })?;
         outcome.advance_ms = clock.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         Ok(outcome)
