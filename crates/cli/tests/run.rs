@@ -123,7 +123,7 @@ fn run_paced_with_a_short_queue_counts_what_it_drops_and_processes_the_rest() {
 #[test]
 fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02"]);
+    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02", "--far-field", "flsm"]);
     assert!(o.status.success(), "{}", text(&o));
     let t = &r["tissue"];
     assert_eq!(t["operational_radius_m"].as_f64(), Some(0.02), "{t}");
@@ -134,7 +134,8 @@ fn run_with_the_hybrid_model_runs_tled_near_the_blade_only_and_reports_it() {
     assert_eq!(t["far_field"].as_str(), Some("flsm"), "{t}");
     // A frozen far field: no FLSM; the tissue starts all TLED, then cells at rest away from the
     // blade sleep.
-    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02", "--far-field", "frozen"]);
+    // (the default far field with a radius).
+    let (o, r) = run_cut_small(dir.path(), &["--operational-radius", "0.02"]);
     assert!(o.status.success(), "{}", text(&o));
     let t = &r["tissue"];
     assert_eq!(t["far_field"].as_str(), Some("frozen"), "{t}");

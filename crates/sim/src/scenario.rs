@@ -109,16 +109,11 @@ pub struct CutSpec {
     /// Cells within this distance of the blade's sweep (and the cut cells) run TLED, the others
     /// `far_field`; absent: every cell TLED.
     pub operational_radius: Option<f64>,
-    /// With `operational_radius`: `"flsm"` (FLSM, matched to the material unless `hybrid.substeps`
-    /// says otherwise) or `"frozen"` (cells at rest sleep).
-    #[serde(default = "far_field_default")]
-    pub far_field: String,
+    /// With `operational_radius`: `"frozen"` (cells at rest sleep; the default) or `"flsm"` (FLSM,
+    /// matched to the material unless `hybrid.substeps` says otherwise).
+    pub far_field: Option<String>,
     /// The table the body rests on, at its lowest layer of nodes; absent: no table.
     pub table: Option<TableSpec>,
-}
-
-fn far_field_default() -> String {
-    "flsm".to_owned()
 }
 
 /// A key of `cut.path`: `{ time = s, offset = [x, y, z] }`.
@@ -607,17 +602,16 @@ impl Scenario {
         if let Some(r) = c.operational_radius {
             in_range("cut.operational_radius", r, 0.0, MAX_POSITION_M, " m")?;
         }
-        if !matches!(c.far_field.as_str(), "flsm" | "frozen") {
-            return Err(invalid(
-                "cut.far_field",
-                format!("unknown `{}` (expected \"flsm\" or \"frozen\")", c.far_field),
-            ));
-        }
-        if c.far_field != "flsm" && c.operational_radius.is_none() {
-            return Err(invalid(
-                "cut.far_field",
-                "needs `cut.operational_radius` (the region that stays awake)".to_owned(),
-            ));
+        if let Some(far) = &c.far_field {
+            if !matches!(far.as_str(), "flsm" | "frozen") {
+                return Err(invalid("cut.far_field", format!("unknown `{far}` (expected \"frozen\" or \"flsm\")")));
+            }
+            if c.operational_radius.is_none() {
+                return Err(invalid(
+                    "cut.far_field",
+                    "needs `cut.operational_radius` (the region that stays TLED)".to_owned(),
+                ));
+            }
         }
         if let Some(t) = &c.table {
             in_range("cut.table.friction", t.friction, 0.0, MAX_FRICTION, "")?;

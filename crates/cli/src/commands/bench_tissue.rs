@@ -35,9 +35,9 @@ enum Model {
     Tled,
     /// The seed paper's hybrid: an FLSM step every 10 TLED steps, β = 200 N/m.
     Seed,
-    /// The hybrid with FLSM matched to the material (the default of `--far-field flsm`).
+    /// The hybrid with FLSM matched to the material (`--far-field flsm`).
     Matched,
-    /// Cells at rest away from the blade sleep (`--far-field frozen`).
+    /// Cells at rest away from the blade sleep (`--far-field frozen`, the default far field).
     Frozen,
 }
 

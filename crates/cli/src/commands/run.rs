@@ -118,13 +118,13 @@ pub struct Args {
     #[arg(long, value_name = "METRES", default_value_t = 0.005, value_parser = super::positive)]
     cell: f64,
     /// The hybrid model: lattice cells within this distance of the blade's sweep (and cut cells
-    /// and their neighbours) run TLED, the others FLSM matched to the material, or sleep
-    /// (`--far-field frozen`); cells leave the region once the blade has left and they have come
-    /// to rest. Without it every cell is TLED.
+    /// and their neighbours) run TLED; the others sleep once at rest (`--far-field frozen`, the
+    /// default) or are moved by FLSM matched to the material (`--far-field flsm`); cells leave the
+    /// region once the blade has left and they have come to rest. Without it every cell is TLED.
     #[arg(long, value_name = "METRES", value_parser = non_negative)]
     operational_radius: Option<f64>,
     /// With --operational-radius: what moves the cells outside the operational region.
-    #[arg(long, value_enum, value_name = "MODEL", default_value_t = FarFieldArg::Flsm, requires = "operational_radius")]
+    #[arg(long, value_enum, value_name = "MODEL", default_value_t = FarFieldArg::Frozen, requires = "operational_radius")]
     far_field: FarFieldArg,
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
@@ -204,10 +204,12 @@ pub struct Args {
 /// `--far-field`: what moves the tissue outside the operational region.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum FarFieldArg {
-    /// FLSM matched to the material, stepping with TLED (the seed paper's hybrid).
+    /// FLSM matched to the material, stepping with TLED (the seed paper's hybrid): slower than
+    /// TLED everywhere on two cores and less accurate than `frozen` (`hullcut bench tissue`).
     Flsm,
     /// Nothing: cells at rest away from the blade and the cuts sleep, their nodes held where they
-    /// are, until the region reaches them again (the tissue starts all TLED and settles first).
+    /// are, until the region reaches them again (the tissue starts all TLED and settles first);
+    /// the cheapest and most accurate far field measured (`hullcut bench tissue`).
     Frozen,
 }
 

@@ -33,10 +33,10 @@ use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 /// interval, and a batch in which a cell inverted is redone on the CPU (counted in the report's
 /// `gpu` object).
 ///
-/// A scenario with [cut] moves a blade's cutting edge along keyed offsets and cuts the surface it
+/// A scenario with `[cut]` moves a blade's cutting edge along keyed offsets and cuts the surface it
 /// sweeps into the body every report.interval (1/60 s by default), as `hullcut run` cuts with
 /// each frame set's pose; the operational region follows the blade (cut.operational_radius, with
-/// cut.far_field "flsm" or "frozen") and the body may rest on a table ([cut.table]). Its report
+/// cut.far_field "frozen" or "flsm") and the body may rest on a table (`[cut.table]`). Its report
 /// (kind "cut-simulation") gives the pieces, the cut's edges, copies and virtual nodes, ms per
 /// frame split into the cut's collision, topology and surfaces and the body's advance, and frames
 /// per wall second; its recording the pieces' surfaces (world/tissue/surface), the swept surface

@@ -89,6 +89,9 @@ impl BladePath {
     }
 }
 
+/// A body's signed distance (negative inside), metres.
+type SignedDistance = dyn Fn(&Point3<f64>) -> f64 + Sync;
+
 /// A rest position's exact bits, to find a held node by it.
 fn bits(p: &Point3<f64>) -> [u64; 3] {
     [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
@@ -146,7 +149,7 @@ impl ScriptedCut {
         let key = if s.body.mesh.is_some() { "body.mesh" } else { "body" };
         let voxelized = crate::body::voxelize(&body, cell, &params).map_err(|e| invalid(key, e.to_string()))?;
         let lattice = voxelized.lattice;
-        let signed: Box<dyn Fn(&Point3<f64>) -> f64 + Sync> = match &body {
+        let signed: Box<SignedDistance> = match &body {
             Body::Box { size } => Box::new(box_sdf(*size)),
             Body::Organ { scale } => {
                 let scale = *scale;
@@ -192,7 +195,7 @@ impl ScriptedCut {
             "gauss8" => Integration::Gauss8,
             _ => Integration::OnePoint,
         };
-        let far_field = if spec.far_field == "frozen" { FarField::Frozen } else { FarField::Flsm };
+        let far_field = if spec.far_field.as_deref() == Some("flsm") { FarField::Flsm } else { FarField::Frozen };
         let hybrid = spec.operational_radius.map(|radius| HybridParams {
             radius,
             flsm: FlsmParams {
