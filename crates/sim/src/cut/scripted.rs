@@ -19,7 +19,7 @@ use crate::flsm::FlsmParams;
 use crate::mesh::WindingTree;
 use crate::operational::{FarField, HybridParams};
 use crate::scenario::{CutSpec, MAX_LATTICE_CELLS, Scenario};
-use crate::simulation::{box_nodes, face_nodes, scenario_body};
+use crate::simulation::{MAX_STEPS, box_nodes, face_nodes, scenario_body};
 use crate::sweep::{SweptSurface, reach_back};
 use crate::table::Table;
 use crate::tled::{Integration, TledParams};
@@ -138,7 +138,9 @@ pub const DEFAULT_INTERVAL_S: f64 = 1.0 / 60.0;
 
 impl ScriptedCut {
     /// The body, blade and settings a scenario with `[cut]` describes (checked first, as
-    /// [`Scenario::validate`] does; an error names the key).
+    /// [`Scenario::validate`] does; an error names the key). A run of more than [`MAX_STEPS`]
+    /// steps (every frame takes at least one) is refused naming `run.duration` or
+    /// `report.interval`.
     pub fn from_scenario(s: &Scenario) -> Result<Self, SimError> {
         s.validate()?;
         let invalid = |key: &str, message: String| SimError::Invalid { key: key.to_owned(), message };
@@ -222,6 +224,20 @@ impl ScriptedCut {
         let fixed = |p: &Point3<f64>| held.contains(&bits(p));
         let sim = CutSim::new(lattice, &*signed, material, fixed, params)?;
         let interval = if s.report.interval > 0.0 { s.report.interval } else { DEFAULT_INTERVAL_S };
+        // Every frame takes at least one step: the run is bounded as a scenario's run is.
+        let frames = (s.run.duration / interval).round().max(1.0);
+        let steps = frames * (interval / sim.dt()).ceil().max(1.0);
+        if !(steps.is_finite() && steps <= MAX_STEPS as f64) {
+            return Err(invalid(
+                if interval < sim.dt() { "report.interval" } else { "run.duration" },
+                format!(
+                    "{} s in frames of {interval:e} s at a step of {:e} s is {steps:.3e} steps, above the limit of \
+                     {MAX_STEPS}: shorten run.duration, or make report.interval no shorter than the step",
+                    s.run.duration,
+                    sim.dt()
+                ),
+            ));
+        }
         Ok(Self { sim, blade: BladePath::from_spec(spec), interval, frame: 0, warnings: voxelized.warnings })
     }
 

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use hullcut_sim::{MAX_STEPS, Scenario, Simulation};
+use hullcut_sim::{MAX_STEPS, Scenario, ScriptedCut, Simulation};
 use proptest::prelude::*;
 
 /// A valid scenario touching every table, small enough to build in milliseconds: eight 1 cm cells,
@@ -198,6 +198,52 @@ fn an_oversized_scenario_file_is_refused_unread() {
     assert!(e.to_string().contains("larger than"), "{e}");
 }
 
+/// A valid scenario with a blade that cuts: a 2 x 2 x 2 cm block of 1 cm cells on a table, an
+/// upright edge drawn through it in a few frames, the far field asleep beyond 5 mm.
+const VALID_CUT: &str = r#"[body]
+shape = "box"
+size = [0.02, 0.02, 0.02]
+cell = 0.01
+
+[material]
+lambda = 20000.0
+mu = 20000.0
+density = 1000.0
+
+[[boundary]]
+faces = ["x-"]
+fix = ["x", "y", "z"]
+
+[run]
+duration = 0.05
+safety = 0.8
+damping = 50.0
+gravity = [0.0, 0.0, -9.81]
+
+[report]
+interval = 0.01
+
+[cut]
+edge = [[0.012, -0.005, -0.001], [0.012, -0.005, 0.025]]
+path = [{ time = 0.0, offset = [0.0, 0.0, 0.0] }, { time = 0.03, offset = [0.0, 0.03, 0.0] }]
+operational_radius = 0.005
+far_field = "frozen"
+
+[cut.table]
+friction = 0.5
+"#;
+
+#[test]
+fn the_valid_cut_scenario_cuts_the_block() {
+    let s = Scenario::parse(VALID_CUT, "cut.toml").expect("parses");
+    let mut run = ScriptedCut::from_scenario(&s).expect("builds");
+    let mut crossed = 0;
+    for _ in 0..run.frames_for(s.run.duration) {
+        crossed += run.frame().expect("stable").cut.map_or(0, |c| c.new_edges);
+    }
+    assert!(crossed > 0, "the blade crossed lattice edges");
+}
+
 /// Every file of `tests/corpus/` is refused, by the parser or when the simulation is built, with
 /// an error naming the key its first line (`# key: ...`) gives.
 #[test]
@@ -221,6 +267,10 @@ fn the_regression_corpus_is_refused_naming_each_key() {
         let name = path.display().to_string();
         let e = match Scenario::parse(&text, &name) {
             Err(e) => e,
+            Ok(s) if s.cut.is_some() => match ScriptedCut::from_scenario(&s) {
+                Err(e) => e,
+                Ok(_) => panic!("{name}: accepted"),
+            },
             Ok(s) => match Simulation::from_scenario(&s) {
                 Err(e) => e,
                 Ok(_) => panic!("{name}: accepted"),
@@ -251,7 +301,12 @@ const HOSTILE: [&str; 14] = [
 
 /// Byte ranges of the numbers in `VALID`.
 fn numbers() -> Vec<(usize, usize)> {
-    let b = VALID.as_bytes();
+    numbers_in(VALID)
+}
+
+/// Byte ranges of the numbers in `text`.
+fn numbers_in(text: &str) -> Vec<(usize, usize)> {
+    let b = text.as_bytes();
     let mut out = Vec::new();
     let mut i = 0;
     while i < b.len() {
@@ -318,6 +373,34 @@ proptest! {
         let text = String::from_utf8_lossy(&bytes);
         if let Ok(s) = Scenario::parse(&text, "fuzz.toml") {
             prop_assert!(all_finite(&s));
+        }
+    }
+
+    /// A cutting scenario with numbers replaced by hostile literals is refused, or it builds (or
+    /// is refused naming a key) and runs its frames to the end or to a reported divergence with
+    /// finite positions: never a panic, never a NaN.
+    #[test]
+    fn hostile_numbers_in_a_cut_scenario_are_refused_or_run(
+        picks in proptest::collection::vec((any::<proptest::sample::Index>(), 0..HOSTILE.len()), 1..3),
+    ) {
+        let spans = numbers_in(VALID_CUT);
+        let mut chosen: Vec<((usize, usize), &str)> =
+            picks.iter().map(|(at, h)| (spans[at.index(spans.len())], HOSTILE[*h])).collect();
+        chosen.sort_by_key(|c| std::cmp::Reverse(c.0));
+        chosen.dedup_by(|a, b| a.0 == b.0);
+        let mut text = VALID_CUT.to_owned();
+        for ((start, end), literal) in chosen {
+            text.replace_range(start..end, literal);
+        }
+        let Ok(s) = Scenario::parse(&text, "fuzz.toml") else { return Ok(()) };
+        prop_assert!(all_finite(&s));
+        let Ok(mut run) = ScriptedCut::from_scenario(&s) else { return Ok(()) };
+        // A few frames at most: a hostile interval or duration must not make this long.
+        for _ in 0..run.frames_for(s.run.duration).min(4) {
+            if run.frame().is_err() {
+                break;
+            }
+            prop_assert!(run.sim.node_positions().iter().all(|p| p.coords.iter().all(|x| x.is_finite())));
         }
     }
 
