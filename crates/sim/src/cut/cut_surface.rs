@@ -110,6 +110,16 @@ impl PieceSurface {
 
 /// The surfaces of every piece of a cut body.
 pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodySamples) -> Vec<PieceSurface> {
+    surfaces_of_pieces(lattice, topology, samples, true)
+}
+
+/// [`piece_surfaces`], visiting only the samples near the surface (`skip_interior`) or all.
+fn surfaces_of_pieces(
+    lattice: &Lattice,
+    topology: &CutTopology,
+    samples: &BodySamples,
+    skip_interior: bool,
+) -> Vec<PieceSurface> {
     // How each split cell's material is divided, once per cell (not once per sample).
     let splits: Vec<Option<CellSplit>> = (0..lattice.cells.len())
         .into_par_iter()
@@ -143,11 +153,18 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
             na.iter().any(|n| nb.contains(n))
         }
     };
+    let near = if skip_interior {
+        near_surface(samples, &owner, |copy, cell| {
+            split[copy as usize] || topology.copies[copy as usize].parent != cell
+        })
+    } else {
+        vec![true; owner.len()]
+    };
     (0..topology.pieces as u32)
         .into_par_iter()
         .map(|piece| {
             let values: Vec<f64> = owner
-                .iter()
+                .par_iter()
                 .zip(&samples.body)
                 .map(|(&(copy, cut), &body)| {
                     if copy == NO_COPY {
@@ -163,6 +180,7 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
                 .collect();
             let field = Field {
                 values: &values,
+                near: &near,
                 owner: &owner,
                 samples,
                 joined: &joined,
@@ -176,6 +194,40 @@ pub fn piece_surfaces(lattice: &Lattice, topology: &CutTopology, samples: &BodyS
             PieceSurface { rest: mesh, bindings }
         })
         .collect()
+}
+
+/// Which samples lie within one sample (along every axis) of a sample the surface can pass
+/// beside: outside the body, in no copy, or in a copy `special(copy, cell)` says can be cut apart
+/// from its neighbours (a copy of a split cell, or one the sample's cell does not hold).
+///
+/// A grid cube whose eight samples are all inside the body and held by whole cells of one piece
+/// (whole cells that touch share lattice nodes, so they are one piece) has no surface through it;
+/// every cube the surface crosses has a special corner, so all its corners are near one. Surface
+/// nets visit only the samples near one: the same cubes in the same order, the organ's interior
+/// skipped (the built-in organ at 2 mm: most of its 1.6 million samples).
+fn near_surface(samples: &BodySamples, owner: &[(u32, f64)], special: impl Fn(u32, u32) -> bool + Sync) -> Vec<bool> {
+    let n = samples.dims;
+    let marked: Vec<bool> = (0..owner.len())
+        .into_par_iter()
+        .map(|g| {
+            let copy = owner[g].0;
+            samples.body[g] >= 0.0 || copy == NO_COPY || special(copy, samples.cell[g])
+        })
+        .collect();
+    // Dilate by one sample along x, then y, then z (a 3 x 3 x 3 neighbourhood in all).
+    let stride = [1, n[0], n[0] * n[1]];
+    let mut near = marked;
+    for axis in 0..3 {
+        let before = near.clone();
+        near.par_iter_mut().enumerate().for_each(|(g, out)| {
+            if *out {
+                return;
+            }
+            let i = (g / stride[axis]) % n[axis];
+            *out = (i > 0 && before[g - stride[axis]]) || (i + 1 < n[axis] && before[g + stride[axis]]);
+        });
+    }
+    near
 }
 
 /// The trilinear weights of `p` in the cube of `copy`.
@@ -194,6 +246,8 @@ fn bind(lattice: &Lattice, topology: &CutTopology, copy: u32, p: &Point3<f64>) -
 struct Field<'a> {
     /// Negative where the piece has material.
     values: &'a [f64],
+    /// Samples near one the surface can pass beside ([`near_surface`]); the others are skipped.
+    near: &'a [bool],
     /// Each sample's copy and signed distance to its cell's cut (metres; infinite in whole cells).
     owner: &'a [(u32, f64)],
     samples: &'a BodySamples,
@@ -301,7 +355,7 @@ impl Field<'_> {
         let mut groups: Vec<[u32; 8]> = Vec::new();
         let mut vertices = Vec::new();
         let mut held_by = Vec::new();
-        for g in (0..self.values.len()).filter(|&g| self.inside(g)) {
+        for g in (0..self.values.len()).filter(|&g| self.near[g] && self.inside(g)) {
             let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
             for c in 0..8 {
                 let lo =
@@ -379,7 +433,7 @@ impl Field<'_> {
             }
         }
         let mut triangles = Vec::new();
-        for g in (0..self.values.len()).filter(|&g| self.inside(g)) {
+        for g in (0..self.values.len()).filter(|&g| self.near[g] && self.inside(g)) {
             let gi = [g % n[0], (g / n[0]) % n[1], g / (n[0] * n[1])];
             for axis in 0..3 {
                 let (u, w) = ((axis + 1) % 3, (axis + 2) % 3);
@@ -418,6 +472,42 @@ mod tests {
     use crate::body::box_sdf;
     use crate::collide::{SpatialHash, cut_edges};
     use crate::sweep::SweptSurface;
+
+    #[test]
+    fn skipping_the_interior_gives_the_same_surfaces_vertex_for_vertex() {
+        // A block cut by two crossing strokes and a third that parts a corner, on the organ-like
+        // margin case too (a box not aligned with the lattice): the skipped samples change nothing.
+        let l = Lattice::block(Point3::origin(), 0.01, [6, 5, 4]);
+        let size = Vector3::new(0.057, 0.046, 0.037);
+        let samples = BodySamples::new(&l, 3, &box_sdf(size));
+        let hash = SpatialHash::new(&l, &l.rest, l.cell);
+        let stroke = |edge: Vec<Point3<f64>>, from: Vector3<f64>, to: Vector3<f64>| {
+            let s = SweptSurface::between(
+                &edge,
+                &Isometry3::translation(from.x, from.y, from.z),
+                &Isometry3::translation(to.x, to.y, to.z),
+                0.004,
+                0.1,
+            )
+            .expect("surface");
+            cut_edges(&l, &l.rest, &hash, &s).edges
+        };
+        let along_x: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(-0.01 + 0.01 * k as f64, 0.0, 0.0)).collect();
+        let along_y: Vec<Point3<f64>> = (0..9).map(|k| Point3::new(0.0, -0.01 + 0.01 * k as f64, 0.0)).collect();
+        let mut edges = stroke(along_x, Vector3::new(0.0, 0.023, 0.06), Vector3::new(0.0, 0.023, 0.012));
+        edges.extend(stroke(along_y.clone(), Vector3::new(0.031, 0.0, 0.06), Vector3::new(0.031, 0.0, -0.01)));
+        edges.extend(stroke(along_y, Vector3::new(0.049, 0.0, 0.06), Vector3::new(0.049, 0.0, -0.01)));
+        let cut = CutTopology::rebuild(&l, edges);
+        assert!(cut.pieces >= 2, "{} pieces", cut.pieces);
+        let (fast, all) = (surfaces_of_pieces(&l, &cut, &samples, true), surfaces_of_pieces(&l, &cut, &samples, false));
+        assert_eq!(fast.len(), all.len());
+        for (a, b) in fast.iter().zip(&all) {
+            assert!(!a.rest.triangles.is_empty());
+            assert_eq!(a.rest.vertices, b.rest.vertices);
+            assert_eq!(a.rest.triangles, b.rest.triangles);
+            assert_eq!(a.bindings.len(), b.bindings.len());
+        }
+    }
 
     #[test]
     fn a_slit_within_one_piece_shows_as_two_faces_that_open_with_their_sides() {
