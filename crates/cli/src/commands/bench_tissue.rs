@@ -162,8 +162,12 @@ fn lockstep(size: Size, speed: f64, models: &[Model]) -> anyhow::Result<Vec<(Mod
                 Err(e) => out.failure = Some(format!("{}: {e}", m.name())),
             }
         }
-        // Errors against the all-TLED body, near the edge where it is now and everywhere.
+        // Errors against the all-TLED body, near the edge where it is now and everywhere; none
+        // once the reference itself has stopped.
         let (reference, rest) = runs.split_first_mut().context("no reference")?;
+        if reference.2.failure.is_some() {
+            break;
+        }
         let time = reference.1.sim.time();
         let edge = reference.1.blade.edge_at(time);
         let a = reference.1.sim.node_positions();
