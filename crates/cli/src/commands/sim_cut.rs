@@ -6,18 +6,15 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use hullcut_sim::dynamics::Divergence;
 use hullcut_sim::scripted::FrameError;
-use hullcut_sim::{PieceState, Scenario, ScriptedCut};
+use hullcut_sim::{PieceState, Scenario, ScriptedCut, SweptSurface};
 use serde::{Deserialize, Serialize};
 
+use super::run::tissue_log::{SWEPT_CYAN, TISSUE_RED, merged};
 use super::sim::Args;
 use crate::backend::Backend;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 
-/// RGBA of the body's surface.
-const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
-/// RGBA of the swept blade surface.
-const SWEPT_CYAN: [u8; 4] = [80, 220, 240, 160];
 /// RGBA of the blade's edge.
 const EDGE_WHITE: [u8; 4] = [240, 240, 240, 255];
 
@@ -158,7 +155,7 @@ pub fn run(args: &Args, scenario: &Scenario) -> anyhow::Result<()> {
                 surface.push(ms(c.surface_ms));
             }
             if let Some(rec) = &rec {
-                log_frame(rec, &run, k)?;
+                log_frame(rec, &run, k, outcome.swept.as_ref())?;
             }
             pb.set_position(k + 1);
         }
@@ -277,23 +274,23 @@ fn print_summary(r: &Report) {
     );
 }
 
-/// Logs one frame: the pieces' surfaces, the swept surface's edge where the blade is, scalars.
-fn log_frame(rec: &hullcut_viz::RecordingStream, run: &ScriptedCut, k: u64) -> anyhow::Result<()> {
+/// Logs one frame: the pieces' surfaces, the surface the blade swept this frame and its edge,
+/// scalars.
+fn log_frame(
+    rec: &hullcut_viz::RecordingStream,
+    run: &ScriptedCut,
+    k: u64,
+    swept: Option<&SweptSurface>,
+) -> anyhow::Result<()> {
     hullcut_viz::set_frame(rec, k as i64);
     hullcut_viz::set_capture_time_ns(rec, (run.sim.time() * 1e9) as i64);
-    let mut vertices = Vec::new();
-    let mut triangles = Vec::new();
-    for mesh in run.sim.surfaces() {
-        let base = vertices.len() as u32;
-        vertices.extend(mesh.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]));
-        triangles.extend(mesh.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
+    let (vertices, triangles) = merged(&run.sim.surfaces());
     hullcut_viz::log_mesh3d(rec, "world/tissue/surface", &vertices, &triangles, TISSUE_RED)?;
-    let t = run.sim.time();
     let cell = run.sim.lattice().cell;
-    let edge: Vec<[f32; 3]> = run.blade.edge_at(t).iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    let edge: Vec<[f32; 3]> =
+        run.blade.edge_at(run.sim.time()).iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
     hullcut_viz::log_line_strips3d(rec, "world/tool/edge", &[edge], EDGE_WHITE, (cell * 0.1) as f32)?;
-    match run.blade.sweep(t - 2.0 * run.interval, t - run.interval, t, 0.0, cell / 2.0) {
+    match swept {
         Some(swept) => {
             let v: Vec<[f32; 3]> = swept.vertices.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
             hullcut_viz::log_mesh3d(rec, "world/tissue/cut", &v, &swept.triangles, SWEPT_CYAN)?;

@@ -217,8 +217,11 @@ fn near_surface(samples: &BodySamples, owner: &[(u32, f64)], special: impl Fn(u3
     // Dilate by one sample along x, then y, then z (a 3 x 3 x 3 neighbourhood in all).
     let stride = [1, n[0], n[0] * n[1]];
     let mut near = marked;
+    let mut before = near.clone();
     for axis in 0..3 {
-        let before = near.clone();
+        if axis > 0 {
+            before.copy_from_slice(&near);
+        }
         near.par_iter_mut().enumerate().for_each(|(g, out)| {
             if *out {
                 return;

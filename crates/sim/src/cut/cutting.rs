@@ -380,14 +380,20 @@ impl CutSim {
             })
         };
         // A cell the obstacles (the hand) reach into is awake: a sleeping or FLSM node is not
-        // pushed out of them, and the hand would pass through a far field that sleeps.
-        let touched = |c: usize| {
-            !self.obstacles.is_empty()
-                && self.lattice.cells[c].nodes.iter().any(|&n| {
-                    let p = self.rest[n as usize] + u[n as usize];
+        // pushed out of them, and the hand would pass through a far field that sleeps. Each
+        // lattice node is looked up once.
+        let pressed: Vec<bool> = if self.obstacles.is_empty() {
+            Vec::new()
+        } else {
+            (0..self.lattice.node_count())
+                .map(|n| {
+                    let p = self.rest[n] + u[n];
                     self.obstacles.iter().any(|o| o.push_at(&p).is_some())
                 })
+                .collect()
         };
+        let touched =
+            |c: usize| !pressed.is_empty() && self.lattice.cells[c].nodes.iter().any(|&n| pressed[n as usize]);
         (0..self.lattice.cells.len())
             .map(|c| {
                 self.band[c]

@@ -100,6 +100,8 @@ fn bits(p: &Point3<f64>) -> [u64; 3] {
 /// What one frame of a [`ScriptedCut`] did.
 #[derive(Debug, Clone, Default)]
 pub struct FrameOutcome {
+    /// The surface the blade swept this frame, when it moved.
+    pub swept: Option<SweptSurface>,
     /// The cut, when the blade moved this frame.
     pub cut: Option<CutOutcome>,
     /// Wall time advancing the body (contacts included), milliseconds.
@@ -258,6 +260,7 @@ impl ScriptedCut {
             outcome.cut = Some(self.sim.cut(swept).map_err(FrameError::Cut)?);
         }
         self.sim.set_tool(swept.as_ref().map_or(&[], |s| &s.vertices[..]));
+        outcome.swept = swept;
         let clock = Instant::now();
         // To the frame's end (whole steps: the body keeps within a step of the blade's clock).
         let seconds = (t1 - self.sim.time()).max(0.0);

@@ -7,9 +7,9 @@ use hullcut_pipeline::TissueStep;
 use hullcut_sim::TriMesh;
 
 /// RGBA of the organ's surface.
-const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
+pub(crate) const TISSUE_RED: [u8; 4] = [170, 60, 50, 255];
 /// RGBA of the swept blade surface.
-const SWEPT_CYAN: [u8; 4] = [80, 220, 240, 160];
+pub(crate) const SWEPT_CYAN: [u8; 4] = [80, 220, 240, 160];
 
 /// The surface as last logged, to log it again only when it has changed visibly.
 #[derive(Debug, Default)]
@@ -76,7 +76,7 @@ pub fn log(
 }
 
 /// The pieces' surfaces as one vertex and triangle list.
-fn merged(surfaces: &[TriMesh]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+pub(crate) fn merged(surfaces: &[TriMesh]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let mut vertices = Vec::new();
     let mut triangles = Vec::new();
     for mesh in surfaces {
