@@ -32,22 +32,25 @@ pub const SHADOW_HULL_HEIGHT: f64 = 0.04;
 /// `sure`, the silhouettes with the possible shadows left out), or at least as many views as see
 /// only shadow there (foreground in `all` but none in `sure`), one at least; with `table`, the
 /// world frame's z = 0 being the table top, also every cell wholly above [`SHADOW_HULL_HEIGHT`]
-/// (a skin-toned hand over a wooden table looks like a shadow of it where it is shaded); and how
-/// many cells went.
+/// (a skin-toned hand over a wooden table looks like a shadow of it where it is shaded); also every
+/// cell `objects` marks (by index; shorter or empty marks none: cells known to be an object, such
+/// as the tracked tool's); and how many cells went.
 pub fn keep_supported(
     occ: &Occupancy,
     all: &[Option<Silhouette>],
     sure: &[Option<Silhouette>],
     margin_px: f64,
     table: bool,
+    objects: &[bool],
 ) -> (Occupancy, usize) {
     let pairs: Vec<(&Silhouette, &Silhouette)> =
         all.iter().zip(sure).filter_map(|(a, s)| a.as_ref().zip(s.as_ref())).collect();
     let keep: Vec<bool> = occ
         .cells
         .par_iter()
-        .map(|c| {
-            if table && c.min.z > SHADOW_HULL_HEIGHT {
+        .enumerate()
+        .map(|(k, c)| {
+            if (table && c.min.z > SHADOW_HULL_HEIGHT) || objects.get(k).copied().unwrap_or(false) {
                 return true;
             }
             let (mut sure_views, mut shadow_views) = (0, 0);

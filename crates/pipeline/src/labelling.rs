@@ -49,6 +49,10 @@ const EXPLAINED: u8 = 254;
 /// full (ambient light only) keeps a fifth of the light or more.
 const SHADOW_DEPTH: f64 = 0.8;
 
+/// Hull cells within this distance of the tool where its track predicts it are an object, not a
+/// cast shadow, metres: enough for the prediction's error and for a tip the fit fell short of.
+const TOOL_OBJECT_MARGIN: f64 = 0.004;
+
 /// Which evidence labels the foreground (`--labels`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -327,12 +331,22 @@ impl Labelling {
                 stats: None,
             });
         }
+        // The colours' hints are taken before possible shadows become foreground or background.
+        let hints: Option<Vec<Option<GrayImage>>> =
+            self.sure.as_ref().filter(|_| self.method == LabelMethod::Both && self.tool.is_some()).map(|sure| {
+                fg.iter()
+                    .zip(&set.views)
+                    .map(|(m, view)| Some(colour_hints(sure, &view.as_ref()?.image, m.as_ref()?)))
+                    .collect()
+            });
         let clock = Instant::now();
         let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
         let views = silhouettes(&self.rig, &refs).with_context(|| format!("frame {frame}"))?;
         let mut occ = carver.carve(&views, &self.hull).with_context(|| format!("frame {frame}"))?;
         if shadow_pixels > 0 {
-            occ = self.resolve_shadows(occ, &views, &mut fg).with_context(|| format!("frame {frame}"))?;
+            occ = self
+                .resolve_shadows(occ, &views, &mut fg, set.timestamp_ns)
+                .with_context(|| format!("frame {frame}"))?;
         }
         for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -357,11 +371,29 @@ impl Labelling {
                 stats: None,
             });
         }
+        // The learned colours' hints for the tool's fit: foreground whose colour is surely the
+        // hand's or the tool's says so (the rest, possible shadows included, stays undecided).
+        let hinted: Option<Vec<Option<GrayImage>>> = hints.map(|hints| {
+            fg.iter()
+                .zip(&hints)
+                .map(|(m, hint)| {
+                    let mut m = m.clone()?;
+                    if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
+                        for (p, &h) in m.iter_mut().zip(hint.iter()) {
+                            if *p != label::BACKGROUND && (h == label::HAND || h == label::SCALPEL) {
+                                *p = h;
+                            }
+                        }
+                    }
+                    Some(m)
+                })
+                .collect()
+        });
         let inputs: Vec<Option<ViewInput>> = self
             .rig
             .cameras
             .iter()
-            .zip(&fg)
+            .zip(hinted.as_ref().unwrap_or(&fg))
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
@@ -465,12 +497,14 @@ impl Labelling {
     }
 
     /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible
-    /// shadows foreground where those cells cover them, background elsewhere.
+    /// shadows foreground where those cells cover them, background elsewhere; the cells near the
+    /// tool where its track predicts it at `timestamp_ns` are kept as objects.
     fn resolve_shadows(
         &mut self,
         occ: Occupancy,
         views: &[Option<Silhouette>],
         fg: &mut [Option<GrayImage>],
+        timestamp_ns: i64,
     ) -> Result<Occupancy, Error> {
         let sure: Vec<Option<GrayImage>> = fg
             .iter()
@@ -484,7 +518,17 @@ impl Labelling {
             .collect();
         let refs: Vec<Option<&GrayImage>> = sure.iter().map(Option::as_ref).collect();
         let sure = silhouettes(&self.rig, &refs).context("the sure foreground's silhouettes")?;
-        let (occ, dropped) = keep_supported(&occ, views, &sure, self.hull.margin_px, self.rig.world_frame.is_table());
+        // Where the tool's track predicts it, the hull is the tool's: a dull blade's tip over a table
+        // of its shade looks like a shadow to most views.
+        let tool = self.tool.as_ref().and_then(|t| t.near_predicted(timestamp_ns, &occ, TOOL_OBJECT_MARGIN));
+        let (occ, dropped) = keep_supported(
+            &occ,
+            views,
+            &sure,
+            self.hull.margin_px,
+            self.rig.world_frame.is_table(),
+            tool.as_deref().unwrap_or_default(),
+        );
         self.counters.shadow_cells_dropped += dropped as u64;
         for (view, mask) in views.iter().zip(fg.iter_mut()) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -534,6 +578,22 @@ impl Labelling {
             appearance_sources: self.appearance.sources,
         }
     }
+}
+
+/// The label of each foreground pixel's colour where `sure` decides ([`label::UNKNOWN`] where it
+/// does not), background elsewhere: possible shadows ([`SHADOW_LIKE`]) too, whose colour is the
+/// background's darkened, not the object's.
+fn colour_hints(sure: &ColourLut, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
+    let mut out = GrayImage::new(mask.width(), mask.height());
+    if image.dimensions() != mask.dimensions() {
+        return out;
+    }
+    for ((o, &m), p) in out.iter_mut().zip(mask.iter()).zip(image.as_raw().chunks_exact(3)) {
+        if m != label::BACKGROUND && m != SHADOW_LIKE {
+            *o = sure.get([p[0], p[1], p[2]]);
+        }
+    }
+    out
 }
 
 /// Gives the foreground near the drawn tool (`region`, grown by [`SHARPEN_PX`]) the label of its

@@ -43,8 +43,12 @@ pub struct LabelParams {
     /// the hull narrower than twice this are taken as the tool when there is no track.
     pub thin_radius_m: f64,
     /// Foreground within this many pixels of the predicted tool's silhouette is the fit's
-    /// evidence of the tool.
+    /// evidence of the tool (unless its colour is surely the hand's).
     pub band_px: f64,
+    /// Foreground whose colour is surely the tool's is the fit's evidence of the tool within this
+    /// many pixels of the predicted silhouette: where the track has fallen short of the tool
+    /// (a thin tip lost for a frame), the colour pulls the fit back over it.
+    pub colour_band_px: f64,
     /// Hull cells whose centre lies this close to the tool's surface (plus half a cell's diagonal)
     /// are the tool's, metres.
     pub tool_margin_m: f64,
@@ -55,7 +59,13 @@ pub struct LabelParams {
 
 impl Default for LabelParams {
     fn default() -> Self {
-        LabelParams { thin_radius_m: 0.007, band_px: 3.0, tool_margin_m: 0.002, occlusion_margin_m: 0.003 }
+        LabelParams {
+            thin_radius_m: 0.007,
+            band_px: 3.0,
+            colour_band_px: 16.0,
+            tool_margin_m: 0.002,
+            occlusion_margin_m: 0.003,
+        }
     }
 }
 
@@ -189,8 +199,18 @@ impl ToolLabeller {
         &self.tracker
     }
 
+    /// Which cells of `occ` come within `margin` metres of the tool where its track predicts it
+    /// at `timestamp_ns` (`None` while the track predicts nothing): cells of an object, whatever
+    /// their shading says.
+    pub fn near_predicted(&self, timestamp_ns: i64, occ: &Occupancy, margin: f64) -> Option<Vec<bool>> {
+        let pose = self.tracker.predicted(timestamp_ns)?;
+        Some(near_tool(occ, &self.field, &pose, margin).cells.iter().map(|c| c.scalpel).collect())
+    }
+
     /// Labels one frame set: `occ` is the hull of the views' foreground, `views` their foreground
-    /// masks (any non-zero label is foreground), one entry per rig camera.
+    /// masks (any non-zero label is foreground), one entry per rig camera. A foreground pixel may
+    /// carry a colour's hint for the fit: [`label::HAND`] where its colour is surely the hand's,
+    /// [`label::SCALPEL`] where surely the tool's; any other value decides nothing.
     pub fn label(
         &mut self,
         frame: u64,
@@ -204,8 +224,18 @@ impl ToolLabeller {
         let provisional_for = |pose: &Isometry3<f64>| {
             let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m);
             let hand: Vec<hullcut_hull::Cell> = hull.cells.iter().filter(|c| c.hand).copied().collect();
-            let masks: Vec<Option<GrayImage>> =
-                views.iter().map(|v| v.map(|v| band_labels(v, &template, pose, self.params.band_px, &hand))).collect();
+            let masks: Vec<Option<GrayImage>> = views
+                .iter()
+                .map(|v| {
+                    v.map(|v| {
+                        let radius = v.camera.distortion.monotonic_radius();
+                        let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
+                        let in_front =
+                            HandInFront { cells: &hand, tool: depth.as_ref(), margin: self.params.occlusion_margin_m };
+                        band_labels(v, &template, pose, (self.params.band_px, self.params.colour_band_px), &in_front)
+                    })
+                })
+                .collect();
             (masks, hull)
         };
         // Each way to start is tried on a copy of the tracker; the best copy becomes the tracker.
@@ -481,19 +511,23 @@ fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f
     [part(&template.blade), part(&template.body)].into_iter().filter(|p| p.len() >= 3).collect()
 }
 
-/// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless a cell of the
-/// hand's hull (`hand`) projects onto it (a finger along the tool, or the hand in front of it:
-/// its outline is not the tool's); other foreground: hand.
+/// Foreground within `bands.0` pixels of the tool's modelled silhouette: scalpel, unless its colour
+/// is surely the hand's (a [`label::HAND`] hint in the view's mask) or a cell of the hand's hull
+/// that is not behind the tool projects onto it (a finger along the tool, or the hand in front of
+/// it: its outline is not the tool's; see [`HandInFront`]); foreground within `bands.1` pixels
+/// whose colour is surely the tool's (a [`label::SCALPEL`] hint): scalpel whatever the hull says;
+/// other foreground: hand.
 fn band_labels(
     view: ViewInput,
     template: &Template,
     pose: &Isometry3<f64>,
-    band: f64,
-    hand: &[hullcut_hull::Cell],
+    bands: (f64, f64),
+    hand: &HandInFront,
 ) -> GrayImage {
     let cam = view.camera;
     let radius = cam.distortion.monotonic_radius();
     let polygons = silhouette(cam, radius, template, pose);
+    let hints = view.mask.as_raw();
     let mut out = view.mask.clone();
     let (w, h) = (out.width() as usize, out.height() as usize);
     for p in out.iter_mut() {
@@ -501,29 +535,59 @@ fn band_labels(
             *p = label::HAND;
         }
     }
+    let raw = out.as_mut();
     for poly in &polygons {
-        let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
-        for q in poly {
-            lo = lo.inf(q);
-            hi = hi.sup(q);
-        }
-        let (i0, j0) = ((lo.x - band).floor().max(0.0) as usize, (lo.y - band).floor().max(0.0) as usize);
-        let (i1, j1) = ((hi.x + band).ceil().min(w as f64 - 1.0), (hi.y + band).ceil().min(h as f64 - 1.0));
-        if i1 < 0.0 || j1 < 0.0 {
-            continue;
-        }
-        let raw = out.as_mut();
-        for j in j0..=j1 as usize {
-            let Some((a, b)) = row_within(poly, band, j as f64, i0, i1 as usize) else { continue };
-            for p in &mut raw[j * w + a..=j * w + b] {
-                if *p == label::HAND {
-                    *p = label::SCALPEL;
+        for (j, a, b) in band_rows(poly, bands.0, w, h) {
+            for k in j * w + a..=j * w + b {
+                if raw[k] == label::HAND && hints[k] != label::HAND {
+                    raw[k] = label::SCALPEL;
                 }
             }
         }
     }
-    clear_hand(&mut out, view.camera, radius, hand);
+    clear_hand(&mut out, view.camera, radius, bands.0, hand, hints);
+    let raw = out.as_mut();
+    for poly in &polygons {
+        for (j, a, b) in band_rows(poly, bands.1.max(bands.0), w, h) {
+            for k in j * w + a..=j * w + b {
+                if hints[k] == label::SCALPEL {
+                    raw[k] = label::SCALPEL;
+                }
+            }
+        }
+    }
     out
+}
+
+/// The hand's hull cells that may take pixels of the tool's band from it, with what tells a cell
+/// behind the tool in a view: the tool drawn with its depth (`None`: no depth known, no cell
+/// behind).
+struct HandInFront<'a> {
+    /// The hull's cells away from the tool.
+    cells: &'a [hullcut_hull::Cell],
+    /// The tool drawn into the view.
+    tool: Option<&'a ToolDepth>,
+    /// A cell is behind the tool where its nearest point lies this much farther from the camera
+    /// than the tool's nearest surface around it, metres.
+    margin: f64,
+}
+
+/// The pixels of a `w`×`h` image within `band` of the convex `polygon`, as (row, first column,
+/// last column).
+fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usize, usize, usize)> {
+    let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
+    for q in polygon {
+        lo = lo.inf(q);
+        hi = hi.sup(q);
+    }
+    let (i0, j0) = ((lo.x - band).floor().max(0.0) as usize, (lo.y - band).floor().max(0.0) as usize);
+    let (i1, j1) = ((hi.x + band).ceil().min(w as f64 - 1.0), (hi.y + band).ceil().min(h as f64 - 1.0));
+    if i1 < i0 as f64 || j1 < j0 as f64 {
+        return Vec::new();
+    }
+    (j0..=j1 as usize)
+        .filter_map(|j| row_within(polygon, band, j as f64, i0, i1 as usize).map(|(a, b)| (j, a, b)))
+        .collect()
 }
 
 /// The columns in `[i0, i1]` of row `y` whose pixel centres lie within `band` of the convex
@@ -563,8 +627,12 @@ fn row_within(polygon: &[Point2<f64>], band: f64, y: f64, i0: usize, i1: usize) 
 
 /// Gives the scalpel pixels of `labels` that a cell of `hand` projects onto back to the hand: the
 /// cell is a disc around its centre's projection whose radius is its half-diagonal's (enough to
-/// cover its footprint, which is what matters along the tool's outline).
-fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &[hullcut_hull::Cell]) {
+/// cover its footprint, which is what matters along the tool's outline), except pixels whose colour
+/// is surely the tool's (`hints`, the view's mask). A cell wholly behind the
+/// tool's nearest surface within `band` pixels of its disc takes nothing: the tool is in front of
+/// it there, and the view sees the tool (the hand's hull, fatter than the hand, would otherwise
+/// hide the blade from every view that sees the hand behind it).
+fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, band: f64, hand: &HandInFront, hints: &[u8]) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     // The scalpel pixels' box: cells projecting elsewhere are skipped after one projection.
     let (mut lo, mut hi) = ((usize::MAX, usize::MAX), (0, 0));
@@ -580,7 +648,7 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &[hullcut
     }
     let f = cam.fx.max(cam.fy);
     let raw = labels.as_mut();
-    for c in hand {
+    for c in hand.cells {
         let centre = c.centre();
         let z = cam.world_to_camera(&centre).z;
         let Some(uv) = project(cam, radius, &centre).filter(|_| z > 0.0) else { continue };
@@ -590,10 +658,15 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &[hullcut
         if i0 > i1 || j0 > j1 {
             continue;
         }
+        let nearest = z - 0.87 * c.size;
+        let around = Point2::new(uv.x - r - band, uv.y - r - band)..=Point2::new(uv.x + r + band, uv.y + r + band);
+        if hand.tool.and_then(|t| t.nearest_in(&around)).is_some_and(|d| nearest > d + hand.margin) {
+            continue;
+        }
         for j in j0 as usize..=(j1 as usize).min(h - 1) {
-            for p in &mut raw[j * w + i0 as usize..=j * w + (i1 as usize).min(w - 1)] {
-                if *p == label::SCALPEL {
-                    *p = label::HAND;
+            for k in j * w + i0 as usize..=j * w + (i1 as usize).min(w - 1) {
+                if raw[k] == label::SCALPEL && hints[k] != label::SCALPEL {
+                    raw[k] = label::HAND;
                 }
             }
         }
@@ -968,6 +1041,24 @@ impl ToolDepth {
             height,
             covered: self.depth.iter().map(|d| d.is_finite()).collect(),
         }
+    }
+
+    /// The nearest depth drawn over the pixel centres in a box (`None` where nothing is drawn).
+    fn nearest_in(&self, within: &std::ops::RangeInclusive<Point2<f64>>) -> Option<f64> {
+        let (lo, hi) = (within.start(), within.end());
+        let h = self.depth.len() / self.w.max(1);
+        let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
+        let (i1, j1) = (
+            (hi.x.floor() - self.x0 as f64).min(self.w as f64 - 1.0),
+            (hi.y.floor() - self.y0 as f64).min(h as f64 - 1.0),
+        );
+        if !(i0 <= i1 && j0 <= j1) {
+            return None;
+        }
+        let nearest = (j0 as usize..=j1 as usize)
+            .flat_map(|j| &self.depth[j * self.w + i0 as usize..=j * self.w + i1 as usize])
+            .fold(f32::INFINITY, |a, &d| a.min(d));
+        nearest.is_finite().then_some(f64::from(nearest))
     }
 
     /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.

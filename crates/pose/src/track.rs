@@ -44,8 +44,9 @@ pub struct TrackerParams {
     pub max_iterations: usize,
     /// Agreement of the fit with the silhouettes (the lower of the share of outline samples it
     /// explains and the share of its interior on foreground) below the first bound gives no
-    /// confidence, above the second full confidence. The geometric labeller's evidence holds some
-    /// of the hand's outline beside the tool, so it uses lower bounds.
+    /// confidence, above the second full confidence (and a fit from the track's prediction that
+    /// reaches the second is kept without fitting again from the hull). The geometric labeller's
+    /// evidence holds some of the hand's outline beside the tool, so it uses lower bounds.
     pub agreement: (f64, f64),
     /// The pose filter.
     pub filter: OneEuroParams,
@@ -320,7 +321,10 @@ impl Tracker {
         let clock = std::time::Instant::now();
         let it = self.params.max_iterations;
         let tracked = prediction.map(|p| fit(&self.template, &evidence, &p, it));
-        let good = |f: &Fit| f.explained >= 0.98 && f.covered >= 0.98;
+        // A tracked fit in full agreement with the silhouettes is kept; anything less is fitted
+        // again from the hull's candidates too (the better of all is kept).
+        let full = self.params.agreement.1;
+        let good = |f: &Fit| f.explained >= full && f.covered >= full;
         let best = match tracked {
             Some(f) if good(&f) => f,
             _ => {
