@@ -589,7 +589,13 @@ fn colour_hints(sure: &ColourLut, image: &image::RgbImage, mask: &GrayImage) -> 
         return out;
     }
     for ((o, &m), p) in out.iter_mut().zip(mask.iter()).zip(image.as_raw().chunks_exact(3)) {
-        if m != label::BACKGROUND && m != SHADOW_LIKE {
+        if m == SHADOW_LIKE {
+            // A possible shadow is the background's colour darkened or an object's: it may speak
+            // against the tool, never for it.
+            if sure.get([p[0], p[1], p[2]]) == label::HAND {
+                *o = label::HAND;
+            }
+        } else if m != label::BACKGROUND {
             *o = sure.get([p[0], p[1], p[2]]);
         }
     }
