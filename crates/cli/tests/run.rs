@@ -584,6 +584,59 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     assert!(r["tissue"]["virtual_nodes"].as_u64().expect("virtual nodes") > 0, "{}", r["tissue"]);
 }
 
+/// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a
+/// brown bare hand over navy clutter, a brass-like handle) with the pointed scalpel, no masks:
+/// segmented from its empty-scene images and the tool's geometry, the loop trusts the blade
+/// through both strokes, down to the table, and cuts the lobe off as the mask files do (measured
+/// 2026-11-26: 147 of 150 trusted, two pieces, 19 ml cut off; 112 trusted and no piece before the
+/// hand's hull stopped hiding a blade in front of it and the learned colours hinted the fit).
+#[test]
+fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let ds = dir.path().join("random");
+    let o = hullcut(&[
+        "synth",
+        "--out",
+        &p(&ds),
+        "--frames",
+        "150",
+        "--scene",
+        "resect",
+        "--rig",
+        "random:47",
+        "--appearance",
+        "random:88",
+        "--tool",
+        "pointed",
+        "--no-truth-meshes",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    std::fs::remove_dir_all(ds.join("masks")).expect("the recording's truth masks removed");
+    let report = dir.path().join("run.json");
+    let o = hullcut(&[
+        "run",
+        "--dataset",
+        &p(&ds),
+        "--rrd",
+        &p(&dir.path().join("run.rrd")),
+        "--report",
+        &p(&report),
+        "--rrd-every",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["masks"].as_str(), Some("segment"), "no masks/: auto segments");
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(150), "{c}");
+    // The goal: the blade trusted in at least 80% of the frame sets.
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 120, "{c}");
+    let t = &r["tissue"];
+    assert_eq!(t["pieces"].as_u64(), Some(2), "the lobe cut off: {t}");
+    assert_pieces_rest_on_the_table(t);
+}
+
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.
 fn retime(ds: &Path, timestamp: impl Fn(u64, i64) -> i64) {
     let path = ds.join("frames.csv");

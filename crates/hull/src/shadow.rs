@@ -120,3 +120,47 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
     }
     covered
 }
+
+#[cfg(test)]
+mod tests {
+    use hullcut_rig::Camera;
+    use image::{GrayImage, Luma};
+    use nalgebra::{Point3, Vector3};
+
+    use super::*;
+    use crate::{Cell, Occupancy};
+
+    /// A camera 1 m above the table looking down, and one 1 cm cell on the table under it.
+    fn scene() -> (Camera, Occupancy) {
+        let camera = Camera::new("top", 200, 200, 200.0, 200.0, 100.0, 100.0)
+            .looking_at(Point3::new(0.0, 0.0, 1.0), Point3::origin(), Vector3::y())
+            .expect("a camera looking down");
+        let cell = Cell { min: Point3::new(-0.005, -0.005, 0.0), size: 0.01, hand: true, scalpel: false, solid: true };
+        let occ = Occupancy {
+            cells: vec![cell],
+            leaf_size: 0.01,
+            origin: Point3::new(-0.005, -0.005, 0.0),
+            resolution: 1,
+            stats: Default::default(),
+        };
+        (camera, occ)
+    }
+
+    #[test]
+    fn a_cell_seen_only_as_shadow_goes_unless_it_is_known_to_be_an_object() {
+        let (camera, occ) = scene();
+        let all = Silhouette::new(&camera, &GrayImage::from_pixel(200, 200, Luma([255])));
+        let sure = Silhouette::new(&camera, &GrayImage::new(200, 200));
+        let (views, sures) = ([Some(all)], [Some(sure)]);
+        let (kept, dropped) = keep_supported(&occ, &views, &sures, 0.5, true, &[]);
+        assert_eq!((kept.cells.len(), dropped), (0, 1), "seen as shadow by its only view");
+        let (kept, dropped) = keep_supported(&occ, &views, &sures, 0.5, true, &[true]);
+        assert_eq!((kept.cells.len(), dropped), (1, 0), "marked as an object (the tracked tool's)");
+        let (kept, _) = keep_supported(&occ, &views, &sures, 0.5, true, &[false]);
+        assert!(kept.cells.is_empty(), "a mark of false keeps nothing");
+        // Seen as sure foreground, it stays whatever the marks say.
+        let sure = Silhouette::new(&camera, &GrayImage::from_pixel(200, 200, Luma([255])));
+        let (kept, _) = keep_supported(&occ, &views, &[Some(sure)], 0.5, true, &[]);
+        assert_eq!(kept.cells.len(), 1);
+    }
+}

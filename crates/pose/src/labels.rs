@@ -45,10 +45,6 @@ pub struct LabelParams {
     /// Foreground within this many pixels of the predicted tool's silhouette is the fit's
     /// evidence of the tool (unless its colour is surely the hand's).
     pub band_px: f64,
-    /// Foreground whose colour is surely the tool's is the fit's evidence of the tool within this
-    /// many pixels of the predicted silhouette: where the track has fallen short of the tool
-    /// (a thin tip lost for a frame), the colour pulls the fit back over it.
-    pub colour_band_px: f64,
     /// Hull cells whose centre lies this close to the tool's surface (plus half a cell's diagonal)
     /// are the tool's, metres.
     pub tool_margin_m: f64,
@@ -59,13 +55,7 @@ pub struct LabelParams {
 
 impl Default for LabelParams {
     fn default() -> Self {
-        LabelParams {
-            thin_radius_m: 0.007,
-            band_px: 3.0,
-            colour_band_px: 16.0,
-            tool_margin_m: 0.002,
-            occlusion_margin_m: 0.003,
-        }
+        LabelParams { thin_radius_m: 0.007, band_px: 3.0, tool_margin_m: 0.002, occlusion_margin_m: 0.003 }
     }
 }
 
@@ -232,7 +222,7 @@ impl ToolLabeller {
                         let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
                         let in_front =
                             HandInFront { cells: &hand, tool: depth.as_ref(), margin: self.params.occlusion_margin_m };
-                        band_labels(v, &template, pose, (self.params.band_px, self.params.colour_band_px), &in_front)
+                        band_labels(v, &template, pose, self.params.band_px, &in_front)
                     })
                 })
                 .collect();
@@ -511,17 +501,16 @@ fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f
     [part(&template.blade), part(&template.body)].into_iter().filter(|p| p.len() >= 3).collect()
 }
 
-/// Foreground within `bands.0` pixels of the tool's modelled silhouette: scalpel, unless its colour
-/// is surely the hand's (a [`label::HAND`] hint in the view's mask) or a cell of the hand's hull
+/// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless its colour
+/// is surely the hand's (a [`label::HAND`] hint in the view's mask), or a cell of the hand's hull
 /// that is not behind the tool projects onto it (a finger along the tool, or the hand in front of
-/// it: its outline is not the tool's; see [`HandInFront`]); foreground within `bands.1` pixels
-/// whose colour is surely the tool's (a [`label::SCALPEL`] hint): scalpel whatever the hull says;
-/// other foreground: hand.
+/// it: its outline is not the tool's; see [`HandInFront`]) and its colour is not surely the
+/// tool's (a [`label::SCALPEL`] hint); other foreground: hand.
 fn band_labels(
     view: ViewInput,
     template: &Template,
     pose: &Isometry3<f64>,
-    bands: (f64, f64),
+    band: f64,
     hand: &HandInFront,
 ) -> GrayImage {
     let cam = view.camera;
@@ -537,7 +526,7 @@ fn band_labels(
     }
     let raw = out.as_mut();
     for poly in &polygons {
-        for (j, a, b) in band_rows(poly, bands.0, w, h) {
+        for (j, a, b) in band_rows(poly, band, w, h) {
             for k in j * w + a..=j * w + b {
                 if raw[k] == label::HAND && hints[k] != label::HAND {
                     raw[k] = label::SCALPEL;
@@ -545,17 +534,7 @@ fn band_labels(
             }
         }
     }
-    clear_hand(&mut out, view.camera, radius, bands.0, hand, hints);
-    let raw = out.as_mut();
-    for poly in &polygons {
-        for (j, a, b) in band_rows(poly, bands.1.max(bands.0), w, h) {
-            for k in j * w + a..=j * w + b {
-                if hints[k] == label::SCALPEL {
-                    raw[k] = label::SCALPEL;
-                }
-            }
-        }
-    }
+    clear_hand(&mut out, view.camera, radius, band, hand, hints);
     out
 }
 
@@ -1127,5 +1106,87 @@ mod tests {
         );
         // A ball does not reach into the block's corners.
         assert!(!opened[at(1, 1, 1)]);
+    }
+
+    /// A camera at the origin looking along +z, a 10x10 block of scalpel pixels at its centre,
+    /// the tool drawn there 0.5 m away, and a 1 cm hand cell on the axis at `z`.
+    fn band_scene(z: f64) -> (Camera, GrayImage, ToolDepth, hullcut_hull::Cell) {
+        let camera = Camera::new("c", 100, 100, 100.0, 100.0, 50.0, 50.0);
+        let mut labels = GrayImage::new(100, 100);
+        for j in 45..55 {
+            for i in 45..55 {
+                labels.put_pixel(i, j, image::Luma([label::SCALPEL]));
+            }
+        }
+        let tool = ToolDepth { x0: 45, y0: 45, w: 10, depth: vec![0.5; 100] };
+        let cell = hullcut_hull::Cell {
+            min: Point3::new(-0.005, -0.005, z - 0.005),
+            size: 0.01,
+            hand: true,
+            scalpel: false,
+            solid: true,
+        };
+        (camera, labels, tool, cell)
+    }
+
+    #[test]
+    fn the_hand_takes_band_pixels_from_the_tool_only_where_it_is_not_behind_it() {
+        let at_centre = |l: &GrayImage| l.get_pixel(50, 50).0[0];
+        for (z, expected) in [(0.7, label::SCALPEL), (0.4, label::HAND), (0.5, label::HAND)] {
+            let (camera, mut labels, tool, cell) = band_scene(z);
+            let hints = GrayImage::new(100, 100);
+            let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
+            clear_hand(&mut labels, &camera, 10.0, 3.0, &hand, hints.as_raw());
+            assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
+            assert_eq!(labels.get_pixel(45, 45).0[0], label::SCALPEL, "the cell's disc is a few pixels wide");
+        }
+        // Without the tool's depth every cell may be in front.
+        let (camera, mut labels, _, cell) = band_scene(0.7);
+        let hints = GrayImage::new(100, 100);
+        clear_hand(
+            &mut labels,
+            &camera,
+            10.0,
+            3.0,
+            &HandInFront { cells: &[cell], tool: None, margin: 0.003 },
+            hints.as_raw(),
+        );
+        assert_eq!(at_centre(&labels), label::HAND);
+        // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
+        let (camera, mut labels, tool, cell) = band_scene(0.4);
+        let mut hints = GrayImage::new(100, 100);
+        hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
+        let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
+        clear_hand(&mut labels, &camera, 10.0, 3.0, &hand, hints.as_raw());
+        assert_eq!(at_centre(&labels), label::SCALPEL);
+        assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
+    }
+
+    #[test]
+    fn nearest_depth_in_a_box_reads_only_what_is_drawn() {
+        let mut depth = vec![f32::INFINITY; 100];
+        depth[3 * 10 + 4] = 0.25;
+        depth[7 * 10 + 8] = 0.5;
+        let tool = ToolDepth { x0: 20, y0: 30, w: 10, depth };
+        let near = |x0: f64, y0: f64, x1: f64, y1: f64| tool.nearest_in(&(Point2::new(x0, y0)..=Point2::new(x1, y1)));
+        assert_eq!(near(0.0, 0.0, 100.0, 100.0), Some(0.25));
+        assert_eq!(near(26.5, 35.5, 29.0, 39.0), Some(0.5));
+        assert_eq!(near(20.0, 30.0, 22.0, 32.0), None, "nothing drawn there");
+        assert_eq!(near(0.0, 0.0, 10.0, 10.0), None, "outside the drawing");
+        assert_eq!(near(25.0, 35.0, 24.0, 36.0), None, "an empty box");
+    }
+
+    #[test]
+    fn band_rows_clip_to_the_image_and_are_empty_off_it() {
+        let square =
+            [Point2::new(10.0, 10.0), Point2::new(20.0, 10.0), Point2::new(20.0, 20.0), Point2::new(10.0, 20.0)];
+        let rows = band_rows(&square, 2.0, 100, 100);
+        assert_eq!(rows.first(), Some(&(8, 10, 20)));
+        assert!(rows.contains(&(15, 8, 22)));
+        assert_eq!(rows.len(), 15);
+        let off: Vec<Point2<f64>> = square.iter().map(|p| p + Vector3::new(500.0, 0.0, 0.0).xy()).collect();
+        assert!(band_rows(&off, 2.0, 100, 100).is_empty(), "right of the image");
+        let above: Vec<Point2<f64>> = square.iter().map(|p| p - Vector3::new(0.0, 500.0, 0.0).xy()).collect();
+        assert!(band_rows(&above, 2.0, 100, 100).is_empty(), "above the image");
     }
 }
