@@ -534,7 +534,7 @@ fn band_labels(
             }
         }
     }
-    clear_hand(&mut out, view.camera, radius, band, hand, hints);
+    clear_hand(&mut out, view.camera, radius, hand, hints);
     out
 }
 
@@ -546,8 +546,8 @@ struct HandInFront<'a> {
     cells: &'a [hullcut_hull::Cell],
     /// The tool drawn into the view.
     tool: Option<&'a ToolDepth>,
-    /// A cell is behind the tool where its nearest point lies this much farther from the camera
-    /// than the tool's nearest surface around it, metres.
+    /// A cell is behind the tool at a pixel where its nearest point lies this much farther from
+    /// the camera than the tool drawn there, metres.
     margin: f64,
 }
 
@@ -607,11 +607,12 @@ fn row_within(polygon: &[Point2<f64>], band: f64, y: f64, i0: usize, i1: usize) 
 /// Gives the scalpel pixels of `labels` that a cell of `hand` projects onto back to the hand: the
 /// cell is a disc around its centre's projection whose radius is its half-diagonal's (enough to
 /// cover its footprint, which is what matters along the tool's outline), except pixels whose colour
-/// is surely the tool's (`hints`, the view's mask). A cell wholly behind the
-/// tool's nearest surface within `band` pixels of its disc takes nothing: the tool is in front of
-/// it there, and the view sees the tool (the hand's hull, fatter than the hand, would otherwise
-/// hide the blade from every view that sees the hand behind it).
-fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, band: f64, hand: &HandInFront, hints: &[u8]) {
+/// is surely the tool's (`hints`, the view's mask) and pixels where the tool is drawn in front of
+/// the cell (its nearest point farther than the drawn depth plus the margin): the view sees the
+/// tool there (the hand's hull, fatter than the hand, would otherwise hide the blade from every
+/// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
+/// the hand's, wherever the cell lies.
+fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8]) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     // The scalpel pixels' box: cells projecting elsewhere are skipped after one projection.
     let (mut lo, mut hi) = ((usize::MAX, usize::MAX), (0, 0));
@@ -638,13 +639,13 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, band: f64, hand
             continue;
         }
         let nearest = z - 0.87 * c.size;
-        let around = Point2::new(uv.x - r - band, uv.y - r - band)..=Point2::new(uv.x + r + band, uv.y + r + band);
-        if hand.tool.and_then(|t| t.nearest_in(&around)).is_some_and(|d| nearest > d + hand.margin) {
-            continue;
-        }
         for j in j0 as usize..=(j1 as usize).min(h - 1) {
-            for k in j * w + i0 as usize..=j * w + (i1 as usize).min(w - 1) {
-                if raw[k] == label::SCALPEL && hints[k] != label::SCALPEL {
+            for i in i0 as usize..=(i1 as usize).min(w - 1) {
+                let k = j * w + i;
+                if raw[k] != label::SCALPEL || hints[k] == label::SCALPEL {
+                    continue;
+                }
+                if !hand.tool.and_then(|t| t.at(i, j)).is_some_and(|d| nearest > d + hand.margin) {
                     raw[k] = label::HAND;
                 }
             }
@@ -1022,22 +1023,14 @@ impl ToolDepth {
         }
     }
 
-    /// The nearest depth drawn over the pixel centres in a box (`None` where nothing is drawn).
-    fn nearest_in(&self, within: &std::ops::RangeInclusive<Point2<f64>>) -> Option<f64> {
-        let (lo, hi) = (within.start(), within.end());
-        let h = self.depth.len() / self.w.max(1);
-        let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
-        let (i1, j1) = (
-            (hi.x.floor() - self.x0 as f64).min(self.w as f64 - 1.0),
-            (hi.y.floor() - self.y0 as f64).min(h as f64 - 1.0),
-        );
-        if !(i0 <= i1 && j0 <= j1) {
+    /// The depth drawn at pixel (`i`, `j`) of the view (`None` where the tool is not drawn).
+    fn at(&self, i: usize, j: usize) -> Option<f64> {
+        let (x, y) = (i.checked_sub(self.x0)?, j.checked_sub(self.y0)?);
+        if x >= self.w {
             return None;
         }
-        let nearest = (j0 as usize..=j1 as usize)
-            .flat_map(|j| &self.depth[j * self.w + i0 as usize..=j * self.w + i1 as usize])
-            .fold(f32::INFINITY, |a, &d| a.min(d));
-        nearest.is_finite().then_some(f64::from(nearest))
+        let d = *self.depth.get(y * self.w + x)?;
+        d.is_finite().then_some(f64::from(d))
     }
 
     /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
@@ -1108,8 +1101,9 @@ mod tests {
         assert!(!opened[at(1, 1, 1)]);
     }
 
-    /// A camera at the origin looking along +z, a 10x10 block of scalpel pixels at its centre,
-    /// the tool drawn there 0.5 m away, and a 1 cm hand cell on the axis at `z`.
+    /// A camera at the origin looking along +z, a 10x10 block of scalpel pixels at its centre
+    /// (the fit's band), the tool drawn 0.5 m away over its left half, and a 1 cm hand cell on the
+    /// axis at `z`.
     fn band_scene(z: f64) -> (Camera, GrayImage, ToolDepth, hullcut_hull::Cell) {
         let camera = Camera::new("c", 100, 100, 100.0, 100.0, 50.0, 50.0);
         let mut labels = GrayImage::new(100, 100);
@@ -1118,7 +1112,8 @@ mod tests {
                 labels.put_pixel(i, j, image::Luma([label::SCALPEL]));
             }
         }
-        let tool = ToolDepth { x0: 45, y0: 45, w: 10, depth: vec![0.5; 100] };
+        let depth = (0..100).map(|k| if k % 10 < 6 { 0.5 } else { f32::INFINITY }).collect();
+        let tool = ToolDepth { x0: 45, y0: 45, w: 10, depth };
         let cell = hullcut_hull::Cell {
             min: Point3::new(-0.005, -0.005, z - 0.005),
             size: 0.01,
@@ -1136,44 +1131,35 @@ mod tests {
             let (camera, mut labels, tool, cell) = band_scene(z);
             let hints = GrayImage::new(100, 100);
             let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
-            clear_hand(&mut labels, &camera, 10.0, 3.0, &hand, hints.as_raw());
+            clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
             assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
+            assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool the band is the hand's");
             assert_eq!(labels.get_pixel(45, 45).0[0], label::SCALPEL, "the cell's disc is a few pixels wide");
         }
         // Without the tool's depth every cell may be in front.
         let (camera, mut labels, _, cell) = band_scene(0.7);
         let hints = GrayImage::new(100, 100);
-        clear_hand(
-            &mut labels,
-            &camera,
-            10.0,
-            3.0,
-            &HandInFront { cells: &[cell], tool: None, margin: 0.003 },
-            hints.as_raw(),
-        );
+        let hand = HandInFront { cells: &[cell], tool: None, margin: 0.003 };
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::HAND);
         // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
         let mut hints = GrayImage::new(100, 100);
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
         let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
-        clear_hand(&mut labels, &camera, 10.0, 3.0, &hand, hints.as_raw());
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
     }
 
     #[test]
-    fn nearest_depth_in_a_box_reads_only_what_is_drawn() {
+    fn the_drawn_depth_is_read_only_where_the_tool_is_drawn() {
         let mut depth = vec![f32::INFINITY; 100];
         depth[3 * 10 + 4] = 0.25;
-        depth[7 * 10 + 8] = 0.5;
         let tool = ToolDepth { x0: 20, y0: 30, w: 10, depth };
-        let near = |x0: f64, y0: f64, x1: f64, y1: f64| tool.nearest_in(&(Point2::new(x0, y0)..=Point2::new(x1, y1)));
-        assert_eq!(near(0.0, 0.0, 100.0, 100.0), Some(0.25));
-        assert_eq!(near(26.5, 35.5, 29.0, 39.0), Some(0.5));
-        assert_eq!(near(20.0, 30.0, 22.0, 32.0), None, "nothing drawn there");
-        assert_eq!(near(0.0, 0.0, 10.0, 10.0), None, "outside the drawing");
-        assert_eq!(near(25.0, 35.0, 24.0, 36.0), None, "an empty box");
+        assert_eq!(tool.at(24, 33), Some(0.25));
+        assert_eq!(tool.at(25, 33), None, "nothing drawn there");
+        assert_eq!((tool.at(19, 33), tool.at(30, 33), tool.at(24, 29), tool.at(24, 40)), (None, None, None, None));
     }
 
     #[test]
