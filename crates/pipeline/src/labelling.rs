@@ -13,7 +13,9 @@ use hullcut_capture::segment::{
 use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
 use hullcut_hull::shadow::{cover, keep_supported};
 use hullcut_hull::{HullParams, Occupancy, Silhouette, silhouettes};
-use hullcut_pose::{LabelParams, LabelStats, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput};
+use hullcut_pose::{
+    LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput,
+};
 use image::GrayImage;
 use serde::{Deserialize, Serialize};
 
@@ -331,12 +333,14 @@ impl Labelling {
                 stats: None,
             });
         }
-        // The colours' hints are taken before possible shadows become foreground or background.
-        let hints: Option<Vec<Option<GrayImage>>> =
-            self.sure.as_ref().filter(|_| self.method == LabelMethod::Both && self.tool.is_some()).map(|sure| {
+        // The fit's hints (the learned colours', the possible shadows) are taken before possible
+        // shadows become foreground or background.
+        let sure = self.sure.as_ref().filter(|_| self.method == LabelMethod::Both);
+        let hints: Option<Vec<Option<GrayImage>>> = (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0))
+            .then(|| {
                 fg.iter()
                     .zip(&set.views)
-                    .map(|(m, view)| Some(colour_hints(sure, &view.as_ref()?.image, m.as_ref()?)))
+                    .map(|(m, view)| Some(fit_hints(sure, &view.as_ref()?.image, m.as_ref()?)))
                     .collect()
             });
         let clock = Instant::now();
@@ -371,8 +375,7 @@ impl Labelling {
                 stats: None,
             });
         }
-        // The learned colours' hints for the tool's fit: foreground whose colour is surely the
-        // hand's or the tool's says so (the rest, possible shadows included, stays undecided).
+        // The hints for the tool's fit, on the foreground as the hull left it.
         let hinted: Option<Vec<Option<GrayImage>>> = hints.map(|hints| {
             fg.iter()
                 .zip(&hints)
@@ -380,7 +383,7 @@ impl Labelling {
                     let mut m = m.clone()?;
                     if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
                         for (p, &h) in m.iter_mut().zip(hint.iter()) {
-                            if *p != label::BACKGROUND && (h == label::HAND || h == label::SCALPEL) {
+                            if *p != label::BACKGROUND && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW) {
                                 *p = h;
                             }
                         }
@@ -580,23 +583,22 @@ impl Labelling {
     }
 }
 
-/// The label of each foreground pixel's colour where `sure` decides ([`label::UNKNOWN`] where it
-/// does not), background elsewhere: possible shadows ([`SHADOW_LIKE`]) too, whose colour is the
-/// background's darkened, not the object's.
-fn colour_hints(sure: &ColourLut, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
+/// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
+/// decides ([`label::UNKNOWN`] where it does not, or without colours), and a possible shadow
+/// ([`SHADOW_LIKE`]) [`POSSIBLE_SHADOW`], or [`label::HAND`] where its colour is surely the hand's:
+/// its colour is the background's darkened, so it may speak against the tool, never for it;
+/// background elsewhere.
+fn fit_hints(sure: Option<&ColourLut>, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
     let mut out = GrayImage::new(mask.width(), mask.height());
     if image.dimensions() != mask.dimensions() {
         return out;
     }
+    let colour = |p: &[u8]| sure.map_or(label::UNKNOWN, |s| s.get([p[0], p[1], p[2]]));
     for ((o, &m), p) in out.iter_mut().zip(mask.iter()).zip(image.as_raw().chunks_exact(3)) {
         if m == SHADOW_LIKE {
-            // A possible shadow is the background's colour darkened or an object's: it may speak
-            // against the tool, never for it.
-            if sure.get([p[0], p[1], p[2]]) == label::HAND {
-                *o = label::HAND;
-            }
+            *o = if colour(p) == label::HAND { label::HAND } else { POSSIBLE_SHADOW };
         } else if m != label::BACKGROUND {
-            *o = sure.get([p[0], p[1], p[2]]);
+            *o = colour(p);
         }
     }
     out

@@ -29,6 +29,15 @@ use crate::geometry::{convex_hull, nearest_on_convex};
 use crate::template::Template;
 use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 
+/// A hint in a labeller's view mask: a foreground pixel that may be a cast shadow (the background's
+/// colour darkened). It is evidence of the tool only where the predicted tool is drawn, or a pixel
+/// from it: a blade's own shadow beside it, where it nears the table, is not its outline.
+pub const POSSIBLE_SHADOW: u8 = 128;
+
+/// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
+/// puts the outline to a pixel or so).
+const SHADOW_REACH_PX: usize = 1;
+
 /// The largest side of a tool a template or labeller is built for, metres (a scalpel is some
 /// 15 cm long): see [`crate::check_tool`].
 pub const MAX_TOOL_SIDE_M: f64 = 0.5;
@@ -199,8 +208,9 @@ impl ToolLabeller {
 
     /// Labels one frame set: `occ` is the hull of the views' foreground, `views` their foreground
     /// masks (any non-zero label is foreground), one entry per rig camera. A foreground pixel may
-    /// carry a colour's hint for the fit: [`label::HAND`] where its colour is surely the hand's,
-    /// [`label::SCALPEL`] where surely the tool's; any other value decides nothing.
+    /// carry a hint for the fit: [`label::HAND`] where its colour is surely the hand's,
+    /// [`label::SCALPEL`] where surely the tool's, [`POSSIBLE_SHADOW`] where it may be a cast
+    /// shadow; any other value decides nothing.
     pub fn label(
         &mut self,
         frame: u64,
@@ -502,10 +512,11 @@ fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f
 }
 
 /// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless its colour
-/// is surely the hand's (a [`label::HAND`] hint in the view's mask), or a cell of the hand's hull
-/// that is not behind the tool projects onto it (a finger along the tool, or the hand in front of
-/// it: its outline is not the tool's; see [`HandInFront`]) and its colour is not surely the
-/// tool's (a [`label::SCALPEL`] hint); other foreground: hand.
+/// is surely the hand's (a [`label::HAND`] hint in the view's mask), or it may be a shadow
+/// ([`POSSIBLE_SHADOW`]) beside the drawn tool, or a cell of the hand's hull that is not behind
+/// the tool projects onto it (a finger along the tool, or the hand in front of it: its outline is
+/// not the tool's; see [`HandInFront`]) and its colour is not surely the tool's (a
+/// [`label::SCALPEL`] hint); other foreground: hand.
 fn band_labels(
     view: ViewInput,
     template: &Template,
@@ -527,8 +538,12 @@ fn band_labels(
     let raw = out.as_mut();
     for poly in &polygons {
         for (j, a, b) in band_rows(poly, band, w, h) {
-            for k in j * w + a..=j * w + b {
-                if raw[k] == label::HAND && hints[k] != label::HAND {
+            for i in a..=b {
+                let k = j * w + i;
+                let hint = hints[k];
+                let shadow_beside =
+                    hint == POSSIBLE_SHADOW && !hand.tool.is_some_and(|t| t.near(i, j, SHADOW_REACH_PX));
+                if raw[k] == label::HAND && hint != label::HAND && !shadow_beside {
                     raw[k] = label::SCALPEL;
                 }
             }
@@ -1023,6 +1038,11 @@ impl ToolDepth {
         }
     }
 
+    /// Whether the tool is drawn within `r` pixels of (`i`, `j`) (a square neighbourhood).
+    fn near(&self, i: usize, j: usize, r: usize) -> bool {
+        (j.saturating_sub(r)..=j + r).any(|y| (i.saturating_sub(r)..=i + r).any(|x| self.at(x, y).is_some()))
+    }
+
     /// The depth drawn at pixel (`i`, `j`) of the view (`None` where the tool is not drawn).
     fn at(&self, i: usize, j: usize) -> Option<f64> {
         let (x, y) = (i.checked_sub(self.x0)?, j.checked_sub(self.y0)?);
@@ -1160,6 +1180,8 @@ mod tests {
         assert_eq!(tool.at(24, 33), Some(0.25));
         assert_eq!(tool.at(25, 33), None, "nothing drawn there");
         assert_eq!((tool.at(19, 33), tool.at(30, 33), tool.at(24, 29), tool.at(24, 40)), (None, None, None, None));
+        assert!(tool.near(25, 34, 1) && tool.near(23, 32, 1) && tool.near(24, 33, 0));
+        assert!(!tool.near(26, 33, 1) && !tool.near(25, 34, 0) && !tool.near(0, 0, 1));
     }
 
     #[test]

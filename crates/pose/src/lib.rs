@@ -37,7 +37,7 @@ mod template;
 mod track;
 
 pub use filter::{OneEuro, OneEuroParams};
-pub use labels::{LabelParams, LabelStats, LabelledFrame, ToolLabeller, ToolRegion};
+pub use labels::{LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, ToolLabeller, ToolRegion};
 pub use metrics::{PoseError, pose_error};
 pub use template::{Template, check_tool};
 pub use track::{
