@@ -588,8 +588,8 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
 /// brown bare hand over navy clutter, a brass-like handle) with the pointed scalpel, no masks:
 /// segmented from its empty-scene images and the tool's geometry, the loop trusts the blade
 /// through both strokes, down to the table, and cuts the lobe off as the mask files do (measured
-/// 2026-11-26: 147 of 150 trusted, two pieces, 19 ml cut off; 112 trusted and no piece before the
-/// hand's hull stopped hiding a blade in front of it and the learned colours hinted the fit).
+/// 2026-11-26: 147 of 150 trusted, two pieces, 19 ml cut off; 112 trusted and no piece while the
+/// learned colours pulled the fit over a 16 px band onto the handle's look-alikes).
 #[test]
 fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
     let dir = tempfile::tempdir().expect("tempdir");
