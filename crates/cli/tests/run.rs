@@ -530,6 +530,24 @@ fn a_camera_that_dies_mid_run_and_a_recording_that_stops_early_are_counted_not_f
     assert_eq!(c["poses_trusted"].as_u64(), Some(7), "{c}");
 }
 
+/// Synthesizes a recording into `dir` with `synth` (after `--out`), removes its truth masks, runs
+/// the loop on it (segmenting, as without masks/ it must) logging images every `rrd_every` frame
+/// sets, and returns the run's report.
+fn run_segmented(dir: &Path, synth: &[&str], rrd_every: &str) -> serde_json::Value {
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let ds = dir.join("recording");
+    let o = hullcut(&[&["synth", "--out", &p(&ds), "--no-truth-meshes"][..], synth].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    std::fs::remove_dir_all(ds.join("masks")).expect("the recording's truth masks removed");
+    let (rrd, report) = (dir.join("run.rrd"), dir.join("run.json"));
+    let o =
+        hullcut(&["run", "--dataset", &p(&ds), "--rrd", &p(&rrd), "--report", &p(&report), "--rrd-every", rrd_every]);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    assert_eq!(r["masks"].as_str(), Some("segment"), "no masks/: auto segments");
+    r
+}
+
 /// A recording from another rig with another look and tool, and no masks: eight 1280x720 cameras
 /// (lab8), a dark bare hand, the pointed scalpel. Segmented from its empty-scene images and the
 /// tool's geometry, the loop trusts the blade in most frame sets and cuts the organ (measured on
@@ -537,43 +555,8 @@ fn a_camera_that_dies_mid_run_and_a_recording_that_stops_early_are_counted_not_f
 #[test]
 fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let ds = dir.path().join("lab8");
-    let o = hullcut(&[
-        "synth",
-        "--out",
-        &p(&ds),
-        "--frames",
-        "24",
-        "--fps",
-        "10",
-        "--seed",
-        "6",
-        "--rig",
-        "lab8",
-        "--appearance",
-        "skin-dark",
-        "--tool",
-        "pointed",
-        "--no-truth-meshes",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    std::fs::remove_dir_all(ds.join("masks")).expect("the recording's truth masks removed");
-    let report = dir.path().join("run.json");
-    let o = hullcut(&[
-        "run",
-        "--dataset",
-        &p(&ds),
-        "--rrd",
-        &p(&dir.path().join("run.rrd")),
-        "--report",
-        &p(&report),
-        "--rrd-every",
-        "12",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let r = json(&report);
-    assert_eq!(r["masks"].as_str(), Some("segment"), "no masks/: auto segments");
+    let look = ["--rig", "lab8", "--appearance", "skin-dark", "--tool", "pointed"];
+    let r = run_segmented(dir.path(), &[&["--frames", "24", "--fps", "10", "--seed", "6"][..], &look].concat(), "12");
     let l = &r["labelling"];
     assert_eq!(l["tool"], true, "{l}");
     assert!(l["foreground"].as_array().expect("per camera").iter().all(|m| m == "background"), "{l}");
@@ -593,41 +576,8 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
 #[test]
 fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let ds = dir.path().join("random");
-    let o = hullcut(&[
-        "synth",
-        "--out",
-        &p(&ds),
-        "--frames",
-        "150",
-        "--scene",
-        "resect",
-        "--rig",
-        "random:47",
-        "--appearance",
-        "random:88",
-        "--tool",
-        "pointed",
-        "--no-truth-meshes",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    std::fs::remove_dir_all(ds.join("masks")).expect("the recording's truth masks removed");
-    let report = dir.path().join("run.json");
-    let o = hullcut(&[
-        "run",
-        "--dataset",
-        &p(&ds),
-        "--rrd",
-        &p(&dir.path().join("run.rrd")),
-        "--report",
-        &p(&report),
-        "--rrd-every",
-        "50",
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
-    let r = json(&report);
-    assert_eq!(r["masks"].as_str(), Some("segment"), "no masks/: auto segments");
+    let look = ["--rig", "random:47", "--appearance", "random:88", "--tool", "pointed"];
+    let r = run_segmented(dir.path(), &[&["--frames", "150", "--scene", "resect"][..], &look].concat(), "50");
     let c = &r["counters"];
     assert_eq!(c["frame_sets_processed"].as_u64(), Some(150), "{c}");
     // The goal: the blade trusted in at least 80% of the frame sets.
