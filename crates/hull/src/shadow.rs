@@ -4,20 +4,22 @@
 //! object is seen as sure foreground by most views (the object against other backgrounds, or in
 //! front of the hand), while a cell of a shadow on the table is seen as shadow by most views, and
 //! as sure foreground only by those where the hand that casts it stands in front of it.
-//! [`keep_supported`] keeps the cells that two views see as sure foreground, or at least as many
-//! as see only shadow there (a dark tool over a table of its colour is seen as shadow from above,
-//! as sure foreground from the side); [`cover`] then turns a view's shadow pixels that the kept cells cover into
-//! foreground (the rest go back to background).
+//! [`keep_supported`] keeps the cells that at least as many views see as sure foreground as see
+//! only shadow there, and those that two views see as sure foreground in front of everything else
+//! (a dark tool over a table of its colour is seen as shadow from above, as sure foreground from
+//! the side; the hand's shadow is seen as sure foreground only through the hand); [`cover`] then
+//! turns a view's shadow pixels that the kept cells cover into foreground (the rest go back to
+//! background).
 
 use image::GrayImage;
 use rayon::prelude::*;
 
 use crate::carve::{Footprint, Projected, footprint, project};
 
-/// A cell that this many views see as sure foreground is kept whatever the others see: the hand
-/// stands between a shadow and a camera near the light's direction, seldom two.
+/// A cell that this many views see as sure foreground, in front of every other object, is kept
+/// whatever the others see.
 pub const SURE_VIEWS: usize = 2;
-use crate::{Occupancy, Silhouette};
+use crate::{Cell, Occupancy, Silhouette};
 
 /// Cast shadows lie on the table: a cell wholly this high above the table top (z = 0 in a table's
 /// frame) is an object, whatever its shading says. The hull of a shadow rises above the table
@@ -27,14 +29,33 @@ use crate::{Occupancy, Silhouette};
 /// this: the rule then keeps them as objects; hullcut's organ is virtual and casts no shadow.
 pub const SHADOW_HULL_HEIGHT: f64 = 0.04;
 
+/// How the views support one cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Support {
+    /// Kept whatever the rest says: high above the table, marked as an object, or seen as sure
+    /// foreground by at least as many views as see only shadow there.
+    Strong,
+    /// Seen as sure foreground by [`SURE_VIEWS`] views or more, but as only shadow by more: kept
+    /// when that many of them see it in front of the strong cells ([`Front`]).
+    Sure,
+    /// Dropped.
+    None,
+}
+
 /// The cells of `occ` (carved from `all`, the views' silhouettes with the possible shadows as
-/// foreground) that [`SURE_VIEWS`] views see as sure foreground (foreground in their footprint in
-/// `sure`, the silhouettes with the possible shadows left out), or at least as many views as see
-/// only shadow there (foreground in `all` but none in `sure`), one at least; with `table`, the
-/// world frame's z = 0 being the table top, also every cell wholly above [`SHADOW_HULL_HEIGHT`]
-/// (a skin-toned hand over a wooden table looks like a shadow of it where it is shaded); also every
-/// cell `objects` marks (by index; shorter or empty marks none: cells known to be an object, such
-/// as the tracked tool's); and how many cells went.
+/// foreground) that at least as many views see as sure foreground (foreground in their footprint
+/// in `sure`, the silhouettes with the possible shadows left out) as see only shadow there
+/// (foreground in `all` but none in `sure`), one at least; with `table`, the world frame's z = 0
+/// being the table top, also every cell wholly above [`SHADOW_HULL_HEIGHT`] (a skin-toned hand
+/// over a wooden table looks like a shadow of it where it is shaded); also every cell `objects`
+/// marks (by index; shorter or empty marks none: cells known to be an object, such as the
+/// tracked tool's). A cell that more views see as shadow is kept too
+/// when [`SURE_VIEWS`] views see sure foreground in its footprint that no cell kept so far nearer the
+/// camera explains (a dull tool over a table of its colour, seen as shadow from above and as
+/// sure foreground from the side), but not when the sure foreground there is an object in
+/// front of it (the hand over its own shadow, seen through it by the views near the light's
+/// direction: several of them on a rig of many cameras). Returns the kept cells, which of them
+/// only the marks kept, and how many went.
 pub fn keep_supported(
     occ: &Occupancy,
     all: &[Option<Silhouette>],
@@ -42,37 +63,160 @@ pub fn keep_supported(
     margin_px: f64,
     table: bool,
     objects: &[bool],
-) -> (Occupancy, usize) {
+) -> Supported {
     let pairs: Vec<(&Silhouette, &Silhouette)> =
         all.iter().zip(sure).filter_map(|(a, s)| a.as_ref().zip(s.as_ref())).collect();
-    let keep: Vec<bool> = occ
+    let support: Vec<Support> = occ
         .cells
         .par_iter()
-        .enumerate()
-        .map(|(k, c)| {
-            if (table && c.min.z > SHADOW_HULL_HEIGHT) || objects.get(k).copied().unwrap_or(false) {
-                return true;
+        .map(|c| {
+            if table && c.min.z > SHADOW_HULL_HEIGHT {
+                return Support::Strong;
             }
             let (mut sure_views, mut shadow_views) = (0, 0);
-            for (a, s) in &pairs {
+            for (n, (a, s)) in pairs.iter().enumerate() {
+                // Settled: the views left cannot outnumber the sure ones.
+                if sure_views > 0 && sure_views >= shadow_views + pairs.len() - n {
+                    return Support::Strong;
+                }
                 // One footprint per view, both tables read on it.
                 let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(a, c, margin_px) else { continue };
                 if s.counts(i0, j0, i1, j1).foreground() > 0 {
                     sure_views += 1;
-                    if sure_views >= SURE_VIEWS {
-                        return true;
-                    }
                 } else if a.counts(i0, j0, i1, j1).foreground() > 0 {
                     shadow_views += 1;
                 }
             }
-            sure_views > 0 && sure_views >= shadow_views
+            if sure_views > 0 && sure_views >= shadow_views {
+                Support::Strong
+            } else if sure_views >= SURE_VIEWS {
+                Support::Sure
+            } else {
+                Support::None
+            }
         })
         .collect();
-    let mut out = occ.clone();
-    out.cells = occ.cells.iter().zip(&keep).filter(|(_, k)| **k).map(|(c, _)| *c).collect();
-    let dropped = occ.cells.len() - out.cells.len();
-    (out, dropped)
+    let marked = |k: usize| objects.get(k).copied().unwrap_or(false);
+    let mut seen: Vec<bool> = support.iter().map(|s| *s == Support::Strong).collect();
+    // What stands in front of a contested cell: the strong cells and the marked objects.
+    let front: Vec<bool> = seen.iter().enumerate().map(|(k, s)| *s || marked(k)).collect();
+    let contested: Vec<usize> = (0..support.len()).filter(|&k| support[k] == Support::Sure).collect();
+    if !contested.is_empty() {
+        let fronts: Vec<Option<Front>> =
+            pairs.par_iter().map(|(_, s)| Front::of(occ, &front, &contested, s, margin_px)).collect();
+        let in_front: Vec<bool> = contested
+            .par_iter()
+            .map(|&k| {
+                let c = &occ.cells[k];
+                let views = pairs
+                    .iter()
+                    .zip(&fronts)
+                    .filter(|((_, s), front)| {
+                        front.as_ref().is_some_and(|f| f.sees_sure(s, c, occ.leaf_size, margin_px))
+                    })
+                    .count();
+                views >= SURE_VIEWS
+            })
+            .collect();
+        for (&k, in_front) in contested.iter().zip(in_front) {
+            seen[k] = in_front;
+        }
+    }
+    let mut occupancy = occ.clone();
+    occupancy.cells.clear();
+    let mut marked_only = Vec::new();
+    for (k, c) in occ.cells.iter().enumerate() {
+        if seen[k] || marked(k) {
+            occupancy.cells.push(*c);
+            marked_only.push(!seen[k]);
+        }
+    }
+    let dropped = occ.cells.len() - occupancy.cells.len();
+    Supported { occupancy, marked_only, dropped }
+}
+
+/// What [`keep_supported`] kept.
+#[derive(Debug, Clone)]
+pub struct Supported {
+    /// The kept cells.
+    pub occupancy: Occupancy,
+    /// Per kept cell: kept only because it was marked as an object, no view's support would
+    /// have kept it (it may be the object, or a shadow beside it).
+    pub marked_only: Vec<bool>,
+    /// How many cells went.
+    pub dropped: usize,
+}
+
+/// Distance of a cell's nearest point from a camera, along its axis, at most: its centre's depth
+/// less its half-diagonal.
+fn near_depth(view: &Silhouette, c: &Cell) -> f64 {
+    view.camera().world_to_camera(&c.centre()).z - 0.87 * c.size
+}
+
+/// The depth of the nearest cell in front ([`Support::Strong`], or marked as an object) at each
+/// pixel of a window of one view (the box of the contested cells' footprints), over each cell's
+/// footprint box.
+#[derive(Debug)]
+struct Front {
+    i0: usize,
+    j0: usize,
+    width: usize,
+    height: usize,
+    /// Nearest depth (metres along the camera's axis; infinite where no such cell lies), row
+    /// by row.
+    depth: Vec<f32>,
+}
+
+impl Front {
+    /// The window over the contested cells' footprints in `view`, and the cells `in_front` marks
+    /// drawn into it; `None` when no contested cell is in view.
+    fn of(occ: &Occupancy, in_front: &[bool], contested: &[usize], view: &Silhouette, margin_px: f64) -> Option<Self> {
+        let (mut lo, mut hi) = ([usize::MAX; 2], [0usize; 2]);
+        for &k in contested {
+            if let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, &occ.cells[k], margin_px) {
+                lo = [lo[0].min(i0), lo[1].min(j0)];
+                hi = [hi[0].max(i1), hi[1].max(j1)];
+            }
+        }
+        if lo[0] > hi[0] {
+            return None;
+        }
+        let (width, height) = (hi[0] - lo[0] + 1, hi[1] - lo[1] + 1);
+        let mut front = Front { i0: lo[0], j0: lo[1], width, height, depth: vec![f32::INFINITY; width * height] };
+        for (c, _) in occ.cells.iter().zip(in_front).filter(|(_, f)| **f) {
+            let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, c, 0.0) else { continue };
+            if i1 < lo[0] || i0 > hi[0] || j1 < lo[1] || j0 > hi[1] {
+                continue;
+            }
+            let d = near_depth(view, c) as f32;
+            let (a0, a1) = (i0.max(lo[0]) - lo[0], i1.min(hi[0]) - lo[0]);
+            for j in j0.max(lo[1])..=j1.min(hi[1]) {
+                let row = (j - lo[1]) * width;
+                for z in &mut front.depth[row + a0..=row + a1] {
+                    *z = z.min(d);
+                }
+            }
+        }
+        Some(front)
+    }
+
+    /// Whether `view` (the sure silhouette) sees sure foreground in the footprint of `c` at a
+    /// pixel where no cell of the front lies in front of it by more than a leaf.
+    fn sees_sure(&self, view: &Silhouette, c: &Cell, leaf: f64, margin_px: f64) -> bool {
+        let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, c, margin_px) else { return false };
+        if view.counts(i0, j0, i1, j1).foreground() == 0 {
+            return false;
+        }
+        let behind = (near_depth(view, c) - leaf) as f32;
+        (j0..=j1).any(|j| {
+            (i0..=i1).any(|i| {
+                let (Some(x), Some(y)) = (i.checked_sub(self.i0), j.checked_sub(self.j0)) else { return false };
+                let nearest =
+                    if x < self.width && y < self.height { self.depth[y * self.width + x] } else { f32::INFINITY };
+                nearest >= behind && view.counts(i, j, i, j).foreground() > 0
+            })
+        })
+    }
 }
 
 /// Sets the pixels of `mask` valued `from` that the footprint of a cell of `occ` covers in `view`
@@ -152,15 +296,75 @@ mod tests {
         let all = Silhouette::new(&camera, &GrayImage::from_pixel(200, 200, Luma([255])));
         let sure = Silhouette::new(&camera, &GrayImage::new(200, 200));
         let (views, sures) = ([Some(all)], [Some(sure)]);
-        let (kept, dropped) = keep_supported(&occ, &views, &sures, 0.5, true, &[]);
-        assert_eq!((kept.cells.len(), dropped), (0, 1), "seen as shadow by its only view");
-        let (kept, dropped) = keep_supported(&occ, &views, &sures, 0.5, true, &[true]);
-        assert_eq!((kept.cells.len(), dropped), (1, 0), "marked as an object (the tracked tool's)");
-        let (kept, _) = keep_supported(&occ, &views, &sures, 0.5, true, &[false]);
-        assert!(kept.cells.is_empty(), "a mark of false keeps nothing");
+        let kept = keep_supported(&occ, &views, &sures, 0.5, true, &[]);
+        assert_eq!((kept.occupancy.cells.len(), kept.dropped), (0, 1), "seen as shadow by its only view");
+        let kept = keep_supported(&occ, &views, &sures, 0.5, true, &[true]);
+        assert_eq!((kept.occupancy.cells.len(), kept.dropped), (1, 0), "marked as an object (the tracked tool's)");
+        assert_eq!(kept.marked_only, vec![true], "kept by the mark alone");
+        let kept = keep_supported(&occ, &views, &sures, 0.5, true, &[false]);
+        assert!(kept.occupancy.cells.is_empty(), "a mark of false keeps nothing");
         // Seen as sure foreground, it stays whatever the marks say.
         let sure = Silhouette::new(&camera, &GrayImage::from_pixel(200, 200, Luma([255])));
-        let (kept, _) = keep_supported(&occ, &views, &[Some(sure)], 0.5, true, &[]);
-        assert_eq!(kept.cells.len(), 1);
+        let kept = keep_supported(&occ, &views, &[Some(sure.clone())], 0.5, true, &[]);
+        assert_eq!(kept.occupancy.cells.len(), 1);
+        let kept = keep_supported(&occ, &views, &[Some(sure)], 0.5, true, &[true]);
+        assert_eq!(kept.marked_only, vec![false], "seen, not only marked");
+    }
+
+    #[test]
+    fn a_table_cell_seen_as_sure_only_through_an_object_in_front_goes() {
+        let looking = |name: &str, eye: Point3<f64>, up: Vector3<f64>| {
+            Camera::new(name, 200, 200, 200.0, 200.0, 100.0, 100.0)
+                .looking_at(eye, Point3::origin(), up)
+                .expect("a camera looking at the cell")
+        };
+        // Two cameras above the cell see sure foreground over all of it; three from the sides
+        // see only shadow there.
+        let cameras = [
+            looking("top", Point3::new(0.0, 0.0, 1.0), Vector3::y()),
+            looking("top2", Point3::new(0.02, 0.0, 1.0), Vector3::y()),
+            looking("east", Point3::new(1.0, 0.0, 0.3), Vector3::z()),
+            looking("west", Point3::new(-1.0, 0.0, 0.3), Vector3::z()),
+            looking("north", Point3::new(0.0, 1.0, 0.3), Vector3::z()),
+        ];
+        let full = GrayImage::from_pixel(200, 200, Luma([255]));
+        let all: Vec<Option<Silhouette>> = cameras.iter().map(|c| Some(Silhouette::new(c, &full))).collect();
+        let sure: Vec<Option<Silhouette>> = cameras
+            .iter()
+            .enumerate()
+            .map(|(k, c)| Some(Silhouette::new(c, &if k < 2 { full.clone() } else { GrayImage::new(200, 200) })))
+            .collect();
+        let (_, table_cell) = scene();
+        // Nothing in front of it: the two views above see the cell itself (a dull tool seen as
+        // sure foreground from two sides, as shadow from the rest).
+        let kept = keep_supported(&table_cell, &all, &sure, 0.5, true, &[]);
+        assert_eq!(
+            (kept.occupancy.cells.len(), kept.dropped),
+            (1, 0),
+            "seen as sure foreground in front of everything by two views"
+        );
+        // A 2 cm object 10 cm above it (above the shadow hull's height: an object) hides it from
+        // both views above: what they see there is the object, so the cell below is its shadow.
+        let object = Cell { min: Point3::new(-0.01, -0.01, 0.1), size: 0.02, hand: true, scalpel: false, solid: true };
+        let mut both = table_cell.clone();
+        both.cells.push(object);
+        let kept = keep_supported(&both, &all, &sure, 0.5, true, &[]);
+        assert_eq!(kept.dropped, 1, "the cell under the object is its shadow");
+        assert_eq!(kept.occupancy.cells, vec![object]);
+        // Marked as an object, it stays, kept by the mark alone.
+        let kept = keep_supported(&both, &all, &sure, 0.5, true, &[true, false]);
+        assert_eq!(kept.marked_only, vec![true, false]);
+        // Without the table rule the object is contested as well, and with nothing strong in
+        // front of either both stay.
+        let kept = keep_supported(&both, &all, &sure, 0.5, false, &[]);
+        assert_eq!(kept.occupancy.cells.len(), 2);
+        // Seen as sure foreground by one view only, it goes whatever is in front.
+        let one: Vec<Option<Silhouette>> = cameras
+            .iter()
+            .enumerate()
+            .map(|(k, c)| Some(Silhouette::new(c, &if k < 1 { full.clone() } else { GrayImage::new(200, 200) })))
+            .collect();
+        let kept = keep_supported(&table_cell, &all, &one, 0.5, true, &[]);
+        assert!(kept.occupancy.cells.is_empty());
     }
 }

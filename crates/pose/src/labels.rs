@@ -203,35 +203,45 @@ impl ToolLabeller {
     /// their shading says.
     pub fn near_predicted(&self, timestamp_ns: i64, occ: &Occupancy, margin: f64) -> Option<Vec<bool>> {
         let pose = self.tracker.predicted(timestamp_ns)?;
-        Some(near_tool(occ, &self.field, &pose, margin).cells.iter().map(|c| c.scalpel).collect())
+        Some(near_tool(occ, &self.field, &pose, margin, &[]).cells.iter().map(|c| c.scalpel).collect())
     }
 
     /// Labels one frame set: `occ` is the hull of the views' foreground, `views` their foreground
     /// masks (any non-zero label is foreground), one entry per rig camera. A foreground pixel may
     /// carry a hint for the fit: [`label::HAND`] where its colour is surely the hand's,
     /// [`label::SCALPEL`] where surely the tool's, [`POSSIBLE_SHADOW`] where it may be a cast
-    /// shadow; any other value decides nothing.
+    /// shadow; any other value decides nothing. `not_hand` marks (by index; shorter or empty
+    /// marks none) cells of `occ` that are no evidence of the hand (kept only as possible parts of
+    /// the tool, which may be its shadow): away from the fitted tool they hide nothing and are
+    /// labelled neither hand nor scalpel.
     pub fn label(
         &mut self,
         frame: u64,
         timestamp_ns: i64,
         occ: &Occupancy,
+        not_hand: &[bool],
         views: &[Option<ViewInput>],
     ) -> LabelledFrame {
         let mut stats = LabelStats::default();
         let clock = Instant::now();
         let template = self.tracker.template().clone();
         let provisional_for = |pose: &Isometry3<f64>| {
-            let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m);
+            let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m, not_hand);
             let hand: Vec<hullcut_hull::Cell> = hull.cells.iter().filter(|c| c.hand).copied().collect();
+            let doubtful: Vec<hullcut_hull::Cell> =
+                hull.cells.iter().filter(|c| !c.hand && !c.scalpel).copied().collect();
             let masks: Vec<Option<GrayImage>> = views
                 .iter()
                 .map(|v| {
                     v.map(|v| {
                         let radius = v.camera.distortion.monotonic_radius();
                         let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
-                        let in_front =
-                            HandInFront { cells: &hand, tool: depth.as_ref(), margin: self.params.occlusion_margin_m };
+                        let in_front = HandInFront {
+                            cells: &hand,
+                            doubtful: &doubtful,
+                            tool: depth.as_ref(),
+                            margin: self.params.occlusion_margin_m,
+                        };
                         band_labels(v, &template, pose, self.params.band_px, &in_front)
                     })
                 })
@@ -305,7 +315,7 @@ impl ToolLabeller {
         let (masks, occupancy, tool_regions) = match &estimate.fitted {
             Some(fitted) => {
                 let pose = fitted.tool_to_world;
-                let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m);
+                let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m, not_hand);
                 // The tool drawn into every view, and the hull's cells labelled from those
                 // drawings: a cell is the hand's only where views see foreground the tool does not
                 // explain (the tool's own hull, fatter than the tool, hides nothing).
@@ -559,6 +569,9 @@ fn band_labels(
 struct HandInFront<'a> {
     /// The hull's cells away from the tool.
     cells: &'a [hullcut_hull::Cell],
+    /// Cells away from the tool that may be no object at all (a shadow kept beside the tool): they
+    /// take band pixels beside the drawn tool, never one where it is drawn.
+    doubtful: &'a [hullcut_hull::Cell],
     /// The tool drawn into the view.
     tool: Option<&'a ToolDepth>,
     /// A cell is behind the tool at a pixel where its nearest point lies this much farther from
@@ -626,7 +639,8 @@ fn row_within(polygon: &[Point2<f64>], band: f64, y: f64, i0: usize, i1: usize) 
 /// the cell (its nearest point farther than the drawn depth plus the margin): the view sees the
 /// tool there (the hand's hull, fatter than the hand, would otherwise hide the blade from every
 /// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
-/// the hand's, wherever the cell lies.
+/// the hand's, wherever the cell lies; a doubtful cell ([`HandInFront::doubtful`]) takes only
+/// those.
 fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8]) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     // The scalpel pixels' box: cells projecting elsewhere are skipped after one projection.
@@ -643,7 +657,8 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
     }
     let f = cam.fx.max(cam.fy);
     let raw = labels.as_mut();
-    for c in hand.cells {
+    let cells = hand.cells.iter().map(|c| (c, false)).chain(hand.doubtful.iter().map(|c| (c, true)));
+    for (c, doubtful) in cells {
         let centre = c.centre();
         let z = cam.world_to_camera(&centre).z;
         let Some(uv) = project(cam, radius, &centre).filter(|_| z > 0.0) else { continue };
@@ -660,7 +675,13 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
                 if raw[k] != label::SCALPEL || hints[k] == label::SCALPEL {
                     continue;
                 }
-                if !hand.tool.and_then(|t| t.at(i, j)).is_some_and(|d| nearest > d + hand.margin) {
+                // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
+                // pixel unless it lies behind the tool there.
+                let takes = match hand.tool.and_then(|t| t.at(i, j)) {
+                    Some(d) => !doubtful && nearest <= d + hand.margin,
+                    None => true,
+                };
+                if takes {
                     raw[k] = label::HAND;
                 }
             }
@@ -793,15 +814,16 @@ impl ToolField {
 
 /// The hull with the cells near the tool at `pose` labelled scalpel and every other cell hand: a
 /// cell is near when the tool comes within `margin` of it (its centre within `margin` plus its
-/// half-diagonal, plus the field's rounding). One transform and one lookup per cell.
-fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64) -> Occupancy {
+/// half-diagonal, plus the field's rounding); a cell `not_hand` marks (by index) is not the hand
+/// (no label) unless near. One transform and one lookup per cell.
+fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64, not_hand: &[bool]) -> Occupancy {
     let to_tool = pose.inverse();
     let mut out = occ.clone();
-    for c in &mut out.cells {
+    for (k, c) in out.cells.iter_mut().enumerate() {
         let reach = margin + 0.87 * c.size + field.spacing;
         let is_near = field.at(&(to_tool * c.centre())) <= reach;
         c.scalpel = is_near;
-        c.hand = !is_near;
+        c.hand = !is_near && !not_hand.get(k).copied().unwrap_or(false);
     }
     out
 }
@@ -1150,23 +1172,31 @@ mod tests {
         for (z, expected) in [(0.7, label::SCALPEL), (0.4, label::HAND), (0.5, label::HAND)] {
             let (camera, mut labels, tool, cell) = band_scene(z);
             let hints = GrayImage::new(100, 100);
-            let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
+            let hand = HandInFront { cells: &[cell], doubtful: &[], tool: Some(&tool), margin: 0.003 };
             clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
             assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
             assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool the band is the hand's");
             assert_eq!(labels.get_pixel(45, 45).0[0], label::SCALPEL, "the cell's disc is a few pixels wide");
         }
+        // A doubtful cell (maybe a shadow) in front of the tool hides nothing of it, and takes the
+        // band beside it.
+        let (camera, mut labels, tool, cell) = band_scene(0.4);
+        let hints = GrayImage::new(100, 100);
+        let hand = HandInFront { cells: &[], doubtful: &[cell], tool: Some(&tool), margin: 0.003 };
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
+        assert_eq!(at_centre(&labels), label::SCALPEL, "where the tool is drawn");
+        assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool");
         // Without the tool's depth every cell may be in front.
         let (camera, mut labels, _, cell) = band_scene(0.7);
         let hints = GrayImage::new(100, 100);
-        let hand = HandInFront { cells: &[cell], tool: None, margin: 0.003 };
+        let hand = HandInFront { cells: &[cell], doubtful: &[], tool: None, margin: 0.003 };
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::HAND);
         // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
         let mut hints = GrayImage::new(100, 100);
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
-        let hand = HandInFront { cells: &[cell], tool: Some(&tool), margin: 0.003 };
+        let hand = HandInFront { cells: &[cell], doubtful: &[], tool: Some(&tool), margin: 0.003 };
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
