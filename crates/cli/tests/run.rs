@@ -587,6 +587,24 @@ fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
     assert_pieces_rest_on_the_table(t);
 }
 
+/// The lobe resection seen by nine cameras of a seeded random rig in a seeded random look (a bare
+/// hand, a blue handle, a grey checkered mat under a light that casts the hand's and the blade's
+/// shadows on it), no masks: the views near the light see the hand's shadow through the hand, and
+/// the blade's cells kept only because the track expects the tool there may be its shadow; with
+/// neither taken for an object in front of the blade, the loop trusts it in at least 80% of the
+/// frame sets and cuts (measured 2026-11-27: 129-130 of 150 trusted, some 140 lattice edges cut;
+/// 108 and 53 edges before; the lobe stays on: the first stroke's turn at the table is refused).
+#[test]
+fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and_cuts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let look = ["--rig", "random:59", "--appearance", "random:101"];
+    let r = run_segmented(dir.path(), &[&["--frames", "150", "--scene", "resect"][..], &look].concat(), "50");
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(150), "{c}");
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 120, "{c}");
+    assert!(c["edges_cut"].as_u64().expect("edges") >= 100, "{c}");
+}
+
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.
 fn retime(ds: &Path, timestamp: impl Fn(u64, i64) -> i64) {
     let path = ds.join("frames.csv");

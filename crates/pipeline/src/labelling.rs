@@ -51,14 +51,6 @@ const EXPLAINED: u8 = 254;
 /// full (ambient light only) keeps a fifth of the light or more.
 const SHADOW_DEPTH: f64 = 0.8;
 
-/// Marks, in the foreground masks, a possible shadow the hull kept as foreground: a dark object of
-/// its background's colour, or a shadow beside one. Its colour is the background's darkened, so
-/// its colour never makes it scalpel; the hints mark it as [`POSSIBLE_SHADOW`], and the final
-/// labels make it scalpel where the fitted tool is drawn over it, hand elsewhere. No label, and not
-/// [`SHADOW_LIKE`] (what it was before the hull kept it).
-const SHADOW_KEPT: u8 = 127;
-const _: () = assert!(SHADOW_KEPT != SHADOW_LIKE && SHADOW_KEPT != EXPLAINED && SHADOW_KEPT != label::UNKNOWN);
-
 /// Hull cells within this distance of the tool where its track predicts it are an object, not a
 /// cast shadow, metres: enough for the prediction's error and for a tip the fit fell short of.
 const TOOL_OBJECT_MARGIN: f64 = 0.004;
@@ -327,7 +319,8 @@ impl Labelling {
         self.counters.degraded_views += degraded.iter().filter(|&&d| d).count() as u64;
         if self.tool.is_none() && shadow_pixels == 0 && !degraded.contains(&true) {
             // No tool: the colours learned from the masked frames.
-            let masks = self.colour(set, &fg);
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
             self.counters.colour += 1;
             self.masks = fg;
             return Ok(Labelled {
@@ -369,7 +362,8 @@ impl Labelling {
         }
         let carve_ms = clock.elapsed().as_secs_f64() * 1e3;
         if self.tool.is_none() {
-            let masks = self.colour(set, &fg);
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
             self.counters.colour += 1;
             self.masks = fg;
             return Ok(Labelled {
@@ -414,17 +408,17 @@ impl Labelling {
         let (mut masks, source) = if trusted {
             let mut masks = labelled.masks;
             if let Some(sure) = self.sure.as_ref().filter(|_| colours) {
-                for (((view, mask), region), fg) in
-                    set.views.iter().zip(&mut masks).zip(&labelled.tool_regions).zip(&fg)
-                {
-                    if let (Some(view), Some(mask), Some(region), Some(fg)) = (view, mask, region, fg) {
-                        sharpen(sure, &view.image, mask, fg, region);
+                for ((view, mask), region) in set.views.iter().zip(&mut masks).zip(&labelled.tool_regions) {
+                    if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
+                        sharpen(sure, &view.image, mask, region);
                     }
                 }
             }
             (masks, LabelSource::Geometry)
         } else if colours && self.colours.is_some() {
-            (self.colour(set, &fg), LabelSource::Colour)
+            let mut masks = fg.clone();
+            self.colour(set, &mut masks);
+            (masks, LabelSource::Colour)
         } else if estimate.fitted.is_some() {
             (labelled.masks, LabelSource::UntrustedGeometry)
         } else {
@@ -509,8 +503,8 @@ impl Labelling {
     /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible
     /// shadows foreground where those cells cover them, background elsewhere; the cells near the
     /// tool where its track predicts it at `timestamp_ns` are kept as objects. Returns the kept
-    /// cells and which of them only that prediction kept (the tool's, or its shadow: never the
-    /// hand).
+    /// cells and which of them only that prediction kept (the tool's, or its shadow beside it:
+    /// never the hand).
     fn resolve_shadows(
         &mut self,
         occ: Occupancy,
@@ -546,22 +540,20 @@ impl Labelling {
         for (view, mask) in views.iter().zip(fg.iter_mut()) {
             if let (Some(view), Some(mask)) = (view, mask) {
                 self.counters.shadow_foreground +=
-                    cover(&occ, view, mask, SHADOW_LIKE, SHADOW_KEPT, self.hull.margin_px);
+                    cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, self.hull.margin_px);
             }
         }
         Ok((occ, kept.marked_only))
     }
 
-    /// The foreground `fg` labelled by colour (unknown where no colours are learned yet, and
-    /// where a kept possible shadow's colour says scalpel: see [`sharpen`]).
-    fn colour(&self, set: &FrameSet, fg: &[Option<GrayImage>]) -> Vec<Option<GrayImage>> {
-        let mut masks = fg.to_vec();
-        for (view, mask) in set.views.iter().zip(&mut masks) {
+    /// Labels the foreground of `masks` by colour (unknown where no colours are learned yet).
+    fn colour(&self, set: &FrameSet, masks: &mut [Option<GrayImage>]) {
+        let Some(lut) = &self.colours else { return };
+        for (view, mask) in set.views.iter().zip(masks) {
             if let (Some(view), Some(mask)) = (view, mask) {
-                colour_labels(self.colours.as_ref(), &view.image, mask);
+                lut.label_foreground(&view.image, mask);
             }
         }
-        masks
     }
 
     /// Learns a trusted frame set's colours; recompiles the classes now and then.
@@ -616,26 +608,10 @@ fn fit_hints(sure: Option<&ColourLut>, image: &image::RgbImage, mask: &GrayImage
     out
 }
 
-/// Labels the foreground of `mask` by the colours of `image` (unknown without colours), except
-/// that a kept possible shadow ([`SHADOW_KEPT`]) whose colour says scalpel is unknown: see
-/// [`sharpen`].
-fn colour_labels(lut: Option<&ColourLut>, image: &image::RgbImage, mask: &mut GrayImage) {
-    let kept: Vec<bool> = mask.iter().map(|&p| p == SHADOW_KEPT).collect();
-    match lut {
-        Some(lut) => lut.label_foreground(image, mask),
-        None => mask.iter_mut().filter(|p| **p != label::BACKGROUND).for_each(|p| *p = label::UNKNOWN),
-    }
-    for (p, _) in mask.iter_mut().zip(kept).filter(|(p, k)| *k && !matches!(**p, label::HAND | label::UNKNOWN)) {
-        *p = label::UNKNOWN;
-    }
-}
-
 /// Gives the foreground near the drawn tool (`region`, grown by [`SHARPEN_PX`]) the label of its
-/// colour where `sure` decides, but never makes a kept possible shadow ([`SHADOW_KEPT`] in `fg`)
-/// scalpel: its colour is the background's darkened, and a steel tool's grey is its likeliest
-/// look-alike; the geometry's label stays elsewhere.
-fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, fg: &GrayImage, region: &ToolRegion) {
-    if image.dimensions() != mask.dimensions() || fg.dimensions() != mask.dimensions() {
+/// colour where `sure` decides; the geometry's label stays elsewhere.
+fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, region: &ToolRegion) {
+    if image.dimensions() != mask.dimensions() {
         return;
     }
     let (w, h) = (mask.width() as usize, mask.height() as usize);
@@ -647,67 +623,8 @@ fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, fg: 
             continue;
         }
         let colour = sure.get([px[3 * k], px[3 * k + 1], px[3 * k + 2]]);
-        if colour == label::HAND || (colour == label::SCALPEL && fg.as_raw()[k] != SHADOW_KEPT) {
+        if colour != label::UNKNOWN {
             raw[k] = colour;
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use hullcut_capture::segment::{ColourClass, ColourClasses};
-    use image::{Luma, Rgb, RgbImage};
-
-    use super::*;
-
-    /// Sure colours: a skin-toned hand and a grey steel tool.
-    fn colours() -> ColourLut {
-        let classes = ColourClasses {
-            classes: vec![
-                ColourClass::from_albedo(label::HAND, [200.0, 140.0, 110.0], (0.2, 1.0), 0.02),
-                ColourClass::from_albedo(label::SCALPEL, [130.0, 130.0, 135.0], (0.2, 1.0), 0.02),
-            ],
-            reject_mahalanobis2: None,
-        };
-        ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)
-    }
-
-    /// Four pixels: grey (the tool's, or a shadow on a grey table), grey kept as a possible
-    /// shadow, skin, skin kept as a possible shadow.
-    fn pixels() -> (RgbImage, GrayImage) {
-        let mut image = RgbImage::new(4, 1);
-        let mut fg = GrayImage::new(4, 1);
-        for (i, (rgb, f)) in [
-            ([60, 60, 63], label::UNKNOWN),
-            ([60, 60, 63], SHADOW_KEPT),
-            ([160, 112, 88], label::UNKNOWN),
-            ([160, 112, 88], SHADOW_KEPT),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            image.put_pixel(i as u32, 0, Rgb(rgb));
-            fg.put_pixel(i as u32, 0, Luma([f]));
-        }
-        (image, fg)
-    }
-
-    #[test]
-    fn a_kept_possible_shadow_is_never_made_scalpel_by_its_colour() {
-        let (image, fg) = pixels();
-        let lut = colours();
-        // Near the drawn tool, the geometry's labels sharpened by the colours.
-        let mut mask = GrayImage::from_pixel(4, 1, Luma([label::HAND]));
-        let region = ToolRegion { x0: 0, y0: 0, width: 4, height: 1, covered: vec![true; 4] };
-        sharpen(&lut, &image, &mut mask, &fg, &region);
-        assert_eq!(mask.as_raw(), &[label::SCALPEL, label::HAND, label::HAND, label::HAND]);
-        // By colour alone.
-        let mut mask = fg.clone();
-        colour_labels(Some(&lut), &image, &mut mask);
-        assert_eq!(mask.as_raw(), &[label::SCALPEL, label::UNKNOWN, label::HAND, label::HAND]);
-        // Without colours every foreground pixel is unknown, the marks gone.
-        let mut mask = fg;
-        colour_labels(None, &image, &mut mask);
-        assert_eq!(mask.as_raw(), &[label::UNKNOWN; 4]);
     }
 }
