@@ -15,11 +15,11 @@ use image::GrayImage;
 use rayon::prelude::*;
 
 use crate::carve::{Footprint, Projected, footprint, project};
+use crate::{Cell, Occupancy, Silhouette};
 
 /// A cell that this many views see as sure foreground, in front of every other object, is kept
 /// whatever the others see.
 pub const SURE_VIEWS: usize = 2;
-use crate::{Cell, Occupancy, Silhouette};
 
 /// Cast shadows lie on the table: a cell wholly this high above the table top (z = 0 in a table's
 /// frame) is an object, whatever its shading says. The hull of a shadow rises above the table
@@ -32,13 +32,13 @@ pub const SHADOW_HULL_HEIGHT: f64 = 0.04;
 /// How the views support one cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Support {
-    /// Kept whatever the rest says: high above the table, marked as an object, or seen as sure
-    /// foreground by at least as many views as see only shadow there.
+    /// Kept: high above the table, or seen as sure foreground by at least as many views as see
+    /// only shadow there.
     Strong,
     /// Seen as sure foreground by [`SURE_VIEWS`] views or more, but as only shadow by more: kept
-    /// when that many of them see it in front of the strong cells ([`Front`]).
+    /// when that many of them see it in front of the strong and the marked cells ([`Front`]).
     Sure,
-    /// Dropped.
+    /// Dropped, unless marked as an object.
     None,
 }
 
@@ -49,13 +49,13 @@ enum Support {
 /// being the table top, also every cell wholly above [`SHADOW_HULL_HEIGHT`] (a skin-toned hand
 /// over a wooden table looks like a shadow of it where it is shaded); also every cell `objects`
 /// marks (by index; shorter or empty marks none: cells known to be an object, such as the
-/// tracked tool's). A cell that more views see as shadow is kept too
-/// when [`SURE_VIEWS`] views see sure foreground in its footprint that no cell kept so far nearer the
-/// camera explains (a dull tool over a table of its colour, seen as shadow from above and as
-/// sure foreground from the side), but not when the sure foreground there is an object in
-/// front of it (the hand over its own shadow, seen through it by the views near the light's
-/// direction: several of them on a rig of many cameras). Returns the kept cells, which of them
-/// only the marks kept, and how many went.
+/// tracked tool's). A cell that more views see as shadow is kept too when [`SURE_VIEWS`] views
+/// see sure foreground in its footprint that no cell kept or marked nearer the camera explains (a
+/// dull tool over a table of its colour, seen as shadow from above and as sure foreground from
+/// the side), but not when the sure foreground there is an object in front of it (the hand over
+/// its own shadow, seen through it by the views near the light's direction: several of them on a
+/// rig of many cameras). Returns the kept cells, which of them only the marks kept, and how many
+/// went.
 pub fn keep_supported(
     occ: &Occupancy,
     all: &[Option<Silhouette>],
