@@ -613,6 +613,9 @@ fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and
     assert_eq!(c["frame_sets_processed"].as_u64(), Some(150), "{c}");
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 120, "{c}");
     assert!(c["edges_cut"].as_u64().expect("edges") >= 100, "{c}");
+    // The report counts the shadow cells that views saw only through the hand.
+    let l = &r["labelling"]["counters"];
+    assert!(l["shadow_cells_seen_through"].as_u64().expect("seen through") > 0, "{l}");
 }
 
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.

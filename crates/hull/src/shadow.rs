@@ -132,7 +132,8 @@ pub fn keep_supported(
         }
     }
     let dropped = occ.cells.len() - occupancy.cells.len();
-    Supported { occupancy, marked_only, dropped }
+    let seen_through = contested.iter().filter(|&&k| !seen[k] && !marked(k)).count();
+    Supported { occupancy, marked_only, dropped, seen_through }
 }
 
 /// What [`keep_supported`] kept.
@@ -145,6 +146,9 @@ pub struct Supported {
     pub marked_only: Vec<bool>,
     /// How many cells went.
     pub dropped: usize,
+    /// Of those, how many [`SURE_VIEWS`] views or more saw as sure foreground, but only through
+    /// an object in front of them (the hand over its own shadow).
+    pub seen_through: usize,
 }
 
 /// Distance of a cell's nearest point from a camera, along its axis, at most: its centre's depth
@@ -349,7 +353,7 @@ mod tests {
         let mut both = table_cell.clone();
         both.cells.push(object);
         let kept = keep_supported(&both, &all, &sure, 0.5, true, &[]);
-        assert_eq!(kept.dropped, 1, "the cell under the object is its shadow");
+        assert_eq!((kept.dropped, kept.seen_through), (1, 1), "the cell under the object is its shadow");
         assert_eq!(kept.occupancy.cells, vec![object]);
         // Marked as an object, it stays, kept by the mark alone.
         let kept = keep_supported(&both, &all, &sure, 0.5, true, &[true, false]);
@@ -366,5 +370,6 @@ mod tests {
             .collect();
         let kept = keep_supported(&table_cell, &all, &one, 0.5, true, &[]);
         assert!(kept.occupancy.cells.is_empty());
+        assert_eq!(kept.seen_through, 0, "one view is not enough to look through anything");
     }
 }

@@ -118,8 +118,14 @@ pub struct LabelCounters {
     pub shadow_pixels: u64,
     /// Of those, pixels the hull showed to be foreground (a dark object, not a shadow).
     pub shadow_foreground: u64,
-    /// Hull cells dropped because no view saw sure foreground in them (shadows on the table).
+    /// Hull cells dropped as shadows on the table: more views saw only shadow in them than sure
+    /// foreground, and fewer than two saw sure foreground in front of every other cell kept.
     pub shadow_cells_dropped: u64,
+    /// Of those, cells that two or more views saw as sure foreground, but only through an object
+    /// in front of them (the hand over its own shadow, seen by the views near the light's
+    /// direction).
+    #[serde(default)]
+    pub shadow_cells_seen_through: u64,
     /// Views whose foreground jumped far above their usual (someone behind the table, a light
     /// switched on): their foreground was cut to what the hull explains, the frame set kept.
     pub degraded_views: u64,
@@ -537,6 +543,7 @@ impl Labelling {
         );
         let occ = kept.occupancy;
         self.counters.shadow_cells_dropped += kept.dropped as u64;
+        self.counters.shadow_cells_seen_through += kept.seen_through as u64;
         for (view, mask) in views.iter().zip(fg.iter_mut()) {
             if let (Some(view), Some(mask)) = (view, mask) {
                 self.counters.shadow_foreground +=
