@@ -102,6 +102,12 @@ pub struct FrameError {
     normal_deg: Option<f64>,
     edge_mm: Option<f64>,
     tip_mm: Option<f64>,
+    /// Errors of the frame's own fit before the pose filter, trusted or not (a trusted frame's
+    /// error beside it tells the fit's error from the filter's lag).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    fit_normal_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    fit_tip_mm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reason: Option<String>,
     /// Fit agreement: outline points explained, interior points on foreground (fractions), RMS px.
@@ -192,6 +198,8 @@ impl PoseReport {
             normal_deg: shown.map(|x| x.normal_deg),
             edge_mm: shown.map(|x| x.edge_mm),
             tip_mm: shown.map(|x| x.tip_mm),
+            fit_normal_deg: fitted_error.map(|x| x.normal_deg),
+            fit_tip_mm: fitted_error.map(|x| x.tip_mm),
             reason: e.reason.clone(),
             explained: e.diagnostics.explained,
             covered: e.diagnostics.covered,

@@ -8,7 +8,7 @@
 use std::time::Instant;
 
 use hullcut_capture::segment::{
-    AppearanceModel, ColourLut, LearnedColour, Method, SHADOW_LIKE, SegmentParams, Segmenter,
+    AppearanceModel, ColourClasses, ColourLut, LearnedColour, Method, SHADOW_LIKE, SegmentParams, Segmenter,
 };
 use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
 use hullcut_hull::shadow::{cover, keep_supported};
@@ -36,6 +36,11 @@ const REFRESH_EVERY: u64 = 15;
 const SHARPEN_PX: usize = 12;
 /// A colour is sure when it is at least e^3 (20) times as likely under its label as under the other.
 const SHARPEN_LOG_RATIO: f64 = 3.0;
+/// ... and when its label's class explains it: its squared Mahalanobis distance from that class
+/// is below the 99th percentile of a χ² with three degrees of freedom. A colour neither the hand
+/// nor the tool has (a shadow on a green mat kept beside the blade) is likelier under the broader
+/// class, but decides nothing.
+const SURE_MAHALANOBIS2: f64 = 11.34;
 /// A view's foreground is degraded when it is this many times its usual (the median over its
 /// last [`DEGRADED_HISTORY`] frame sets)...
 const DEGRADED_JUMP: f64 = 3.0;
@@ -190,8 +195,11 @@ pub struct Labelling {
     tool: Option<ToolLabeller>,
     appearance: AppearanceModel,
     colours: Option<ColourLut>,
-    /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]).
+    /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]): the fit's hints.
     sure: Option<ColourLut>,
+    /// The sure colours that their class also explains ([`SURE_MAHALANOBIS2`]): they sharpen the
+    /// labels near the drawn tool.
+    explained: Option<ColourLut>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -252,9 +260,7 @@ impl Labelling {
                 appearance.sources.mask_views += 1;
             }
         }
-        let classes = appearance.classes();
-        let colours = classes.as_ref().map(ColourLut::new);
-        let sure = classes.as_ref().map(|c| ColourLut::confident(c, 2.0 * SHARPEN_LOG_RATIO));
+        let (colours, sure, explained) = compile(appearance.classes());
         let tool = tool
             .map(|t| {
                 ToolLabeller::new(
@@ -280,6 +286,7 @@ impl Labelling {
             appearance,
             colours,
             sure,
+            explained,
             hull,
             rig: ds.rig().clone(),
             label_frames: label_frames.to_vec(),
@@ -413,10 +420,10 @@ impl Labelling {
         let trusted = estimate.valid && estimate.fitted.is_some();
         let (mut masks, source) = if trusted {
             let mut masks = labelled.masks;
-            if let Some(sure) = self.sure.as_ref().filter(|_| colours) {
+            if let Some(explained) = self.explained.as_ref().filter(|_| colours) {
                 for ((view, mask), region) in set.views.iter().zip(&mut masks).zip(&labelled.tool_regions) {
                     if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                        sharpen(sure, &view.image, mask, region);
+                        sharpen(explained, &view.image, mask, region);
                     }
                 }
             }
@@ -574,9 +581,7 @@ impl Labelling {
         self.appearance.sources.geometry_frames += 1;
         self.counters.learned += 1;
         if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() {
-            let classes = self.appearance.classes();
-            self.colours = classes.as_ref().map(ColourLut::new);
-            self.sure = classes.as_ref().map(|c| ColourLut::confident(c, 2.0 * SHARPEN_LOG_RATIO));
+            (self.colours, self.sure, self.explained) = compile(self.appearance.classes());
         }
     }
 
@@ -592,6 +597,19 @@ impl Labelling {
             appearance_sources: self.appearance.sources,
         }
     }
+}
+
+/// The learned classes compiled three ways: every colour labelled; labelled only where sure
+/// ([`SHARPEN_LOG_RATIO`]); and only where sure and explained by the label's class
+/// ([`SURE_MAHALANOBIS2`]).
+fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>, Option<ColourLut>) {
+    let Some(classes) = classes else { return (None, None, None) };
+    let explained = ColourClasses { reject_mahalanobis2: Some(SURE_MAHALANOBIS2), ..classes.clone() };
+    (
+        Some(ColourLut::new(&classes)),
+        Some(ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)),
+        Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO)),
+    )
 }
 
 /// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
@@ -633,5 +651,37 @@ fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, regi
         if colour != label::UNKNOWN {
             raw[k] = colour;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use hullcut_capture::segment::ColourClass;
+    use image::{Rgb, RgbImage};
+
+    use super::*;
+
+    #[test]
+    fn only_colours_their_class_explains_sharpen_the_labels_near_the_tool() {
+        // A skin-toned hand and a tool of steel and brass (one broad class), learned; the drawn
+        // tool covers the middle column of a 3x1 view.
+        let classes = ColourClasses {
+            classes: vec![
+                ColourClass::from_albedo(label::HAND, [200.0, 140.0, 110.0], (0.5, 1.0), 0.015),
+                ColourClass::from_albedo(label::SCALPEL, [150.0, 140.0, 110.0], (0.2, 1.0), 0.05),
+            ],
+            reject_mahalanobis2: None,
+        };
+        let (steel, skin, green_shadow) = ([90, 90, 95], [190, 132, 104], [20, 60, 35]);
+        let image = RgbImage::from_fn(3, 1, |x, _| Rgb([steel, skin, green_shadow][x as usize]));
+        let region = ToolRegion { x0: 1, y0: 0, width: 1, height: 1, covered: vec![true] };
+        let mut mask = GrayImage::from_raw(3, 1, vec![label::HAND, label::SCALPEL, label::HAND]).expect("mask");
+        let (_, likelier, explained) = compile(Some(classes));
+        sharpen(&explained.expect("compiled"), &image, &mut mask, &region);
+        // The steel beside the drawn tool is the tool's, the skin on it the hand's; the green
+        // shadow kept beside the blade is neither: the geometry's label stays.
+        assert_eq!(mask.as_raw(), &vec![label::SCALPEL, label::HAND, label::HAND]);
+        // Without the test of explanation the broader class would take the shadow.
+        assert_eq!(likelier.expect("compiled").get(green_shadow), label::SCALPEL);
     }
 }
