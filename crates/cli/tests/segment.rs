@@ -115,6 +115,37 @@ fn segments_the_built_in_rig_with_a_seeded_random_look() {
 }
 
 #[test]
+fn a_shadow_kept_beside_the_blade_does_not_become_the_tool_by_its_colour() {
+    // The first 40 frame sets of the resection on the random:89 rig (six cameras) in random:131: a
+    // bare hand over a green mat, its dark shadow kept beside the blade where it nears the mat.
+    // Measured: scalpel IoU 0.840, precision 0.882, hand 0.974; when a colour sharpened the labels
+    // wherever one class was the likelier (the shadow went to the broader, the tool's) 0.746,
+    // 0.778 and 0.983.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("resect");
+    let o = hullcut(&[
+        "synth",
+        "--scene",
+        "resect",
+        "--frames",
+        "40",
+        "--rig",
+        "random:89",
+        "--appearance",
+        "random:131",
+        "--no-truth-meshes",
+        "--out",
+        &path(&ds),
+    ]);
+    assert!(o.status.success(), "synth: {}", stderr(&o));
+    let r = segment(&ds, &[]);
+    let scalpel = r["accuracy"]["labels"].as_array().expect("labels").iter().find(|l| l["name"] == "scalpel");
+    let precision = scalpel.and_then(|l| l["precision"].as_f64()).expect("scalpel precision");
+    let got = [iou(&r, "hand"), iou(&r, "scalpel"), precision];
+    assert!(got[0] >= 0.95 && got[1] >= 0.80 && got[2] >= 0.84, "hand IoU, scalpel IoU, precision {got:?}");
+}
+
+#[test]
 fn segments_the_lab8_rig_with_a_bare_hand_and_the_pointed_tool() {
     let _ = labels_from_the_scene("lab8", "skin-medium", "pointed", [0.97, 0.97, 0.77]);
 }
