@@ -198,7 +198,8 @@ type StageEnd<T> = (T, Result<(), Error>);
 /// What the reader did.
 #[derive(Debug, Default)]
 pub struct ReadOutcome {
-    /// Frame sets read and handed on.
+    /// Frame sets read and handed on to the stages, or dropped by live pacing (`dropped`); one
+    /// read as a stop came, before it went in, is not counted.
     pub read: u64,
     /// Camera images and frame sets left out (unreadable, unknown labels), counted and listed.
     pub faults: Faults,
@@ -505,7 +506,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         stage("read", &abort, move || {
             let pace = Pace { realtime, stop: &stop, abort: &abort_flag };
             let passes = Passes { frames: &frames, repeat, span_ns: pass_span_ns };
-            let gate = Gate { credits: credit_rx, tx: read_tx, depth: &depth };
+            let gate = Gate { credits: credit_rx, tx: read_tx, depth: &depth, handed: std::cell::Cell::new(0) };
             let mut outcome = ReadOutcome::default();
             let result = read_stage(&source, &passes, use_files, &pace, &gate, &mut outcome);
             (outcome, result)
@@ -556,6 +557,8 @@ struct Gate<'a> {
     credits: Receiver<()>,
     tx: Sender<Work>,
     depth: &'a QueueDepth,
+    /// Frame sets handed on.
+    handed: std::cell::Cell<u64>,
 }
 
 /// Whether the reader goes on.
@@ -591,6 +594,7 @@ impl Gate<'_> {
         if self.tx.send(work).is_err() {
             return Flow::End;
         }
+        self.handed.set(self.handed.get() + 1);
         self.depth.note(0, &self.tx);
         Flow::Go
     }
@@ -690,6 +694,22 @@ fn read_stage(
     gate: &Gate<'_>,
     outcome: &mut ReadOutcome,
 ) -> Result<(), Error> {
+    let result = read_frames(source, passes, use_files, pace, gate, outcome);
+    // Read: handed on, or dropped by live pacing. A frame set read as a stop came, before it
+    // went in, is neither: the run ended before it.
+    outcome.read = gate.handed.get() + outcome.dropped;
+    result
+}
+
+/// [`read_stage`]'s loop.
+fn read_frames(
+    source: &FrameSource,
+    passes: &Passes<'_>,
+    use_files: bool,
+    pace: &Pace,
+    gate: &Gate<'_>,
+    outcome: &mut ReadOutcome,
+) -> Result<(), Error> {
     let ds = source.dataset();
     let mut pacer = Pacer::default();
     let mut pending: Option<Work> = None;
@@ -709,7 +729,6 @@ fn read_stage(
         let Some(mut set) = set else { continue };
         set.timestamp_ns = shifted(ds, &set, pass, passes.span_ns)?;
         let took = started.elapsed();
-        outcome.read += 1;
         if pace.realtime {
             let (wait, skipped) = pacer.wait(set.timestamp_ns, Instant::now());
             outcome.gaps_skipped += u64::from(skipped);
