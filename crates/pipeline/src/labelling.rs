@@ -421,25 +421,26 @@ impl Labelling {
         let learns = colours && trusted && estimate.confidence >= LEARN_CONFIDENCE;
         let mut learn_from = None;
         let (mut masks, source) = if trusted {
-            let sharpened = |lut: Option<&ColourLut>| {
-                let mut masks = labelled.masks.clone();
-                if let Some(lut) = lut.filter(|_| colours) {
-                    for ((view, mask), region) in set.views.iter().zip(&mut masks).zip(&labelled.tool_regions) {
-                        if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                            sharpen(lut, &view.image, mask, region);
-                        }
+            let sharpen_all = |masks: &mut [Option<GrayImage>], lut: Option<&ColourLut>| {
+                let Some(lut) = lut.filter(|_| colours) else { return };
+                for ((view, mask), region) in set.views.iter().zip(masks).zip(&labelled.tool_regions) {
+                    if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
+                        sharpen(lut, &view.image, mask, region);
                     }
                 }
-                masks
             };
             // The colours are learned from the labels sharpened wherever a colour is surely the
             // likelier (the rule before the labels' own): learned from the labels handed out,
             // the hints they teach the fit changed and lost the track on random:59 in
             // random:101 (129 -> 104 of 150 frame sets trusted).
             if learns {
-                learn_from = Some(sharpened(self.sure.as_ref()));
+                let mut masks = labelled.masks.clone();
+                sharpen_all(&mut masks, self.sure.as_ref());
+                learn_from = Some(masks);
             }
-            (sharpened(self.explained.as_ref()), LabelSource::Geometry)
+            let mut masks = labelled.masks;
+            sharpen_all(&mut masks, self.explained.as_ref());
+            (masks, LabelSource::Geometry)
         } else if colours && self.colours.is_some() {
             let mut masks = fg.clone();
             self.colour(set, &mut masks);
