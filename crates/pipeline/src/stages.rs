@@ -509,6 +509,9 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
             let gate = Gate { credits: credit_rx, tx: read_tx, depth: &depth, handed: std::cell::Cell::new(0) };
             let mut outcome = ReadOutcome::default();
             let result = read_stage(&source, &passes, use_files, &pace, &gate, &mut outcome);
+            // Read: handed on, or dropped by live pacing. A frame set read as a stop came, before
+            // it went in, is neither: the run ended before it.
+            outcome.read = gate.handed.get() + outcome.dropped;
             (outcome, result)
         })?
     };
@@ -684,25 +687,10 @@ impl Pacer {
     }
 }
 
-/// Reads frame sets into `outcome` and lets them into the stages ([`Gate`]); with live pacing
+/// Reads frame sets into `outcome` (its `read` the caller takes from the gate afterwards) and lets
+/// them into the stages ([`Gate`]); with live pacing
 /// keeps to their timestamps (see [`Pacer`]) and drops the oldest that found no room.
 fn read_stage(
-    source: &FrameSource,
-    passes: &Passes<'_>,
-    use_files: bool,
-    pace: &Pace,
-    gate: &Gate<'_>,
-    outcome: &mut ReadOutcome,
-) -> Result<(), Error> {
-    let result = read_frames(source, passes, use_files, pace, gate, outcome);
-    // Read: handed on, or dropped by live pacing. A frame set read as a stop came, before it
-    // went in, is neither: the run ended before it.
-    outcome.read = gate.handed.get() + outcome.dropped;
-    result
-}
-
-/// [`read_stage`]'s loop.
-fn read_frames(
     source: &FrameSource,
     passes: &Passes<'_>,
     use_files: bool,
