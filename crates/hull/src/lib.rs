@@ -39,6 +39,7 @@ pub use volume::{SeenVolume, VolumeSource, WorkingVolume, seen_volume};
 
 use hullcut_rig::Rig;
 use image::GrayImage;
+use rayon::prelude::*;
 
 /// Why carving could not run.
 #[derive(Debug, thiserror::Error)]
@@ -76,13 +77,13 @@ pub enum HullError {
     Gpu(String),
 }
 
-/// Summed-area tables for each camera's mask (`None` for a missing view).
+/// Summed-area tables for each camera's mask (`None` for a missing view), built on the rayon pool.
 pub fn silhouettes(rig: &Rig, masks: &[Option<&GrayImage>]) -> Result<Vec<Option<Silhouette>>, HullError> {
     rig.cameras
-        .iter()
-        .zip(masks.iter().chain(std::iter::repeat(&None)))
-        .map(|(cam, mask)| {
-            let Some(mask) = mask else { return Ok(None) };
+        .par_iter()
+        .enumerate()
+        .map(|(k, cam)| {
+            let Some(mask) = masks.get(k).copied().flatten() else { return Ok(None) };
             if mask.dimensions() != (cam.width, cam.height) {
                 return Err(HullError::MaskSize {
                     camera: cam.name.clone(),

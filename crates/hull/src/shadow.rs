@@ -14,7 +14,7 @@
 use image::GrayImage;
 use rayon::prelude::*;
 
-use crate::carve::{Footprint, Projected, footprint, project};
+use crate::carve::{Footprint, footprint};
 use crate::{Cell, Occupancy, Silhouette};
 
 /// A cell that this many views see as sure foreground, in front of every other object, is kept
@@ -227,29 +227,37 @@ impl Front {
 /// to `to`, and every other `from` pixel to 0; returns how many became `to`. `view` must be the
 /// silhouette of this view's camera (its tables are not read).
 pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8, to: u8, margin_px: f64) -> u64 {
-    let w = mask.width() as usize;
+    let (w, h) = (mask.width() as usize, mask.height() as usize);
     let raw: &mut [u8] = mask;
-    // The box of the `from` pixels: a cell whose footprint misses it is skipped after projecting
-    // its centre.
-    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    // Which blocks of `BLOCK`² pixels hold a `from` pixel: a cell whose footprint can only reach
+    // blocks without one is skipped after projecting its centre.
+    let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
+    let mut blocks = vec![false; bw * bh];
+    let mut any = false;
     for (k, _) in raw.iter().enumerate().filter(|(_, p)| **p == from) {
-        let (i, j) = ((k % w) as f64, (k / w) as f64);
-        lo = [lo[0].min(i), lo[1].min(j)];
-        hi = [hi[0].max(i), hi[1].max(j)];
+        blocks[(k / w / BLOCK) * bw + (k % w) / BLOCK] = true;
+        any = true;
     }
-    if lo[0] > hi[0] {
+    if !any {
         return 0;
     }
+    let reaches = |lo: [f64; 2], hi: [f64; 2]| {
+        let clip = |x: f64, n: usize| (x.max(0.0) as usize / BLOCK).min(n - 1);
+        if hi[0] < 0.0 || hi[1] < 0.0 || lo[0] > (w - 1) as f64 || lo[1] > (h - 1) as f64 {
+            return false;
+        }
+        let (b0, b1) = (clip(lo[0], bw), clip(hi[0], bw));
+        (clip(lo[1], bh)..=clip(hi[1], bh)).any(|bj| blocks[bj * bw + b0..=bj * bw + b1].contains(&true))
+    };
     let cam = view.camera();
-    let focal = cam.fx.max(cam.fy);
+    let limit = view.field_radius().unwrap_or(view.monotonic_radius());
     let mut covered = 0;
     for c in &occ.cells {
-        let centre = c.centre();
-        if let Projected::Pixel([u, v]) = project(view, &centre) {
-            // A bound on the footprint's half-side: the cell's half-diagonal at its centre's
-            // depth, twice over for the lens and the margin.
-            let r = 2.0 * (0.87 * c.size * focal / cam.world_to_camera(&centre).z + margin_px) + 1.0;
-            if u + r < lo[0] || u - r > hi[0] || v + r < lo[1] || v - r > hi[1] {
+        // Every pixel of the footprint lies within the disc holding the cell's projection, widened
+        // by the margin, the lens' bow over the footprint and a pixel of rounding.
+        if let Some((uv, r)) = cam.project_ball(&c.centre(), HALF_DIAGONAL * c.size, 1e-3, limit) {
+            let pad = r + margin_px + view.curvature() * 4.0 * r * r + 1.0;
+            if !reaches([uv.x - pad, uv.y - pad], [uv.x + pad, uv.y + pad]) {
                 continue;
             }
         }
@@ -268,6 +276,12 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
     }
     covered
 }
+
+/// Side of the blocks in which [`cover`] looks for pixels to cover, pixels.
+const BLOCK: usize = 8;
+
+/// A cube's half-diagonal over its side, rounded up (√3 / 2).
+const HALF_DIAGONAL: f64 = 0.866_026;
 
 #[cfg(test)]
 mod tests {

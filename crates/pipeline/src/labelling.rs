@@ -17,6 +17,7 @@ use hullcut_pose::{
     LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput,
 };
 use image::GrayImage;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
@@ -564,12 +565,15 @@ impl Labelling {
         let occ = kept.occupancy;
         self.counters.shadow_cells_dropped += kept.dropped as u64;
         self.counters.shadow_cells_seen_through += kept.seen_through as u64;
-        for (view, mask) in views.iter().zip(fg.iter_mut()) {
-            if let (Some(view), Some(mask)) = (view, mask) {
-                self.counters.shadow_foreground +=
-                    cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, self.hull.margin_px);
-            }
-        }
+        let margin = self.hull.margin_px;
+        self.counters.shadow_foreground += views
+            .par_iter()
+            .zip(fg.par_iter_mut())
+            .map(|(view, mask)| match (view, mask) {
+                (Some(view), Some(mask)) => cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, margin),
+                _ => 0,
+            })
+            .sum::<u64>();
         Ok((occ, kept.marked_only))
     }
 

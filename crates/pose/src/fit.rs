@@ -16,7 +16,7 @@
 use nalgebra::{Isometry3, Matrix6, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3, Vector6};
 
 use crate::evidence::{Twist2, ViewEvidence};
-use crate::geometry::{convex_hull_indices, nearest_on_convex};
+use crate::geometry::{Convex, convex_hull_indices};
 use crate::template::Template;
 
 /// Huber threshold, pixels.
@@ -81,7 +81,8 @@ struct Outline {
     pixels: Vec<Point2<f64>>,
     jacobians: Vec<Twist2>,
     hull: Vec<usize>,
-    polygon: Vec<Point2<f64>>,
+    vertices: Vec<Point2<f64>>,
+    polygon: Convex,
 }
 
 impl Outline {
@@ -95,13 +96,14 @@ impl Outline {
             }
         }
         convex_hull_indices(&self.pixels, &mut self.hull);
-        self.polygon.clear();
-        self.polygon.extend(self.hull.iter().map(|&i| self.pixels[i]));
+        self.vertices.clear();
+        self.vertices.extend(self.hull.iter().map(|&i| self.pixels[i]));
+        self.polygon.set(&self.vertices);
     }
 
     /// Signed distance of `q` to the projected part and its twist derivative.
     fn distance(&self, q: &Point2<f64>) -> Option<(f64, [f64; 6])> {
-        let near = nearest_on_convex(&self.polygon, q)?;
+        let near = self.polygon.nearest(q)?;
         let n = self.polygon.len();
         let (ja, jb) = (&self.jacobians[self.hull[near.edge]], &self.jacobians[self.hull[(near.edge + 1) % n]]);
         // Moving the nearest boundary point c = a + t (b - a) by dc changes sd by -normal · dc.

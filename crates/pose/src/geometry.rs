@@ -56,40 +56,94 @@ pub(crate) struct Nearest {
     pub normal: Vector2<f64>,
 }
 
-/// The nearest feature of a convex polygon (counter-clockwise, at least two points) to `q`.
-pub(crate) fn nearest_on_convex(polygon: &[Point2<f64>], q: &Point2<f64>) -> Option<Nearest> {
-    let n = polygon.len();
-    if n < 2 {
-        return None;
+/// One edge of a [`Convex`] polygon, from vertex `index` to the next.
+#[derive(Debug, Clone, Copy)]
+struct Edge {
+    index: usize,
+    a: Point2<f64>,
+    ab: Vector2<f64>,
+    len2: f64,
+    len: f64,
+    /// Outward unit normal (the polygon is counter-clockwise).
+    normal: Vector2<f64>,
+}
+
+/// A convex polygon (counter-clockwise) prepared for many nearest-feature queries: its edges'
+/// vectors, lengths and normals are computed once.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Convex {
+    vertices: usize,
+    edges: Vec<Edge>,
+}
+
+impl Convex {
+    /// The polygon through `polygon`'s points in order (a repeated point makes no edge).
+    pub(crate) fn new(polygon: &[Point2<f64>]) -> Self {
+        let mut convex = Convex::default();
+        convex.set(polygon);
+        convex
     }
-    let mut inside = n >= 3;
-    let mut out = Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() };
-    let mut depth = Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() };
-    for i in 0..n {
-        let (a, b) = (polygon[i], polygon[(i + 1) % n]);
-        let ab = b - a;
-        let aq = q - a;
-        let len2 = ab.norm_squared();
-        if len2 == 0.0 {
-            continue;
-        }
-        let len = len2.sqrt();
-        let side = ab.perp(&aq) / len;
-        if side < 0.0 {
-            inside = false;
-        }
-        let t = (aq.dot(&ab) / len2).clamp(0.0, 1.0);
-        if side < depth.sd {
-            depth = Nearest { sd: side, edge: i, t, normal: Vector2::new(ab.y, -ab.x) / len };
-        }
-        let d = aq - ab * t;
-        let dist = d.norm();
-        if dist < out.sd {
-            let normal = if dist > 1e-12 { d / dist } else { Vector2::new(ab.y, -ab.x) / len };
-            out = Nearest { sd: dist, edge: i, t, normal };
+
+    /// Makes this the polygon through `polygon`'s points, reusing its storage.
+    pub(crate) fn set(&mut self, polygon: &[Point2<f64>]) {
+        let n = polygon.len();
+        self.vertices = n;
+        self.edges.clear();
+        for i in 0..n {
+            let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+            let ab = b - a;
+            let len2 = ab.norm_squared();
+            if len2 == 0.0 {
+                continue;
+            }
+            let len = len2.sqrt();
+            self.edges.push(Edge { index: i, a, ab, len2, len, normal: Vector2::new(ab.y, -ab.x) / len });
         }
     }
-    Some(if inside { Nearest { sd: -depth.sd, ..depth } } else { out })
+
+    /// Number of vertices.
+    pub(crate) fn len(&self) -> usize {
+        self.vertices
+    }
+
+    /// The nearest feature to `q` (`None` for fewer than two points).
+    pub(crate) fn nearest(&self, q: &Point2<f64>) -> Option<Nearest> {
+        if self.vertices < 2 {
+            return None;
+        }
+        let mut inside = self.vertices >= 3;
+        let mut depth = Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() };
+        // The nearest point outside, compared by squared distance: (squared distance, edge, t,
+        // offset from the edge's nearest point).
+        let mut out: Option<(f64, &Edge, f64, Vector2<f64>)> = None;
+        for e in &self.edges {
+            let aq = q - e.a;
+            let side = e.ab.perp(&aq) / e.len;
+            if side < 0.0 {
+                inside = false;
+            }
+            let t = (aq.dot(&e.ab) / e.len2).clamp(0.0, 1.0);
+            if side < depth.sd {
+                depth = Nearest { sd: side, edge: e.index, t, normal: e.normal };
+            }
+            let d = aq - e.ab * t;
+            let dist2 = d.norm_squared();
+            if out.is_none_or(|(best, ..)| dist2 < best) {
+                out = Some((dist2, e, t, d));
+            }
+        }
+        if inside {
+            return Some(Nearest { sd: -depth.sd, ..depth });
+        }
+        Some(match out {
+            Some((dist2, e, t, d)) => {
+                let dist = dist2.sqrt();
+                let normal = if dist > 1e-12 { d / dist } else { e.normal };
+                Nearest { sd: dist, edge: e.index, t, normal }
+            }
+            None => Nearest { sd: f64::INFINITY, edge: 0, t: 0.0, normal: Vector2::x() },
+        })
+    }
 }
 
 #[cfg(test)]
@@ -103,7 +157,8 @@ mod tests {
         let h = convex_hull(&pts);
         assert_eq!(h.len(), 4);
         assert!(crate::template::polygon_area(&h) > 0.99);
-        let sd = |x: f64, y: f64| nearest_on_convex(&h, &Point2::new(x, y)).expect("a polygon");
+        let h = Convex::new(&h);
+        let sd = |x: f64, y: f64| h.nearest(&Point2::new(x, y)).expect("a polygon");
         let inside = sd(0.5, 0.4);
         assert!((inside.sd + 0.4).abs() < 1e-12 && (inside.normal - Vector2::new(0.0, -1.0)).norm() < 1e-12);
         let beside = sd(2.0, 0.5);

@@ -17,15 +17,17 @@
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use hullcut_dataset::{Mesh, ToolGeometry, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, footprint_counts};
 use hullcut_rig::Camera;
 use image::GrayImage;
-use nalgebra::{Isometry3, Point2, Point3, Vector3};
+use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 
 use crate::ToolError;
 use crate::evidence::project;
-use crate::geometry::{convex_hull, nearest_on_convex};
+use crate::geometry::{Convex, convex_hull};
 use crate::template::Template;
 use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 
@@ -231,7 +233,7 @@ impl ToolLabeller {
             let doubtful: Vec<hullcut_hull::Cell> =
                 hull.cells.iter().filter(|c| !c.hand && !c.scalpel).copied().collect();
             let masks: Vec<Option<GrayImage>> = views
-                .iter()
+                .par_iter()
                 .map(|v| {
                     v.map(|v| {
                         let radius = v.camera.distortion.monotonic_radius();
@@ -320,49 +322,80 @@ impl ToolLabeller {
                 // drawings: a cell is the hand's only where views see foreground the tool does not
                 // explain (the tool's own hull, fatter than the tool, hides nothing).
                 let drawn: Vec<Option<ToolDepth>> = views
-                    .iter()
+                    .par_iter()
                     .map(|v| {
                         v.and_then(|v| {
                             ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), &self.mesh, &pose)
                         })
                     })
                     .collect();
-                let unhidden: Vec<Option<GrayImage>> =
-                    views.iter().zip(&drawn).map(|(v, d)| v.map(|v| labels_without_occlusion(v, d.as_ref()))).collect();
+                let unhidden: Vec<Option<GrayImage>> = views
+                    .par_iter()
+                    .zip(drawn.par_iter())
+                    .map(|(v, d)| v.map(|v| labels_without_occlusion(v, d.as_ref())))
+                    .collect();
                 // Occluders per view: the hull's hand cells (labelled from those drawings) whose
                 // footprint in that very view holds hand pixels, i.e. cells that view can see as
                 // hand. A cell of the hand's hull that the view sees only where the tool is drawn
                 // is the hull's fat (a phantom in front of the tool), not what hides it.
                 let sil: Vec<Option<Silhouette>> = views
-                    .iter()
-                    .zip(&unhidden)
+                    .par_iter()
+                    .zip(unhidden.par_iter())
                     .map(|(v, m)| v.zip(m.as_ref()).map(|(v, m)| Silhouette::new(v.camera, m)))
                     .collect();
-                let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
-                let labelled = hullcut_hull::relabel(&occupancy, &sil, &params);
-                let hand_cells: Vec<hullcut_hull::Cell> = labelled
-                    .cells
-                    .iter()
-                    .zip(&occupancy.cells)
-                    .filter(|(l, o)| l.hand && !l.scalpel && o.hand)
-                    .map(|(l, _)| *l)
+                // Only cells drawn over the tool in some view can hide it there: the others are
+                // neither relabelled nor judged.
+                let margin = self.params.occlusion_margin_m + occ.leaf_size;
+                let over: Vec<Vec<usize>> = views
+                    .par_iter()
+                    .zip(drawn.par_iter())
+                    .map(|(v, d)| match (v, d) {
+                        (Some(v), Some(d)) => d.cells_over(v.camera, &occupancy.cells, margin),
+                        _ => Vec::new(),
+                    })
                     .collect();
+                let mut wanted: Vec<usize> =
+                    over.iter().flatten().copied().filter(|&i| occupancy.cells[i].hand).collect();
+                wanted.sort_unstable();
+                wanted.dedup();
+                let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
+                let near = Occupancy {
+                    cells: wanted.iter().map(|&i| occupancy.cells[i]).collect(),
+                    stats: occupancy.stats.clone(),
+                    ..occupancy
+                };
+                let mut hand = vec![false; occupancy.cells.len()];
+                for (&i, l) in wanted.iter().zip(&hullcut_hull::relabel(&near, &sil, &params).cells) {
+                    hand[i] = l.hand && !l.scalpel;
+                }
                 let occluders: Vec<Vec<hullcut_hull::Cell>> = sil
                     .iter()
-                    .map(|s| match s {
-                        Some(s) => hand_cells
+                    .zip(&over)
+                    .map(|(s, over)| match s {
+                        Some(s) => over
                             .iter()
+                            .filter(|&&i| hand[i])
+                            .map(|&i| occupancy.cells[i])
                             .filter(|c| footprint_counts(s, c, params.margin_px).is_some_and(|n| n.hand > 0))
-                            .copied()
                             .collect(),
                         None => Vec::new(),
                     })
                     .collect();
-                let masks = views
-                    .iter()
-                    .zip(&drawn)
-                    .zip(&occluders)
-                    .map(|((v, d), o)| v.map(|v| self.final_labels(v, d.as_ref(), o, occ.leaf_size, &mut stats)))
+                let labelled: Vec<Option<(GrayImage, u64, u64)>> = views
+                    .par_iter()
+                    .zip(drawn.par_iter())
+                    .zip(occluders.par_iter())
+                    .map(|((v, d), o)| v.map(|v| self.final_labels(v, d.as_ref(), o, occ.leaf_size)))
+                    .collect();
+                let masks = labelled
+                    .into_iter()
+                    .map(|l| {
+                        l.map(|(mask, scalpel, hidden)| {
+                            stats.scalpel_pixels += scalpel;
+                            stats.hidden_pixels += hidden;
+                            mask
+                        })
+                    })
                     .collect();
                 let regions = drawn.iter().map(|d| d.as_ref().map(ToolDepth::region)).collect();
                 (masks, occupancy, regions)
@@ -389,15 +422,15 @@ impl ToolLabeller {
     }
 
     /// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
-    /// hand cell lies in front of it there; the rest of the foreground hand.
+    /// hand cell lies in front of it there; the rest of the foreground hand. With the pixels
+    /// labelled scalpel and those the hand hides.
     fn final_labels(
         &self,
         view: ViewInput,
         tool: Option<&ToolDepth>,
         hand_cells: &[hullcut_hull::Cell],
         leaf: f64,
-        stats: &mut LabelStats,
-    ) -> GrayImage {
+    ) -> (GrayImage, u64, u64) {
         let cam = view.camera;
         let radius = cam.distortion.monotonic_radius();
         let mut out = view.mask.clone();
@@ -406,29 +439,14 @@ impl ToolLabeller {
                 *p = label::HAND;
             }
         }
-        let Some(tool) = tool else { return out };
+        let Some(tool) = tool else { return (out, 0, 0) };
+        let (mut scalpel, mut hidden_pixels) = (0, 0);
         let mut hand = vec![f32::INFINITY; tool.depth.len()];
         let margin = self.params.occlusion_margin_m + leaf;
         for c in hand_cells {
-            let mut corners = [(Point2::origin(), 0.0); 8];
-            let mut all = true;
-            for (k, corner) in corners.iter_mut().enumerate() {
-                let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
-                match project(cam, radius, &p) {
-                    Some(uv) => *corner = (uv, cam.world_to_camera(&p).z),
-                    None => all = false,
-                }
+            if let Some((lo, hi, z)) = drawn_box(cam, radius, c) {
+                tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
             }
-            if !all {
-                continue;
-            }
-            let (mut lo, mut hi, mut z) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN), f64::MAX);
-            for (uv, d) in &corners {
-                lo = lo.inf(uv);
-                hi = hi.sup(uv);
-                z = z.min(*d);
-            }
-            tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
         }
         let (w, raw) = (out.width() as usize, view.mask.as_raw());
         // 0 outside the tool or on background, 1 visible tool, 2 hidden by the hand.
@@ -472,13 +490,13 @@ impl ToolLabeller {
             }
             let px = (tool.y0 + j) * w + tool.x0 + i;
             if hidden {
-                stats.hidden_pixels += 1;
+                hidden_pixels += 1;
             } else {
                 out.as_mut()[px] = label::SCALPEL;
-                stats.scalpel_pixels += 1;
+                scalpel += 1;
             }
         }
-        out
+        (out, scalpel, hidden_pixels)
     }
 }
 
@@ -592,8 +610,9 @@ fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usi
     if i1 < i0 as f64 || j1 < j0 as f64 {
         return Vec::new();
     }
+    let polygon = Convex::new(polygon);
     (j0..=j1 as usize)
-        .filter_map(|j| row_within(polygon, band, j as f64, i0, i1 as usize).map(|(a, b)| (j, a, b)))
+        .filter_map(|j| row_within(&polygon, band, j as f64, i0, i1 as usize).map(|(a, b)| (j, a, b)))
         .collect()
 }
 
@@ -601,8 +620,8 @@ fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usi
 /// `polygon`: an interval, since the signed distance to a convex set is a convex function; found by
 /// a ternary search for its minimum and two binary searches for its ends (about thirty distance
 /// evaluations instead of one per column).
-fn row_within(polygon: &[Point2<f64>], band: f64, y: f64, i0: usize, i1: usize) -> Option<(usize, usize)> {
-    let sd = |i: usize| nearest_on_convex(polygon, &Point2::new(i as f64, y)).map_or(f64::INFINITY, |n| n.sd);
+fn row_within(polygon: &Convex, band: f64, y: f64, i0: usize, i1: usize) -> Option<(usize, usize)> {
+    let sd = |i: usize| polygon.nearest(&Point2::new(i as f64, y)).map_or(f64::INFINITY, |n| n.sd);
     let (mut lo, mut hi) = (i0, i1);
     while hi - lo > 2 {
         let (m1, m2) = (lo + (hi - lo) / 3, hi - (hi - lo) / 3);
@@ -733,6 +752,26 @@ fn thin_labels(view: ViewInput, hull: &Occupancy) -> GrayImage {
         }
     }
     out
+}
+
+/// A cube's half-diagonal over its side, rounded up (√3 / 2).
+const HALF_DIAGONAL: f64 = 0.866_026;
+
+/// The nearest a projected point may lie to the camera's plane, metres (as [`project`]).
+const NEAR_M: f64 = 1e-3;
+
+/// The box of a cell's eight projected corners and the nearest corner's depth, as the drawn
+/// depth of a hand cell is splatted (`None` unless every corner projects).
+fn drawn_box(cam: &Camera, radius: f64, c: &hullcut_hull::Cell) -> Option<(Point2<f64>, Point2<f64>, f64)> {
+    let (mut lo, mut hi, mut z) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN), f64::MAX);
+    for k in 0..8 {
+        let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
+        let uv = project(cam, radius, &p)?;
+        lo = lo.inf(&uv);
+        hi = hi.sup(&uv);
+        z = z.min(cam.world_to_camera(&p).z);
+    }
+    Some((lo, hi, z))
 }
 
 /// Points filling the tool (its surface and its inside, about `spacing` apart), in the tool frame.
@@ -1075,24 +1114,64 @@ impl ToolDepth {
         d.is_finite().then_some(f64::from(d))
     }
 
-    /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
-    fn splat_min(&self, buffer: &mut [f32], lo: Point2<f64>, hi: Point2<f64>, z: f32) {
+    /// The pixel centres of the drawn box in `[lo, hi]`, as columns and rows of `depth` (first
+    /// and last column, first and last row), or `None` where they miss it.
+    fn span(&self, lo: Point2<f64>, hi: Point2<f64>) -> Option<(usize, usize, usize, usize)> {
         let h = self.depth.len() / self.w.max(1);
         let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
         let (i1, j1) = (
             (hi.x.floor() - self.x0 as f64).min(self.w as f64 - 1.0),
             (hi.y.floor() - self.y0 as f64).min(h as f64 - 1.0),
         );
-        if i0 > i1 || j0 > j1 {
-            return;
-        }
-        for j in j0 as usize..=j1 as usize {
-            for v in &mut buffer[j * self.w + i0 as usize..=j * self.w + i1 as usize] {
+        (i0 <= i1 && j0 <= j1).then_some((i0 as usize, i1 as usize, j0 as usize, j1 as usize))
+    }
+
+    /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
+    fn splat_min(&self, buffer: &mut [f32], lo: Point2<f64>, hi: Point2<f64>, z: f32) {
+        let Some((i0, i1, j0, j1)) = self.span(lo, hi) else { return };
+        for j in j0..=j1 {
+            for v in &mut buffer[j * self.w + i0..=j * self.w + i1] {
                 if z < *v {
                     *v = z;
                 }
             }
         }
+    }
+
+    /// The indices of the `cells` that can hide the drawn tool in [`ToolLabeller::final_labels`]:
+    /// their [`drawn_box`] holds a pixel where the tool is drawn, and their nearest corner plus
+    /// `margin` lies nearer than the farthest drawn depth. One projection of a cell's centre with a
+    /// disc around it ([`Camera::project_ball`], its half-diagonal's ball) rules most cells out;
+    /// the others are projected corner by corner. The drawn pixels in a box are counted from a
+    /// summed-area table.
+    fn cells_over(&self, cam: &Camera, cells: &[hullcut_hull::Cell], margin: f64) -> Vec<usize> {
+        let farthest = self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max);
+        let (w, h) = (self.w, self.depth.len() / self.w.max(1));
+        let mut sat = vec![0u32; (w + 1) * (h + 1)];
+        for j in 0..h {
+            let mut row = 0;
+            for i in 0..w {
+                row += u32::from(self.depth[j * w + i].is_finite());
+                sat[(j + 1) * (w + 1) + i + 1] = sat[j * (w + 1) + i + 1] + row;
+            }
+        }
+        let drawn_in = |lo: Point2<f64>, hi: Point2<f64>| {
+            self.span(lo, hi).is_some_and(|(i0, i1, j0, j1)| {
+                let at = |i: usize, j: usize| sat[j * (w + 1) + i];
+                at(i1 + 1, j1 + 1) + at(i0, j0) > at(i0, j1 + 1) + at(i1 + 1, j0)
+            })
+        };
+        let radius = cam.distortion.monotonic_radius();
+        let reach = |c: &hullcut_hull::Cell| {
+            if let Some((uv, r)) = cam.project_ball(&c.centre(), HALF_DIAGONAL * c.size, NEAR_M, radius) {
+                let pad = Vector2::new(r, r);
+                if !drawn_in(uv - pad, uv + pad) {
+                    return false;
+                }
+            }
+            drawn_box(cam, radius, c).is_some_and(|(lo, hi, z)| ((z + margin) as f32) < farthest && drawn_in(lo, hi))
+        };
+        cells.iter().enumerate().filter(|(_, c)| reach(c)).map(|(i, _)| i).collect()
     }
 }
 

@@ -167,6 +167,39 @@ impl Camera {
         Projection { pixel, depth, visible }
     }
 
+    /// A disc of pixels that holds the projection of every point within `rho` of the world point
+    /// `centre`: the centre's pixel and the disc's radius. `None` where the ball comes nearer than
+    /// `near` to the camera's plane, or where the normalized points it spans may reach
+    /// `max_radius` (beyond the lens' invertible radius a projection folds back: pass
+    /// [`Distortion::monotonic_radius`]); the caller then projects what it needs point by point.
+    ///
+    /// With the centre at `(X, Y, Z)` in the camera frame, a point of the ball lies within
+    /// `rho (1 + |(X, Y)| / Z) / (Z - rho)` of the centre in normalized coordinates, and the
+    /// distortion stretches that by at most [`Distortion::stretch_bound`].
+    ///
+    /// [`Distortion::monotonic_radius`]: crate::Distortion::monotonic_radius
+    /// [`Distortion::stretch_bound`]: crate::Distortion::stretch_bound
+    pub fn project_ball(
+        &self,
+        centre: &Point3<f64>,
+        rho: f64,
+        near: f64,
+        max_radius: f64,
+    ) -> Option<(Point2<f64>, f64)> {
+        let pc = self.world_to_camera(centre);
+        if !(pc.z - rho > near) {
+            return None;
+        }
+        let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
+        let spread = rho * (1.0 + xn.norm()) / (pc.z - rho);
+        let reach = xn.norm() + spread;
+        if !(reach < max_radius) {
+            return None;
+        }
+        let radius = self.fx.abs().max(self.fy.abs()) * self.distortion.stretch_bound(reach) * spread;
+        Some((self.normalized_to_pixel(self.distortion.distort(xn)), radius))
+    }
+
     /// Pixel → undistorted normalized image coordinates `(x/z, y/z)`.
     ///
     /// Returns `None` when the inversion does not converge (see [`Distortion::undistort`]).

@@ -40,6 +40,26 @@ mod projection {
     }
 
     #[test]
+    fn a_small_ball_in_view_projects_into_a_tight_disc() {
+        let c = test_camera();
+        let centre = Point3::new(0.02, -0.03, 0.12);
+        let rho = 0.003 * 3f64.sqrt() / 2.0;
+        let (uv, r) = c.project_ball(&centre, rho, 1e-3, c.distortion.monotonic_radius()).expect("in view");
+        assert!((uv - c.project(&centre).pixel).norm() < 1e-9);
+        // How far the corners of the 3 mm cell whose half-diagonal is rho actually spread.
+        let spread = (0..8)
+            .map(|k| {
+                let corner = Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64);
+                let p = centre + (corner * 2.0 - Vector3::repeat(1.0)) * 0.0015;
+                (c.project(&p).pixel - uv).norm()
+            })
+            .fold(0.0f64, f64::max);
+        assert!(spread <= r && r < 2.0 * spread, "disc radius {r} against a spread of {spread}");
+        // Nearer than `near` to the camera's plane: no disc.
+        assert!(c.project_ball(&c.centre(), rho, 1e-3, 1.0).is_none());
+    }
+
+    #[test]
     fn image_bounds_use_pixel_centres() {
         let c = Camera::new("c", 4, 3, 1.0, 1.0, 0.0, 0.0);
         assert!(c.contains_pixel(Point2::new(-0.5, -0.5)));
@@ -68,6 +88,40 @@ mod projection {
             let ray = c.pixel_ray(proj.pixel).expect("ray");
             let along = (p - ray.origin).dot(&ray.direction);
             prop_assert!((ray.at(along) - p).norm() < 1e-9);
+        }
+
+        /// The distortion stretches no distance by more than its bound over the radius both points
+        /// lie within, whatever the coefficients.
+        #[test]
+        fn distortion_stretches_no_more_than_its_bound(
+            k in prop::array::uniform5(-0.5f64..0.5),
+            a in prop::array::uniform2(-1.0f64..1.0),
+            b in prop::array::uniform2(-1.0f64..1.0),
+        ) {
+            let d = Distortion::from_array([k[0], k[1], k[2] * 0.02, k[3] * 0.02, k[4]]);
+            let (a, b) = (nalgebra::Vector2::from(a), nalgebra::Vector2::from(b));
+            let r = a.norm().max(b.norm());
+            let moved = (d.distort(a) - d.distort(b)).norm();
+            prop_assert!(moved <= d.stretch_bound(r) * (a - b).norm() * (1.0 + 1e-12) + 1e-15);
+        }
+
+        /// Every point of a ball projects into the disc `project_ball` gives for it.
+        #[test]
+        fn a_ball_projects_into_its_disc(
+            centre in prop::array::uniform3(-0.3f64..0.3),
+            rho in 0.0005f64..0.05,
+            dir in prop::array::uniform3(-1.0f64..1.0),
+            t in 0.0f64..1.0,
+        ) {
+            let c = test_camera();
+            let centre = Point3::from(centre);
+            let dir = Vector3::from(dir);
+            prop_assume!(dir.norm() > 1e-3);
+            let radius = c.distortion.monotonic_radius();
+            if let Some((uv, r)) = c.project_ball(&centre, rho, 1e-3, radius) {
+                let p = c.project(&(centre + dir.normalize() * rho * t));
+                prop_assert!((p.pixel - uv).norm() <= r * (1.0 + 1e-9), "{:?} outside {uv:?} + {r}", p.pixel);
+            }
         }
 
         /// Undistortion inverts distortion inside the monotonic range.
