@@ -86,13 +86,26 @@ struct Outline {
 }
 
 impl Outline {
-    fn project(&mut self, points: &[Point3<f64>], view: &ViewEvidence, pose: &Isometry3<f64>, pivot: &Point3<f64>) {
+    /// Projects the part's points, with their twist derivatives about `pivot` when given (a
+    /// pose's cost needs none).
+    fn project(
+        &mut self,
+        points: &[Point3<f64>],
+        view: &ViewEvidence,
+        pose: &Isometry3<f64>,
+        pivot: Option<&Point3<f64>>,
+    ) {
         self.pixels.clear();
         self.jacobians.clear();
         for p in points {
-            if let Some((uv, j)) = view.project_with_jacobian(&(pose * p), pivot) {
-                self.pixels.push(uv);
-                self.jacobians.push(j);
+            match pivot {
+                Some(pivot) => {
+                    if let Some((uv, j)) = view.project_with_jacobian(&(pose * p), pivot) {
+                        self.pixels.push(uv);
+                        self.jacobians.push(j);
+                    }
+                }
+                None => self.pixels.extend(view.project(&(pose * p))),
             }
         }
         convex_hull_indices(&self.pixels, &mut self.hull);
@@ -101,9 +114,13 @@ impl Outline {
         self.polygon.set(&self.vertices);
     }
 
-    /// Signed distance of `q` to the projected part and its twist derivative.
+    /// Signed distance of `q` to the projected part and its twist derivative (zero where the part
+    /// was projected without derivatives).
     fn distance(&self, q: &Point2<f64>) -> Option<(f64, [f64; 6])> {
         let near = self.polygon.nearest(q)?;
+        if self.jacobians.is_empty() {
+            return Some((near.sd, [0.0; 6]));
+        }
         let n = self.polygon.len();
         let (ja, jb) = (&self.jacobians[self.hull[near.edge]], &self.jacobians[self.hull[(near.edge + 1) % n]]);
         // Moving the nearest boundary point c = a + t (b - a) by dc changes sd by -normal · dc.
@@ -168,8 +185,9 @@ fn residuals_of(
     let mut tally = Tally::default();
     let (mut blade, mut body) = (Outline::default(), Outline::default());
     for view in views {
-        blade.project(&template.blade, view, pose, &pivot);
-        body.project(&template.body, view, pose, &pivot);
+        let derivatives = jacobian.is_some().then_some(&pivot);
+        blade.project(&template.blade, view, pose, derivatives);
+        body.project(&template.body, view, pose, derivatives);
         for s in &view.samples {
             let nearest = match (blade.distance(s), body.distance(s)) {
                 (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),

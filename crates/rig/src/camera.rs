@@ -187,15 +187,12 @@ impl Camera {
         max_radius: f64,
     ) -> Option<(Point2<f64>, f64)> {
         let pc = self.world_to_camera(centre);
-        if !(pc.z - rho > near) {
-            return None;
-        }
+        // Comparisons that are false for NaN: a non-finite ball gives no disc.
+        (pc.z - rho > near).then_some(())?;
         let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
         let spread = rho * (1.0 + xn.norm()) / (pc.z - rho);
         let reach = xn.norm() + spread;
-        if !(reach < max_radius) {
-            return None;
-        }
+        (reach < max_radius).then_some(())?;
         let radius = self.fx.abs().max(self.fy.abs()) * self.distortion.stretch_bound(reach) * spread;
         Some((self.normalized_to_pixel(self.distortion.distort(xn)), radius))
     }
