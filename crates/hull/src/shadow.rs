@@ -386,4 +386,60 @@ mod tests {
         assert!(kept.occupancy.cells.is_empty());
         assert_eq!(kept.seen_through, 0, "one view is not enough to look through anything");
     }
+
+    #[test]
+    fn cover_paints_what_every_cells_footprint_covers() {
+        // A distorted camera looking down at cells of many sizes, some near its plane or beside
+        // the image, over a mask with patches of `from` pixels.
+        let mut camera = Camera::new("top", 320, 240, 260.0, 255.0, 158.0, 121.0)
+            .looking_at(Point3::new(0.05, -0.02, 0.6), Point3::origin(), Vector3::y())
+            .expect("a camera looking down");
+        camera.distortion = hullcut_rig::Distortion { k1: -0.2, k2: 0.05, p1: 1e-3, p2: -5e-4, k3: 0.0 };
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let cells: Vec<Cell> = (0..600)
+            .map(|_| {
+                let size = 0.002 + 0.008 * next();
+                let min = Point3::new(next() * 0.8 - 0.4, next() * 0.6 - 0.3, next() * 0.62 - 0.02);
+                Cell { min, size, hand: true, scalpel: false, solid: true }
+            })
+            .collect();
+        let occ =
+            Occupancy { cells, leaf_size: 0.002, origin: Point3::origin(), resolution: 1, stats: Default::default() };
+        let (from, to) = (7u8, 9u8);
+        let mut mask = GrayImage::from_pixel(320, 240, Luma([1]));
+        for _ in 0..25 {
+            let (i, j) = ((next() * 300.0) as u32, (next() * 220.0) as u32);
+            for y in j..j + 20 {
+                for x in i..i + 20 {
+                    if (x + y) % 3 != 0 {
+                        mask.put_pixel(x, y, Luma([from]));
+                    }
+                }
+            }
+        }
+        let view = Silhouette::new(&camera, &mask);
+        let mut expected = mask.clone();
+        for c in &occ.cells {
+            if let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(&view, c, 0.5) {
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        let p = expected.get_pixel_mut(i as u32, j as u32);
+                        if p.0[0] == from {
+                            p.0[0] = to;
+                        }
+                    }
+                }
+            }
+        }
+        let painted = expected.iter().filter(|&&p| p == to).count() as u64;
+        expected.iter_mut().filter(|p| **p == from).for_each(|p| *p = 0);
+        let covered = cover(&occ, &view, &mut mask, from, to, 0.5);
+        assert!(painted > 0 && expected.iter().any(|&p| p == 0), "the scene covers some pixels, not all");
+        assert_eq!(covered, painted);
+        assert!(mask == expected, "cover differs from painting every cell's footprint");
+    }
 }

@@ -165,4 +165,32 @@ mod tests {
         assert!((beside.sd - 1.0).abs() < 1e-12 && (beside.t - 0.5).abs() < 1e-12);
         assert!((sd(2.0, 2.0).sd - 2f64.sqrt()).abs() < 1e-12);
     }
+
+    #[test]
+    fn nearest_agrees_with_the_distance_to_every_edge() {
+        let mut seed = 3u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0
+        };
+        for _ in 0..200 {
+            let points: Vec<Point2<f64>> = (0..8).map(|_| Point2::new(next(), next())).collect();
+            let hull = convex_hull(&points);
+            let polygon = Convex::new(&hull);
+            let q = Point2::new(next(), next());
+            let n = hull.len();
+            // The distance to the boundary: the nearest of its edges as segments.
+            let boundary = (0..n)
+                .map(|i| {
+                    let (a, b) = (hull[i], hull[(i + 1) % n]);
+                    let t = ((q - a).dot(&(b - a)) / (b - a).norm_squared()).clamp(0.0, 1.0);
+                    (q - (a + (b - a) * t)).norm()
+                })
+                .fold(f64::INFINITY, f64::min);
+            let inside = (0..n).all(|i| (hull[(i + 1) % n] - hull[i]).perp(&(q - hull[i])) >= 0.0);
+            let near = polygon.nearest(&q).expect("a polygon");
+            assert!((near.sd.abs() - boundary).abs() < 1e-9, "{} against {boundary}", near.sd);
+            assert_eq!(near.sd <= 0.0, inside, "{q:?} in {hull:?}");
+        }
+    }
 }

@@ -1306,4 +1306,53 @@ mod tests {
         let above: Vec<Point2<f64>> = square.iter().map(|p| p - Vector3::new(0.0, 500.0, 0.0).xy()).collect();
         assert!(band_rows(&above, 2.0, 100, 100).is_empty(), "above the image");
     }
+
+    #[test]
+    fn a_cell_not_drawn_over_the_tool_cannot_hide_it() {
+        // A distorted camera, a thin diagonal tool drawn 0.5 m away, and hull cells of many sizes
+        // in front of it, behind it, beside it and near the camera.
+        let mut camera = Camera::new("c", 200, 160, 180.0, 175.0, 98.0, 83.0)
+            .looking_at(Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 1.0), Vector3::y())
+            .expect("a camera looking along +z");
+        camera.distortion = hullcut_rig::Distortion { k1: -0.15, k2: 0.04, p1: 5e-4, p2: 2e-4, k3: 0.0 };
+        let (x0, y0, w, h): (usize, usize, usize, usize) = (60, 40, 80, 70);
+        let depth = (0..w * h)
+            .map(|k| {
+                let (i, j) = (k % w, k / w);
+                if i.abs_diff(j) < 3 { 0.5 + 0.001 * j as f32 } else { f32::INFINITY }
+            })
+            .collect();
+        let tool = ToolDepth { x0, y0, w, depth };
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let cells: Vec<hullcut_hull::Cell> = (0..3000)
+            .map(|_| {
+                let size = 0.002 + 0.01 * next();
+                let min = Point3::new(next() * 0.6 - 0.3, next() * 0.5 - 0.25, next() * 0.7);
+                hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true }
+            })
+            .collect();
+        let margin = 0.006;
+        let over = tool.cells_over(&camera, &cells, margin);
+        assert!(
+            !over.is_empty() && over.len() < cells.len() / 4,
+            "{} of {} cells over the tool",
+            over.len(),
+            cells.len()
+        );
+        let radius = camera.distortion.monotonic_radius();
+        let mut hides = 0;
+        for (k, c) in cells.iter().enumerate() {
+            let Some((lo, hi, z)) = drawn_box(&camera, radius, c) else { continue };
+            let mut buffer = vec![f32::INFINITY; tool.depth.len()];
+            tool.splat_min(&mut buffer, lo, hi, (z + margin) as f32);
+            let hidden = buffer.iter().zip(&tool.depth).any(|(b, d)| d.is_finite() && b < d);
+            hides += usize::from(hidden);
+            assert!(!hidden || over.contains(&k), "cell {k} ({c:?}) hides the tool but was left out");
+        }
+        assert!(hides > 0, "some cells hide the tool");
+    }
 }
