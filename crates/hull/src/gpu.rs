@@ -424,7 +424,11 @@ impl GpuCarver {
         let mut table: Vec<u32> = Vec::new();
         let mut cams = Vec::with_capacity(present.len());
         for s in &present {
-            let (entries, stride) = s.table();
+            let Some((entries, stride)) = s.table() else {
+                return Err(HullError::Gpu(
+                    "a silhouette without summed-area tables cannot be carved on the GPU".into(),
+                ));
+            };
             let cam = s.camera();
             let r = cam.rotation.matrix();
             let t = cam.translation;

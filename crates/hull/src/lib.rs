@@ -84,16 +84,37 @@ pub fn silhouettes(rig: &Rig, masks: &[Option<&GrayImage>]) -> Result<Vec<Option
         .enumerate()
         .map(|(k, cam)| {
             let Some(mask) = masks.get(k).copied().flatten() else { return Ok(None) };
-            if mask.dimensions() != (cam.width, cam.height) {
-                return Err(HullError::MaskSize {
-                    camera: cam.name.clone(),
-                    w: cam.width,
-                    h: cam.height,
-                    found_w: mask.width(),
-                    found_h: mask.height(),
-                });
-            }
+            check_mask_size(cam, mask)?;
             Ok(Some(Silhouette::new(cam, mask)))
         })
         .collect()
+}
+
+/// [`Silhouette::direct`] for each camera's mask (`None` for a missing view; masks past the
+/// rig's cameras are dropped): for masks asked about few, small rectangles.
+pub fn direct_silhouettes(rig: &Rig, mut masks: Vec<Option<GrayImage>>) -> Result<Vec<Option<Silhouette>>, HullError> {
+    masks.resize(rig.cameras.len(), None);
+    rig.cameras
+        .par_iter()
+        .zip(masks.into_par_iter())
+        .map(|(cam, mask)| {
+            let Some(mask) = mask else { return Ok(None) };
+            check_mask_size(cam, &mask)?;
+            Ok(Some(Silhouette::direct(cam, mask)))
+        })
+        .collect()
+}
+
+/// A mask must have its camera's size.
+fn check_mask_size(cam: &hullcut_rig::Camera, mask: &GrayImage) -> Result<(), HullError> {
+    if mask.dimensions() != (cam.width, cam.height) {
+        return Err(HullError::MaskSize {
+            camera: cam.name.clone(),
+            w: cam.width,
+            h: cam.height,
+            found_w: mask.width(),
+            found_h: mask.height(),
+        });
+    }
+    Ok(())
 }

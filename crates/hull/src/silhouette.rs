@@ -72,8 +72,8 @@ impl Counts {
     }
 }
 
-/// One camera's mask as a summed-area table, `(w + 1) × (h + 1)` entries of (hand, scalpel,
-/// unknown) counts, interleaved so that a rectangle query touches four cache lines, not twelve.
+/// One camera's mask, ready for label counts over pixel rectangles: as a summed-area table
+/// ([`Silhouette::new`]) or as the mask itself ([`Silhouette::direct`]).
 #[derive(Debug, Clone)]
 pub struct Silhouette {
     camera: Camera,
@@ -84,13 +84,20 @@ pub struct Silhouette {
     field_radius: Option<f64>,
     /// Bound on how far distortion bows a projected straight edge, per pixel² of its length.
     curvature: f64,
-    stride: usize,
-    table: Vec<[u32; 3]>,
-    /// Foreground pixels per block of `BLOCK`² pixels, as a summed-area table over blocks
+    store: Store,
+}
+
+/// How a [`Silhouette`] counts the labels in a rectangle.
+#[derive(Debug, Clone)]
+enum Store {
+    /// `(w + 1) × (h + 1)` entries of (hand, scalpel, unknown) counts, interleaved so that a
+    /// rectangle query touches four cache lines, not twelve; `blocks` counts the foreground
+    /// pixels per block of `BLOCK`² pixels, as a summed-area table over blocks
     /// (`(w / BLOCK + 2)` columns): small enough to stay in cache, so that a footprint over
     /// background (most of them) is settled without touching `table`.
-    blocks: Vec<u32>,
-    block_stride: usize,
+    Summed { stride: usize, table: Vec<[u32; 3]>, blocks: Vec<u32>, block_stride: usize },
+    /// The mask's labels, counted pixel by pixel over each rectangle asked for.
+    Direct { width: usize, labels: Vec<u8> },
 }
 
 /// Side of the blocks of [`Silhouette`]'s coarse table, pixels.
@@ -131,19 +138,24 @@ impl Silhouette {
                 blocks[(bj + 1) * block_stride + bi + 1] = blocks[bj * block_stride + bi + 1] + row;
             }
         }
+        Self::with_store(camera, Store::Summed { stride, table, blocks, block_stride })
+    }
+
+    /// A silhouette that counts labels by visiting the mask's pixels in each rectangle asked
+    /// for, without building tables (sizes must agree; the caller checks): for a mask that is
+    /// asked about few, small rectangles (the cells near the tool, the few cells a shadow test
+    /// leaves open), where building the 3.7 MB table of a 640x480 view would cost more than all
+    /// the queries. Counts and verdicts are those of [`Silhouette::new`].
+    pub fn direct(camera: &Camera, mask: GrayImage) -> Self {
+        let width = mask.width() as usize;
+        Self::with_store(camera, Store::Direct { width, labels: mask.into_raw() })
+    }
+
+    fn with_store(camera: &Camera, store: Store) -> Self {
         let monotonic_radius = camera.distortion.monotonic_radius();
         let field_radius = field_radius(camera, monotonic_radius);
         let curvature = curvature(camera, field_radius.unwrap_or(monotonic_radius.min(2.0)));
-        Silhouette {
-            camera: camera.clone(),
-            monotonic_radius,
-            field_radius,
-            curvature,
-            stride,
-            table,
-            blocks,
-            block_stride,
-        }
+        Silhouette { camera: camera.clone(), monotonic_radius, field_radius, curvature, store }
     }
 
     /// A bound on how far, in pixels, the lens' distortion bows the image of a straight edge out of
@@ -171,32 +183,53 @@ impl Silhouette {
     }
 
     /// The summed-area table (`(w + 1) × (h + 1)` entries of hand, scalpel, unknown counts, row
-    /// by row) and its row stride.
+    /// by row) and its row stride; `None` for a [`Silhouette::direct`] one.
     #[cfg(feature = "gpu")]
-    pub(crate) fn table(&self) -> (&[[u32; 3]], usize) {
-        (&self.table, self.stride)
+    pub(crate) fn table(&self) -> Option<(&[[u32; 3]], usize)> {
+        match &self.store {
+            Store::Summed { table, stride, .. } => Some((table, *stride)),
+            Store::Direct { .. } => None,
+        }
     }
 
     /// Whether the blocks covering the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside
-    /// the image) hold any foreground: `false` means the rectangle holds none.
+    /// the image) hold any foreground: `false` means the rectangle holds none (always `true` for
+    /// a [`Silhouette::direct`] one: its counts tell).
     #[inline]
     pub fn may_have_foreground(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> bool {
-        let s = self.block_stride;
+        let Store::Summed { blocks: b, block_stride: s, .. } = &self.store else { return true };
         let (b0, c0, b1, c1) = (i0 / BLOCK, j0 / BLOCK, i1 / BLOCK + 1, j1 / BLOCK + 1);
-        let b = &self.blocks;
         b[c1 * s + b1] + b[c0 * s + b0] != b[c0 * s + b1] + b[c1 * s + b0]
     }
 
     /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).
     pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
-        let s = self.stride;
-        let (a, b, c, d) = (
-            self.table[(j1 + 1) * s + i1 + 1],
-            self.table[j0 * s + i0],
-            self.table[j0 * s + i1 + 1],
-            self.table[(j1 + 1) * s + i0],
-        );
-        let sum = |k: usize| a[k] + b[k] - c[k] - d[k];
-        Counts { total: ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32, hand: sum(0), scalpel: sum(1), unknown: sum(2) }
+        let total = ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32;
+        match &self.store {
+            Store::Summed { stride: s, table, .. } => {
+                let (a, b, c, d) = (
+                    table[(j1 + 1) * s + i1 + 1],
+                    table[j0 * s + i0],
+                    table[j0 * s + i1 + 1],
+                    table[(j1 + 1) * s + i0],
+                );
+                let sum = |k: usize| a[k] + b[k] - c[k] - d[k];
+                Counts { total, hand: sum(0), scalpel: sum(1), unknown: sum(2) }
+            }
+            Store::Direct { width, labels } => {
+                let mut counts = Counts { total, ..Counts::default() };
+                for row in labels.chunks_exact(*width).skip(j0).take(j1 + 1 - j0) {
+                    for &p in &row[i0..=i1] {
+                        match p {
+                            label::BACKGROUND => {}
+                            label::HAND => counts.hand += 1,
+                            label::SCALPEL => counts.scalpel += 1,
+                            _ => counts.unknown += 1,
+                        }
+                    }
+                }
+                counts
+            }
+        }
     }
 }

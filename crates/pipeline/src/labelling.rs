@@ -12,7 +12,7 @@ use hullcut_capture::segment::{
 };
 use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
 use hullcut_hull::shadow::{cover, keep_supported};
-use hullcut_hull::{HullParams, Occupancy, Silhouette, silhouettes};
+use hullcut_hull::{HullParams, Occupancy, Silhouette, direct_silhouettes, silhouettes};
 use hullcut_pose::{
     LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput,
 };
@@ -549,8 +549,9 @@ impl Labelling {
                 })
             })
             .collect();
-        let refs: Vec<Option<&GrayImage>> = sure.iter().map(Option::as_ref).collect();
-        let sure = silhouettes(&self.rig, &refs).context("the sure foreground's silhouettes")?;
+        // Few cells are judged on the sure foreground (most settle on their height or the first
+        // views): its masks are counted pixel by pixel, not tabled.
+        let sure = direct_silhouettes(&self.rig, sure).context("the sure foreground's silhouettes")?;
         // Where the tool's track predicts it, the hull is the tool's: a dull blade's tip over a table
         // of its shade looks like a shadow to most views.
         let tool = self.tool.as_ref().and_then(|t| t.near_predicted(timestamp_ns, &occ, TOOL_OBJECT_MARGIN));

@@ -329,19 +329,16 @@ impl ToolLabeller {
                         })
                     })
                     .collect();
-                let unhidden: Vec<Option<GrayImage>> = views
-                    .par_iter()
-                    .zip(drawn.par_iter())
-                    .map(|(v, d)| v.map(|v| labels_without_occlusion(v, d.as_ref())))
-                    .collect();
                 // Occluders per view: the hull's hand cells (labelled from those drawings) whose
                 // footprint in that very view holds hand pixels, i.e. cells that view can see as
                 // hand. A cell of the hand's hull that the view sees only where the tool is drawn
-                // is the hull's fat (a phantom in front of the tool), not what hides it.
+                // is the hull's fat (a phantom in front of the tool), not what hides it. Only the
+                // cells near the tool are judged: the drawings are counted pixel by pixel, not
+                // tabled.
                 let sil: Vec<Option<Silhouette>> = views
                     .par_iter()
-                    .zip(unhidden.par_iter())
-                    .map(|(v, m)| v.zip(m.as_ref()).map(|(v, m)| Silhouette::new(v.camera, m)))
+                    .zip(drawn.par_iter())
+                    .map(|(v, d)| v.map(|v| Silhouette::direct(v.camera, labels_without_occlusion(v, d.as_ref()))))
                     .collect();
                 // Only cells drawn over the tool in some view can hide it there: the others are
                 // neither relabelled nor judged.

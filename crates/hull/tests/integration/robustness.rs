@@ -374,3 +374,42 @@ fn accuracy_of_an_all_scalpel_hull_is_measured_exactly_and_promptly_and_a_far_ve
     assert!(surface_distance(&hull, &nan, 2.0 * LEAF).is_none());
     assert!(surface_distance(&hull, &truth, 0.0).is_none());
 }
+
+#[test]
+fn a_silhouette_counted_pixel_by_pixel_carves_and_counts_as_the_tabled_one() {
+    let (rig, masks) = clean_masks();
+    // Hand, scalpel and unknown pixels all present.
+    let labelled: Vec<Option<GrayImage>> = masks
+        .iter()
+        .map(|m| {
+            let mut m = m.clone();
+            for (i, j, p) in m.enumerate_pixels_mut() {
+                if p.0[0] != label::BACKGROUND {
+                    p.0[0] = match (i * 7 + j * 3) % 11 {
+                        0..=2 => label::SCALPEL,
+                        3 => label::UNKNOWN,
+                        _ => label::HAND,
+                    };
+                }
+            }
+            Some(m)
+        })
+        .collect();
+    let refs: Vec<Option<&GrayImage>> = labelled.iter().map(Option::as_ref).collect();
+    let tabled = silhouettes(rig, &refs).expect("sizes match");
+    let direct = hullcut_hull::direct_silhouettes(rig, labelled.clone()).expect("sizes match");
+    for (n, (t, d)) in tabled.iter().flatten().zip(direct.iter().flatten()).enumerate() {
+        let (w, h) = (u64::from(t.camera().width), u64::from(t.camera().height));
+        for k in 0..200u64 {
+            let r = |salt: u64, n: u64| (mix64(k * 31 + salt) % n) as usize;
+            let (i0, j0) = (r(1, w), r(2, h));
+            let (i1, j1) = ((i0 + r(3, 40)).min(w as usize - 1), (j0 + r(4, 40)).min(h as usize - 1));
+            assert_eq!(t.counts(i0, j0, i1, j1), d.counts(i0, j0, i1, j1), "view {n}, [{i0}, {i1}] x [{j0}, {j1}]");
+        }
+    }
+    let (a, b) = (carve(&tabled, &params(1)).expect("carve"), carve(&direct, &params(1)).expect("carve"));
+    assert!(!a.cells.is_empty());
+    assert_eq!(a.cells, b.cells, "the same hull from either");
+    let too_small = vec![Some(GrayImage::new(3, 3))];
+    assert!(hullcut_hull::direct_silhouettes(rig, too_small).is_err(), "a mask of another size is refused");
+}
