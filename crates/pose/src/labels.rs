@@ -1135,12 +1135,13 @@ impl ToolDepth {
         }
     }
 
-    /// The indices of the `cells` that can hide the drawn tool in [`ToolLabeller::final_labels`]:
-    /// their [`drawn_box`] holds a pixel where the tool is drawn, and their nearest corner plus
-    /// `margin` lies nearer than the farthest drawn depth. One projection of a cell's centre with a
-    /// disc around it ([`Camera::project_ball`], its half-diagonal's ball) rules most cells out;
-    /// the others are projected corner by corner. The drawn pixels in a box are counted from a
-    /// summed-area table.
+    /// The indices of the hand's `cells` that can hide the drawn tool in
+    /// [`ToolLabeller::final_labels`]: their [`drawn_box`] holds a pixel where the tool is drawn,
+    /// and their nearest corner plus `margin` lies nearer than the farthest drawn depth. A cell's
+    /// centre depth rules out those behind the tool, one projection of the centre with a disc
+    /// around it ([`Camera::project_ball`], its half-diagonal's ball) most of the others; the rest
+    /// are projected corner by corner. The drawn pixels in a box are counted from a summed-area
+    /// table.
     fn cells_over(&self, cam: &Camera, cells: &[hullcut_hull::Cell], margin: f64) -> Vec<usize> {
         let farthest = self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max);
         let (w, h) = (self.w, self.depth.len() / self.w.max(1));
@@ -1159,8 +1160,15 @@ impl ToolDepth {
             })
         };
         let radius = cam.distortion.monotonic_radius();
+        // A cell whose nearest point, plus the margin, lies beyond the farthest drawn depth hides
+        // nothing (a micrometre of slack for rounding).
+        let beyond = f64::from(farthest) + 1e-6 - margin;
         let reach = |c: &hullcut_hull::Cell| {
-            if let Some((uv, r)) = cam.project_ball(&c.centre(), HALF_DIAGONAL * c.size, NEAR_M, radius) {
+            let centre = c.centre();
+            if !c.hand || cam.world_to_camera(&centre).z - HALF_DIAGONAL * c.size > beyond {
+                return false;
+            }
+            if let Some((uv, r)) = cam.project_ball(&centre, HALF_DIAGONAL * c.size, NEAR_M, radius) {
                 let pad = Vector2::new(r, r);
                 if !drawn_in(uv - pad, uv + pad) {
                     return false;
