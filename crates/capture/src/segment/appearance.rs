@@ -10,7 +10,7 @@ use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
 use serde::{Deserialize, Serialize};
 
-use super::classes::{ColourClass, ColourClasses, ColourLut};
+use super::classes::{ColourClass, ColourClasses, LazyLut};
 
 /// Pixels darker than this channel sum carry no usable chromaticity and are not learned from.
 const MIN_SUM: u32 = 24;
@@ -89,7 +89,7 @@ pub struct AppearanceModel {
     /// The classes as they were at the last [`AppearanceModel::age`], compiled to judge new
     /// samples.
     #[serde(skip)]
-    gate: Option<ColourLut>,
+    gate: Option<LazyLut>,
 }
 
 impl Default for AppearanceModel {
@@ -141,7 +141,7 @@ impl AppearanceModel {
         let (w, h) = (labels.width() as usize, labels.height() as usize);
         let (raw, px) = (labels.as_raw(), image.as_raw());
         let stride = self.stride.max(1);
-        let gate = self.gate.as_ref();
+        let mut gate = self.gate.as_mut();
         for j in 1..h.saturating_sub(1) {
             for i in 1..w.saturating_sub(1) {
                 let k = j * w + i;
@@ -154,7 +154,7 @@ impl AppearanceModel {
                     continue;
                 }
                 let rgb = [px[3 * k], px[3 * k + 1], px[3 * k + 2]];
-                if gate.is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
+                if gate.as_mut().is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
                     continue;
                 }
                 if let Some(f) = features(rgb) {
@@ -167,7 +167,7 @@ impl AppearanceModel {
     /// Forgets a little of what was learned (call once per frame set learned from, before
     /// learning it), and compiles what is known so far to judge the new samples.
     pub fn age(&mut self) {
-        self.gate = self.classes().map(|c| ColourLut::confident(&c, 2.0 * GATE_LOG_RATIO));
+        self.gate = self.classes().map(|c| LazyLut::confident(&c, 2.0 * GATE_LOG_RATIO));
         for s in &mut self.sums {
             s.scale(self.forget);
         }

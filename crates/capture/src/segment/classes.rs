@@ -280,6 +280,48 @@ impl ClassLut {
     }
 }
 
+/// [`ColourLut::confident`]'s table filled as it is read: each bin is classified on its first
+/// lookup, so that a table asked about a few thousand colours (the samples a frame set teaches)
+/// costs those, not all 262,144 bins. Lookups give what [`ColourLut::confident`]'s would.
+#[derive(Debug, Clone)]
+pub(crate) struct LazyLut {
+    compiled: Vec<Compiled>,
+    reject: Option<f64>,
+    margin: f64,
+    /// Per bin: its label, or [`LazyLut::UNSET`].
+    table: Vec<u8>,
+}
+
+impl LazyLut {
+    /// A bin not classified yet (no label has this value: labels are 0, 1, 2 and 255).
+    const UNSET: u8 = 254;
+
+    /// The classes, colours left unknown where the best wins by less than `margin`.
+    pub(crate) fn confident(classes: &ColourClasses, margin: f64) -> Self {
+        let n = 1usize << (3 * LUT_BITS);
+        LazyLut {
+            compiled: classes.compile(),
+            reject: classes.reject_mahalanobis2,
+            margin,
+            table: vec![Self::UNSET; n],
+        }
+    }
+
+    /// The label of one colour (its bin's centre, classified on first use).
+    pub(crate) fn get(&mut self, rgb: [u8; 3]) -> u8 {
+        let s = 8 - LUT_BITS;
+        let [r, g, b] = rgb.map(|v| usize::from(v >> s));
+        let i = (r << (2 * LUT_BITS)) | (g << LUT_BITS) | b;
+        let Some(slot) = self.table.get_mut(i) else { return label::UNKNOWN };
+        if *slot == Self::UNSET {
+            let step = 1usize << s;
+            let c = |v: usize| f64::from((v * step + step / 2) as u8);
+            *slot = classify_compiled(&self.compiled, self.reject, self.margin, features(c(r), c(g), c(b)));
+        }
+        *slot
+    }
+}
+
 /// Colour classes compiled for labelling foreground pixels (a 256 KiB lookup table).
 #[derive(Debug, Clone)]
 pub struct ColourLut {
@@ -315,5 +357,41 @@ impl ColourLut {
                 *m = self.lut.get(p[0], p[1], p[2]);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lazy_table_reads_as_the_compiled_one() {
+        let shade = (0.25, 1.15);
+        let classes = ColourClasses {
+            classes: vec![
+                ColourClass::from_albedo(label::HAND, [200.0, 150.0, 120.0], shade, 0.03),
+                ColourClass::from_albedo(label::SCALPEL, [150.0, 150.0, 155.0], shade, 0.02),
+                ColourClass::from_albedo(label::SCALPEL, [180.0, 150.0, 60.0], shade, 0.03),
+            ],
+            reject_mahalanobis2: Some(11.34),
+        };
+        let eager = ColourLut::confident(&classes, 3.0);
+        let mut lazy = LazyLut::confident(&classes, 3.0);
+        let mut labels = [0usize; 256];
+        // Every bin, twice (the second read comes from the table), at two colours in the bin.
+        for pass in 0..2u8 {
+            for r in (0..=255u8).step_by(4) {
+                for g in (0..=255u8).step_by(4) {
+                    for b in (0..=255u8).step_by(4) {
+                        let rgb = [r + pass, g + 3 * pass, b + pass];
+                        let l = lazy.get(rgb);
+                        assert_eq!(l, eager.get(rgb), "{rgb:?}");
+                        labels[usize::from(l)] += 1;
+                    }
+                }
+            }
+        }
+        let seen = [label::HAND, label::SCALPEL, label::UNKNOWN].map(|l| labels[usize::from(l)]);
+        assert!(seen.iter().all(|&n| n > 0), "hand, scalpel and unknown colours all read: {seen:?}");
     }
 }
