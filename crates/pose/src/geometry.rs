@@ -116,20 +116,29 @@ impl Convex {
         // The nearest point outside, compared by squared distance: (squared distance, edge, t,
         // offset from the edge's nearest point).
         let mut out: Option<(f64, &Edge, f64, Vector2<f64>)> = None;
+        // A segment (two points) has no inside: every edge's distance counts.
+        let segment = self.vertices < 3;
         for e in &self.edges {
             let aq = q - e.a;
             let side = e.ab.perp(&aq) / e.len;
-            if side < 0.0 {
-                inside = false;
+            let deeper = side < depth.sd;
+            // Outside a polygon, the nearest boundary point lies on an edge that `q` is outside
+            // of (at a vertex, on one of the two edges that meet there): the distance to the
+            // others is not needed.
+            if side >= 0.0 && !deeper && !segment {
+                continue;
             }
             let t = (aq.dot(&e.ab) / e.len2).clamp(0.0, 1.0);
-            if side < depth.sd {
+            if deeper {
                 depth = Nearest { sd: side, edge: e.index, t, normal: e.normal };
             }
-            let d = aq - e.ab * t;
-            let dist2 = d.norm_squared();
-            if out.is_none_or(|(best, ..)| dist2 < best) {
-                out = Some((dist2, e, t, d));
+            if side < 0.0 || segment {
+                inside &= side >= 0.0;
+                let d = aq - e.ab * t;
+                let dist2 = d.norm_squared();
+                if out.is_none_or(|(best, ..)| dist2 < best) {
+                    out = Some((dist2, e, t, d));
+                }
             }
         }
         if inside {
@@ -191,6 +200,15 @@ mod tests {
             let near = polygon.nearest(&q).expect("a polygon");
             assert!((near.sd.abs() - boundary).abs() < 1e-9, "{} against {boundary}", near.sd);
             assert_eq!(near.sd <= 0.0, inside, "{q:?} in {hull:?}");
+            // A segment has no inside: the distance to it, also from a point on its line.
+            let (a, b) = (hull[0], hull[1]);
+            let segment = Convex::new(&[a, b]);
+            for q in [q, a + (b - a) * 1.5] {
+                let t = ((q - a).dot(&(b - a)) / (b - a).norm_squared()).clamp(0.0, 1.0);
+                let expected = (q - (a + (b - a) * t)).norm();
+                let near = segment.nearest(&q).expect("a segment");
+                assert!((near.sd - expected).abs() < 1e-9, "{} against {expected}", near.sd);
+            }
         }
     }
 }
