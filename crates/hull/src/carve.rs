@@ -182,6 +182,12 @@ impl Cell {
     pub fn centre(&self) -> Point3<f64> {
         self.min + Vector3::repeat(self.size / 2.0)
     }
+
+    /// The radius of a ball around [`Cell::centre`] that holds the whole cell: its half-diagonal,
+    /// rounded up (√3 / 2 of its side, to six digits).
+    pub fn bounding_radius(&self) -> f64 {
+        0.866_026 * self.size
+    }
 }
 
 /// Counters of one carving run.

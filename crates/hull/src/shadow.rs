@@ -255,7 +255,7 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
     for c in &occ.cells {
         // Every pixel of the footprint lies within the disc holding the cell's projection, widened
         // by the margin, the lens' bow over the footprint and a pixel of rounding.
-        if let Some((uv, r)) = cam.project_ball(&c.centre(), HALF_DIAGONAL * c.size, 1e-3, limit) {
+        if let Some((uv, r)) = cam.project_ball(&c.centre(), c.bounding_radius(), 1e-3, limit) {
             let pad = r + margin_px + view.curvature() * 4.0 * r * r + 1.0;
             if !reaches([uv.x - pad, uv.y - pad], [uv.x + pad, uv.y + pad]) {
                 continue;
@@ -279,9 +279,6 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
 
 /// Side of the blocks in which [`cover`] looks for pixels to cover, pixels.
 const BLOCK: usize = 8;
-
-/// A cube's half-diagonal over its side, rounded up (√3 / 2).
-const HALF_DIAGONAL: f64 = 0.866_026;
 
 #[cfg(test)]
 mod tests {

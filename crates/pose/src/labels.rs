@@ -17,13 +17,12 @@
 
 use std::time::Instant;
 
-use rayon::prelude::*;
-
 use hullcut_dataset::{Mesh, ToolGeometry, label};
 use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, footprint_counts};
 use hullcut_rig::Camera;
 use image::GrayImage;
 use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
+use rayon::prelude::*;
 
 use crate::ToolError;
 use crate::evidence::project;
@@ -351,8 +350,7 @@ impl ToolLabeller {
                         _ => Vec::new(),
                     })
                     .collect();
-                let mut wanted: Vec<usize> =
-                    over.iter().flatten().copied().filter(|&i| occupancy.cells[i].hand).collect();
+                let mut wanted: Vec<usize> = over.iter().flatten().copied().collect();
                 wanted.sort_unstable();
                 wanted.dedup();
                 let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
@@ -750,9 +748,6 @@ fn thin_labels(view: ViewInput, hull: &Occupancy) -> GrayImage {
     }
     out
 }
-
-/// A cube's half-diagonal over its side, rounded up (√3 / 2).
-const HALF_DIAGONAL: f64 = 0.866_026;
 
 /// The nearest a projected point may lie to the camera's plane, metres (as [`project`]).
 const NEAR_M: f64 = 1e-3;
@@ -1165,10 +1160,10 @@ impl ToolDepth {
         let beyond = f64::from(farthest) + 1e-6 - margin;
         let reach = |c: &hullcut_hull::Cell| {
             let centre = c.centre();
-            if !c.hand || cam.world_to_camera(&centre).z - HALF_DIAGONAL * c.size > beyond {
+            if !c.hand || cam.world_to_camera(&centre).z - c.bounding_radius() > beyond {
                 return false;
             }
-            if let Some((uv, r)) = cam.project_ball(&centre, HALF_DIAGONAL * c.size, NEAR_M, radius) {
+            if let Some((uv, r)) = cam.project_ball(&centre, c.bounding_radius(), NEAR_M, radius) {
                 let pad = Vector2::new(r, r);
                 if !drawn_in(uv - pad, uv + pad) {
                     return false;
