@@ -317,7 +317,7 @@ impl Labelling {
         let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
         // One pass over each mask: its foreground and possible shadow pixels.
         let counts: Vec<Option<MaskCounts>> = fg
-            .iter()
+            .par_iter()
             .map(|m| {
                 m.as_ref().map(|m| {
                     let (foreground, shadow) = m.iter().fold((0, 0), |(n, s), &p| {
@@ -352,8 +352,8 @@ impl Labelling {
         let sure = self.sure.as_ref().filter(|_| self.method == LabelMethod::Both);
         let hints: Option<Vec<Option<GrayImage>>> = (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0))
             .then(|| {
-                fg.iter()
-                    .zip(&set.views)
+                fg.par_iter()
+                    .zip(set.views.par_iter())
                     .map(|(m, view)| Some(fit_hints(sure, &view.as_ref()?.image, m.as_ref()?)))
                     .collect()
             });
@@ -392,8 +392,8 @@ impl Labelling {
         }
         // The hints for the tool's fit, on the foreground as the hull left it.
         let hinted: Option<Vec<Option<GrayImage>>> = hints.map(|hints| {
-            fg.iter()
-                .zip(&hints)
+            fg.par_iter()
+                .zip(hints.par_iter())
                 .map(|(m, hint)| {
                     let mut m = m.clone()?;
                     if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
@@ -424,11 +424,13 @@ impl Labelling {
         let (mut masks, source) = if trusted {
             let sharpen_all = |masks: &mut [Option<GrayImage>], lut: Option<&ColourLut>| {
                 let Some(lut) = lut.filter(|_| colours) else { return };
-                for ((view, mask), region) in set.views.iter().zip(masks).zip(&labelled.tool_regions) {
-                    if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                        sharpen(lut, &view.image, mask, region);
-                    }
-                }
+                set.views.par_iter().zip(masks).zip(labelled.tool_regions.par_iter()).for_each(
+                    |((view, mask), region)| {
+                        if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
+                            sharpen(lut, &view.image, mask, region);
+                        }
+                    },
+                );
             };
             // The colours are learned from the labels sharpened wherever a colour is surely the
             // likelier (the rule before the labels' own): learned from the labels handed out,
