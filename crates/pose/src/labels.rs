@@ -342,7 +342,7 @@ impl ToolLabeller {
                 // Only cells drawn over the tool in some view can hide it there: the others are
                 // neither relabelled nor judged.
                 let margin = self.params.occlusion_margin_m + occ.leaf_size;
-                let over: Vec<Vec<usize>> = views
+                let over: Vec<Vec<(usize, DrawnBox)>> = views
                     .par_iter()
                     .zip(drawn.par_iter())
                     .map(|(v, d)| match (v, d) {
@@ -350,7 +350,7 @@ impl ToolLabeller {
                         _ => Vec::new(),
                     })
                     .collect();
-                let mut wanted: Vec<usize> = over.iter().flatten().copied().collect();
+                let mut wanted: Vec<usize> = over.iter().flatten().map(|(i, _)| *i).collect();
                 wanted.sort_unstable();
                 wanted.dedup();
                 let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
@@ -363,15 +363,18 @@ impl ToolLabeller {
                 for (&i, l) in wanted.iter().zip(&hullcut_hull::relabel(&near, &sil, &params).cells) {
                     hand[i] = l.hand && !l.scalpel;
                 }
-                let occluders: Vec<Vec<hullcut_hull::Cell>> = sil
+                let occluders: Vec<Vec<DrawnBox>> = sil
                     .iter()
                     .zip(&over)
                     .map(|(s, over)| match s {
                         Some(s) => over
                             .iter()
-                            .filter(|&&i| hand[i])
-                            .map(|&i| occupancy.cells[i])
-                            .filter(|c| footprint_counts(s, c, params.margin_px).is_some_and(|n| n.hand > 0))
+                            .filter(|(i, _)| {
+                                hand[*i]
+                                    && footprint_counts(s, &occupancy.cells[*i], params.margin_px)
+                                        .is_some_and(|n| n.hand > 0)
+                            })
+                            .map(|(_, b)| *b)
                             .collect(),
                         None => Vec::new(),
                     })
@@ -417,17 +420,15 @@ impl ToolLabeller {
     }
 
     /// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
-    /// hand cell lies in front of it there; the rest of the foreground hand. With the pixels
-    /// labelled scalpel and those the hand hides.
+    /// hand cell (its [`drawn_box`] among `hand_cells`) lies in front of it there; the rest of the
+    /// foreground hand. With the pixels labelled scalpel and those the hand hides.
     fn final_labels(
         &self,
         view: ViewInput,
         tool: Option<&ToolDepth>,
-        hand_cells: &[hullcut_hull::Cell],
+        hand_cells: &[DrawnBox],
         leaf: f64,
     ) -> (GrayImage, u64, u64) {
-        let cam = view.camera;
-        let radius = cam.distortion.monotonic_radius();
         let mut out = view.mask.clone();
         for p in out.iter_mut() {
             if *p != label::BACKGROUND {
@@ -438,10 +439,8 @@ impl ToolLabeller {
         let (mut scalpel, mut hidden_pixels) = (0, 0);
         let mut hand = vec![f32::INFINITY; tool.depth.len()];
         let margin = self.params.occlusion_margin_m + leaf;
-        for c in hand_cells {
-            if let Some((lo, hi, z)) = drawn_box(cam, radius, c) {
-                tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
-            }
+        for &(lo, hi, z) in hand_cells {
+            tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
         }
         let (w, raw) = (out.width() as usize, view.mask.as_raw());
         // 0 outside the tool or on background, 1 visible tool, 2 hidden by the hand.
@@ -752,9 +751,13 @@ fn thin_labels(view: ViewInput, hull: &Occupancy) -> GrayImage {
 /// The nearest a projected point may lie to the camera's plane, metres (as [`project`]).
 const NEAR_M: f64 = 1e-3;
 
+/// A hand cell as it is splatted over the drawn tool: the box of its eight projected corners
+/// (lowest, highest) and its nearest corner's depth.
+type DrawnBox = (Point2<f64>, Point2<f64>, f64);
+
 /// The box of a cell's eight projected corners and the nearest corner's depth, as the drawn
 /// depth of a hand cell is splatted (`None` unless every corner projects).
-fn drawn_box(cam: &Camera, radius: f64, c: &hullcut_hull::Cell) -> Option<(Point2<f64>, Point2<f64>, f64)> {
+fn drawn_box(cam: &Camera, radius: f64, c: &hullcut_hull::Cell) -> Option<DrawnBox> {
     let (mut lo, mut hi, mut z) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN), f64::MAX);
     for k in 0..8 {
         let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
@@ -1130,14 +1133,14 @@ impl ToolDepth {
         }
     }
 
-    /// The indices of the hand's `cells` that can hide the drawn tool in
+    /// The indices of the hand's `cells` (with their [`drawn_box`]) that can hide the drawn tool in
     /// [`ToolLabeller::final_labels`]: their [`drawn_box`] holds a pixel where the tool is drawn,
     /// and their nearest corner plus `margin` lies nearer than the farthest drawn depth. A cell's
     /// centre depth rules out those behind the tool, one projection of the centre with a disc
     /// around it ([`Camera::project_ball`], its half-diagonal's ball) most of the others; the rest
     /// are projected corner by corner. The drawn pixels in a box are counted from a summed-area
     /// table.
-    fn cells_over(&self, cam: &Camera, cells: &[hullcut_hull::Cell], margin: f64) -> Vec<usize> {
+    fn cells_over(&self, cam: &Camera, cells: &[hullcut_hull::Cell], margin: f64) -> Vec<(usize, DrawnBox)> {
         let farthest = self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max);
         let (w, h) = (self.w, self.depth.len() / self.w.max(1));
         let mut sat = vec![0u32; (w + 1) * (h + 1)];
@@ -1161,17 +1164,17 @@ impl ToolDepth {
         let reach = |c: &hullcut_hull::Cell| {
             let centre = c.centre();
             if !c.hand || cam.world_to_camera(&centre).z - c.bounding_radius() > beyond {
-                return false;
+                return None;
             }
             if let Some((uv, r)) = cam.project_ball(&centre, c.bounding_radius(), NEAR_M, radius) {
                 let pad = Vector2::new(r, r);
                 if !drawn_in(uv - pad, uv + pad) {
-                    return false;
+                    return None;
                 }
             }
-            drawn_box(cam, radius, c).is_some_and(|(lo, hi, z)| ((z + margin) as f32) < farthest && drawn_in(lo, hi))
+            drawn_box(cam, radius, c).filter(|&(lo, hi, z)| ((z + margin) as f32) < farthest && drawn_in(lo, hi))
         };
-        cells.iter().enumerate().filter(|(_, c)| reach(c)).map(|(i, _)| i).collect()
+        cells.iter().enumerate().filter_map(|(i, c)| reach(c).map(|b| (i, b))).collect()
     }
 }
 
@@ -1351,7 +1354,9 @@ mod tests {
             tool.splat_min(&mut buffer, lo, hi, (z + margin) as f32);
             let hidden = buffer.iter().zip(&tool.depth).any(|(b, d)| d.is_finite() && b < d);
             hides += usize::from(hidden);
-            assert!(!hidden || over.contains(&k), "cell {k} ({c:?}) hides the tool but was left out");
+            let kept = over.iter().find(|(i, _)| *i == k);
+            assert!(!hidden || kept.is_some(), "cell {k} ({c:?}) hides the tool but was left out");
+            assert!(kept.is_none_or(|(_, b)| *b == (lo, hi, z)), "cell {k}: its box as splatted");
         }
         assert!(hides > 0, "some cells hide the tool");
     }

@@ -171,7 +171,8 @@ impl Camera {
     /// `centre`: the centre's pixel and the disc's radius. `None` where the ball comes nearer than
     /// `near` to the camera's plane, or where the normalized points it spans may reach
     /// `max_radius` (beyond the lens' invertible radius a projection folds back: pass
-    /// [`Distortion::monotonic_radius`]); the caller then projects what it needs point by point.
+    /// [`Distortion::monotonic_radius`]), or where the camera's numbers are not finite; the
+    /// caller then projects what it needs point by point.
     ///
     /// With the centre at `(X, Y, Z)` in the camera frame, a point of the ball lies within
     /// `rho (1 + |(X, Y)| / Z) / (Z - rho)` of the centre in normalized coordinates, and the
@@ -194,7 +195,8 @@ impl Camera {
         let reach = xn.norm() + spread;
         (reach < max_radius).then_some(())?;
         let radius = self.fx.abs().max(self.fy.abs()) * self.distortion.stretch_bound(reach) * spread;
-        Some((self.normalized_to_pixel(self.distortion.distort(xn)), radius))
+        // A non-finite focal length or coefficient bounds nothing.
+        radius.is_finite().then(|| (self.normalized_to_pixel(self.distortion.distort(xn)), radius))
     }
 
     /// Pixel → undistorted normalized image coordinates `(x/z, y/z)`.

@@ -57,6 +57,10 @@ mod projection {
         assert!(spread <= r && r < 2.0 * spread, "disc radius {r} against a spread of {spread}");
         // Nearer than `near` to the camera's plane: no disc.
         assert!(c.project_ball(&c.centre(), rho, 1e-3, 1.0).is_none());
+        // A coefficient that is not a number bounds nothing.
+        let mut bad = c.clone();
+        bad.distortion.k2 = f64::NAN;
+        assert!(bad.project_ball(&centre, rho, 1e-3, 1.0).is_none());
     }
 
     #[test]
