@@ -118,9 +118,11 @@ fn segments_the_built_in_rig_with_a_seeded_random_look() {
 fn a_shadow_kept_beside_the_blade_does_not_become_the_tool_by_its_colour() {
     // The first 40 frame sets of the resection on the random:89 rig (six cameras) in random:131: a
     // bare hand over a green mat, its dark shadow kept beside the blade where it nears the mat.
-    // Measured: scalpel IoU 0.840, precision 0.882, hand 0.974; when a colour sharpened the labels
-    // wherever one class was the likelier (the shadow went to the broader, the tool's) 0.746,
-    // 0.778 and 0.983.
+    // Measured: scalpel IoU 0.924, precision 0.976, hand 0.969; when the sharpening colours were
+    // those learned from the labels sharpened wherever one class was the likelier (the shadow went
+    // to the broader class, the tool's, and was learned as the tool) 0.840, 0.882 and 0.974; when
+    // a colour also sharpened the labels wherever one class was the likelier 0.746, 0.778 and
+    // 0.983.
     let dir = tempfile::tempdir().expect("tempdir");
     let ds = dir.path().join("resect");
     let o = hullcut(&[
@@ -142,7 +144,12 @@ fn a_shadow_kept_beside_the_blade_does_not_become_the_tool_by_its_colour() {
     let scalpel = r["accuracy"]["labels"].as_array().expect("labels").iter().find(|l| l["name"] == "scalpel");
     let precision = scalpel.and_then(|l| l["precision"].as_f64()).expect("scalpel precision");
     let got = [iou(&r, "hand"), iou(&r, "scalpel"), precision];
-    assert!(got[0] >= 0.95 && got[1] >= 0.80 && got[2] >= 0.84, "hand IoU, scalpel IoU, precision {got:?}");
+    assert!(got[0] >= 0.95 && got[1] >= 0.88 && got[2] >= 0.94, "hand IoU, scalpel IoU, precision {got:?}");
+    // Both sets of colours are reported, each with both labels learned.
+    for key in ["appearance", "sharpening_appearance"] {
+        let learned = r["labelling"][key].as_array().unwrap_or_else(|| panic!("{key} reported"));
+        assert!(learned.len() == 2 && learned.iter().all(|c| c["rgb"].is_array()), "{key}: {learned:?}");
+    }
 }
 
 #[test]

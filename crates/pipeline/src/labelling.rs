@@ -152,8 +152,13 @@ pub struct LabellingReport {
     pub label_frames: Vec<u64>,
     /// Counts per label source.
     pub counters: LabelCounters,
-    /// The learned colours.
+    /// The learned colours that label by colour and give the tool's fit its hints (learned from
+    /// the labels sharpened wherever a colour is surely the likelier).
     pub appearance: Vec<LearnedColour>,
+    /// The learned colours that sharpen the labels near the drawn tool (learned from the labels
+    /// handed out).
+    #[serde(default)]
+    pub sharpening_appearance: Vec<LearnedColour>,
     /// Frame sets and views it learned from.
     pub appearance_sources: hullcut_capture::segment::AppearanceSources,
 }
@@ -194,12 +199,17 @@ pub struct Labelling {
     method: LabelMethod,
     segmenter: Segmenter,
     tool: Option<ToolLabeller>,
+    /// The colours of the labels sharpened wherever a colour is surely the likelier: they label
+    /// by colour and give the fit its hints.
     appearance: AppearanceModel,
+    /// The colours of the labels handed out: they sharpen the labels near the drawn tool (see
+    /// [`Labelling::learn`] for why apart).
+    sharpening: AppearanceModel,
     colours: Option<ColourLut>,
     /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]): the fit's hints.
     sure: Option<ColourLut>,
-    /// The sure colours that their class also explains ([`SURE_MAHALANOBIS2`]): they sharpen the
-    /// labels near the drawn tool.
+    /// The sharpening colours where sure and their class also explains them
+    /// ([`SURE_MAHALANOBIS2`]): they sharpen the labels near the drawn tool.
     explained: Option<ColourLut>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
@@ -261,7 +271,9 @@ impl Labelling {
                 appearance.sources.mask_views += 1;
             }
         }
-        let (colours, sure, explained) = compile(appearance.classes());
+        let sharpening = appearance.clone();
+        let (colours, sure) = compile(appearance.classes());
+        let explained = compile_explained(sharpening.classes());
         let tool = tool
             .map(|t| {
                 ToolLabeller::new(
@@ -285,6 +297,7 @@ impl Labelling {
             segmenter,
             tool,
             appearance,
+            sharpening,
             colours,
             sure,
             explained,
@@ -432,17 +445,16 @@ impl Labelling {
                     },
                 );
             };
-            // The colours are learned from the labels sharpened wherever a colour is surely the
-            // likelier (the rule before the labels' own): learned from the labels handed out,
-            // the hints they teach the fit changed and lost the track on random:59 in
-            // random:101 (129 -> 104 of 150 frame sets trusted).
-            if learns {
+            // The colours that label and hint are learned from the labels sharpened wherever a
+            // colour is surely the likelier, the sharpening colours from the labels handed out.
+            let likelier = learns.then(|| {
                 let mut masks = labelled.masks.clone();
                 sharpen_all(&mut masks, self.sure.as_ref());
-                learn_from = Some(masks);
-            }
+                masks
+            });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_ref());
+            learn_from = likelier.map(|l| (l, masks.clone()));
             (masks, LabelSource::Geometry)
         } else if colours && self.colours.is_some() {
             let mut masks = fg.clone();
@@ -459,8 +471,8 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some(learn_from) = learn_from {
-            self.learn(set, &learn_from);
+        if let Some((likelier, handed_out)) = learn_from {
+            self.learn(set, &likelier, &handed_out);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
@@ -590,19 +602,32 @@ impl Labelling {
         }
     }
 
-    /// Learns a trusted frame set's colours from its labels (`masks`); recompiles the classes now
-    /// and then.
-    fn learn(&mut self, set: &FrameSet, masks: &[Option<GrayImage>]) {
-        self.appearance.age();
-        for (view, mask) in set.views.iter().zip(masks) {
-            if let (Some(view), Some(mask)) = (view, mask) {
-                self.appearance.learn(&view.image, mask, true);
+    /// Learns a trusted frame set's colours: those that label and hint from `likelier` (its labels
+    /// sharpened wherever a colour is surely the likelier), the sharpening colours from
+    /// `handed_out` (the labels handed out); recompiles the classes now and then.
+    ///
+    /// Two models, because one failed either way. Learned from the likelier colours' labels
+    /// alone, a shadow kept beside the blade (dark green on a green mat, of neither class) went
+    /// to the broader class, the tool's, was learned as the tool and then sharpened to it
+    /// (random:89 in random:131: scalpel IoU 0.758). Learned from the labels handed out alone,
+    /// the hints those colours gave lost random:59 in random:101's track from frame set 93 to 120
+    /// (129 -> 104 of 150 frame sets trusted), and the frame sets labelled by colour alone lost
+    /// (random:97 in random:137, where the fit is trusted in 34 of 150: scalpel 0.588 -> 0.458).
+    fn learn(&mut self, set: &FrameSet, likelier: &[Option<GrayImage>], handed_out: &[Option<GrayImage>]) {
+        let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>]| {
+            model.age();
+            for (view, mask) in set.views.iter().zip(masks) {
+                if let (Some(view), Some(mask)) = (view, mask) {
+                    model.learn(&view.image, mask, true);
+                }
             }
-        }
-        self.appearance.sources.geometry_frames += 1;
+            model.sources.geometry_frames += 1;
+        };
+        rayon::join(|| learn(&mut self.appearance, likelier), || learn(&mut self.sharpening, handed_out));
         self.counters.learned += 1;
-        if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() {
-            (self.colours, self.sure, self.explained) = compile(self.appearance.classes());
+        if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() || self.explained.is_none() {
+            (self.colours, self.sure) = compile(self.appearance.classes());
+            self.explained = compile_explained(self.sharpening.classes());
         }
     }
 
@@ -615,22 +640,24 @@ impl Labelling {
             label_frames: self.label_frames.clone(),
             counters: self.counters.clone(),
             appearance: self.appearance.summary(),
+            sharpening_appearance: self.sharpening.summary(),
             appearance_sources: self.appearance.sources,
         }
     }
 }
 
-/// The learned classes compiled three ways: every colour labelled; labelled only where sure
-/// ([`SHARPEN_LOG_RATIO`]); and only where sure and explained by the label's class
-/// ([`SURE_MAHALANOBIS2`]).
-fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>, Option<ColourLut>) {
-    let Some(classes) = classes else { return (None, None, None) };
-    let explained = ColourClasses { reject_mahalanobis2: Some(SURE_MAHALANOBIS2), ..classes.clone() };
-    (
-        Some(ColourLut::new(&classes)),
-        Some(ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)),
-        Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO)),
-    )
+/// The learned classes compiled two ways: every colour labelled; labelled only where sure
+/// ([`SHARPEN_LOG_RATIO`]).
+fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>) {
+    let Some(classes) = classes else { return (None, None) };
+    (Some(ColourLut::new(&classes)), Some(ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)))
+}
+
+/// The learned classes compiled to label only where sure ([`SHARPEN_LOG_RATIO`]) and explained by
+/// the label's class ([`SURE_MAHALANOBIS2`]).
+fn compile_explained(classes: Option<ColourClasses>) -> Option<ColourLut> {
+    let explained = ColourClasses { reject_mahalanobis2: Some(SURE_MAHALANOBIS2), ..classes? };
+    Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO))
 }
 
 /// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
@@ -697,7 +724,7 @@ mod tests {
         let image = RgbImage::from_fn(3, 1, |x, _| Rgb([steel, skin, green_shadow][x as usize]));
         let region = ToolRegion { x0: 1, y0: 0, width: 1, height: 1, covered: vec![true] };
         let mut mask = GrayImage::from_raw(3, 1, vec![label::HAND, label::SCALPEL, label::HAND]).expect("mask");
-        let (_, likelier, explained) = compile(Some(classes));
+        let (likelier, explained) = (compile(Some(classes.clone())).1, compile_explained(Some(classes)));
         sharpen(&explained.expect("compiled"), &image, &mut mask, &region);
         // The steel beside the drawn tool is the tool's, the skin on it the hand's; the green
         // shadow kept beside the blade is neither: the geometry's label stays.

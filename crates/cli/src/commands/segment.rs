@@ -239,9 +239,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         labels.counters.unknown,
         labels.counters.relabelled
     );
-    for c in &labels.appearance {
-        if let Some(rgb) = c.rgb {
-            println!("  learned {} colour ~ rgb{rgb:?} from {:.0} pixels", c.label, c.pixels);
+    for (what, learned) in [("learned", &labels.appearance), ("sharpening", &labels.sharpening_appearance)] {
+        for c in learned {
+            if let Some(rgb) = c.rgb {
+                println!("  {what} {} colour ~ rgb{rgb:?} from {:.0} pixels", c.label, c.pixels);
+            }
         }
     }
     if let Some(acc) = &accuracy {
