@@ -625,8 +625,13 @@ impl Labelling {
         };
         rayon::join(|| learn(&mut self.appearance, likelier), || learn(&mut self.sharpening, handed_out));
         self.counters.learned += 1;
-        if self.counters.learned % REFRESH_EVERY == 1 || self.colours.is_none() || self.explained.is_none() {
+        // Each model compiled on its own: one not learned yet (no class) does not make the other
+        // compile every frame set.
+        let refresh = self.counters.learned % REFRESH_EVERY == 1;
+        if refresh || self.colours.is_none() {
             (self.colours, self.sure) = compile(self.appearance.classes());
+        }
+        if refresh || self.explained.is_none() {
             self.explained = compile_explained(self.sharpening.classes());
         }
     }
