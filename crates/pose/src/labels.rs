@@ -342,11 +342,12 @@ impl ToolLabeller {
                 // Only cells drawn over the tool in some view can hide it there: the others are
                 // neither relabelled nor judged.
                 let margin = self.params.occlusion_margin_m + occ.leaf_size;
+                let runs = CellRun::split(&occupancy.cells);
                 let over: Vec<Vec<(usize, DrawnBox)>> = views
                     .par_iter()
                     .zip(drawn.par_iter())
                     .map(|(v, d)| match (v, d) {
-                        (Some(v), Some(d)) => d.cells_over(v.camera, &occupancy.cells, margin),
+                        (Some(v), Some(d)) => d.cells_over(v.camera, &occupancy.cells, &runs, margin),
                         _ => Vec::new(),
                     })
                     .collect();
@@ -1135,12 +1136,19 @@ impl ToolDepth {
 
     /// The indices of the hand's `cells` (with their [`drawn_box`]) that can hide the drawn tool in
     /// [`ToolLabeller::final_labels`]: their [`drawn_box`] holds a pixel where the tool is drawn,
-    /// and their nearest corner plus `margin` lies nearer than the farthest drawn depth. A cell's
-    /// centre depth rules out those behind the tool, one projection of the centre with a disc
-    /// around it ([`Camera::project_ball`], its half-diagonal's ball) most of the others; the rest
-    /// are projected corner by corner. The drawn pixels in a box are counted from a summed-area
-    /// table.
-    fn cells_over(&self, cam: &Camera, cells: &[hullcut_hull::Cell], margin: f64) -> Vec<(usize, DrawnBox)> {
+    /// and their nearest corner plus `margin` lies nearer than the farthest drawn depth. Each of
+    /// `runs` (over `cells`: [`CellRun::split`]) is ruled out whole where its ball lies behind
+    /// the tool or projects onto no drawn pixel; in the others, a cell's centre depth rules out
+    /// those behind the tool, one projection of the centre with a disc around it
+    /// ([`Camera::project_ball`], its half-diagonal's ball) most of the others; the rest are
+    /// projected corner by corner. The drawn pixels in a box are counted from a summed-area table.
+    fn cells_over(
+        &self,
+        cam: &Camera,
+        cells: &[hullcut_hull::Cell],
+        runs: &[CellRun],
+        margin: f64,
+    ) -> Vec<(usize, DrawnBox)> {
         let farthest = self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max);
         let (w, h) = (self.w, self.depth.len() / self.w.max(1));
         let mut sat = vec![0u32; (w + 1) * (h + 1)];
@@ -1174,7 +1182,57 @@ impl ToolDepth {
             }
             drawn_box(cam, radius, c).filter(|&(lo, hi, z)| ((z + margin) as f32) < farthest && drawn_in(lo, hi))
         };
-        cells.iter().enumerate().filter_map(|(i, c)| reach(c).map(|b| (i, b))).collect()
+        // A run's ball holds its cells' balls: behind the tool, or projected onto no drawn pixel,
+        // so is each of them (a nanometre and a micro-pixel of slack for rounding).
+        let run_reaches = |run: &CellRun| {
+            if cam.world_to_camera(&run.centre).z - run.radius - 1e-9 > beyond {
+                return false;
+            }
+            cam.project_ball(&run.centre, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
+                let pad = Vector2::new(r + 1e-6, r + 1e-6);
+                drawn_in(uv - pad, uv + pad)
+            })
+        };
+        runs.iter()
+            .filter(|run| run_reaches(run))
+            .flat_map(|run| (run.start..run.end).filter_map(|i| reach(&cells[i]).map(|b| (i, b))))
+            .collect()
+    }
+}
+
+/// Consecutive cells judged together ahead of their own tests in [`ToolDepth::cells_over`]: the
+/// hull's cells come in octree order, so such a run is compact.
+const RUN_CELLS: usize = 16;
+
+/// A run of consecutive cells (`start..end`) and a ball that holds each of their bounding balls.
+#[derive(Debug, Clone, Copy)]
+struct CellRun {
+    start: usize,
+    end: usize,
+    centre: Point3<f64>,
+    radius: f64,
+}
+
+impl CellRun {
+    /// `cells` in runs of [`RUN_CELLS`], each with a ball around its cells' balls (centred on the
+    /// middle of their centres' box).
+    fn split(cells: &[hullcut_hull::Cell]) -> Vec<CellRun> {
+        (0..cells.len())
+            .step_by(RUN_CELLS)
+            .map(|start| {
+                let end = (start + RUN_CELLS).min(cells.len());
+                let run = &cells[start..end];
+                let (mut lo, mut hi) =
+                    (Point3::from(Vector3::repeat(f64::MAX)), Point3::from(Vector3::repeat(f64::MIN)));
+                for c in run {
+                    lo = lo.inf(&c.centre());
+                    hi = hi.sup(&c.centre());
+                }
+                let centre = nalgebra::center(&lo, &hi);
+                let radius = run.iter().map(|c| (c.centre() - centre).norm() + c.bounding_radius()).fold(0.0, f64::max);
+                CellRun { start, end, centre, radius }
+            })
+            .collect()
     }
 }
 
@@ -1310,10 +1368,8 @@ mod tests {
         assert!(band_rows(&above, 2.0, 100, 100).is_empty(), "above the image");
     }
 
-    #[test]
-    fn a_cell_not_drawn_over_the_tool_cannot_hide_it() {
-        // A distorted camera, a thin diagonal tool drawn 0.5 m away, and hull cells of many sizes
-        // in front of it, behind it, beside it and near the camera.
+    /// A distorted camera looking along +z and a thin diagonal tool drawn 0.5-0.57 m away.
+    fn diagonal_tool() -> (Camera, ToolDepth) {
         let mut camera = Camera::new("c", 200, 160, 180.0, 175.0, 98.0, 83.0)
             .looking_at(Point3::new(0.0, 0.0, 0.0), Point3::new(0.0, 0.0, 1.0), Vector3::y())
             .expect("a camera looking along +z");
@@ -1325,7 +1381,54 @@ mod tests {
                 if i.abs_diff(j) < 3 { 0.5 + 0.001 * j as f32 } else { f32::INFINITY }
             })
             .collect();
-        let tool = ToolDepth { x0, y0, w, depth };
+        (camera, ToolDepth { x0, y0, w, depth })
+    }
+
+    #[test]
+    fn runs_of_cells_rule_out_only_cells_that_cannot_hide_the_tool() {
+        // A block of 3 mm leaves in front of the diagonal tool, in octree-like order (z fastest
+        // within 4x4x4 bricks), and a few larger cells: judged in runs, the same cells and boxes
+        // as judged one by one (one run whose ball holds everything rules nothing out).
+        let (camera, tool) = diagonal_tool();
+        let leaf = 0.003;
+        let mut cells = Vec::new();
+        for brick in 0..(12 * 10 * 4) {
+            let (bx, by, bz) = (brick % 12, (brick / 12) % 10, brick / 120);
+            for k in 0..64 {
+                let (x, y, z) = (4 * bx + k % 4, 4 * by + (k / 4) % 4, 4 * bz + k / 16);
+                let min = Point3::new(-0.07 + leaf * x as f64, -0.06 + leaf * y as f64, 0.38 + leaf * z as f64);
+                cells.push(hullcut_hull::Cell { min, size: leaf, hand: true, scalpel: false, solid: true });
+            }
+        }
+        cells.push(hullcut_hull::Cell {
+            min: Point3::new(-0.02, -0.02, 0.3),
+            size: 0.024,
+            hand: true,
+            scalpel: false,
+            solid: true,
+        });
+        let margin = 0.006;
+        let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9 }];
+        let one_by_one = tool.cells_over(&camera, &cells, &all, margin);
+        let runs = CellRun::split(&cells);
+        let by_runs = tool.cells_over(&camera, &cells, &runs, margin);
+        assert!(
+            !one_by_one.is_empty() && one_by_one.len() < cells.len() / 4,
+            "{} of {}",
+            one_by_one.len(),
+            cells.len()
+        );
+        assert_eq!(by_runs, one_by_one);
+        // The leaves' runs are compact (the last run is the large cell alone).
+        let leaves = &runs[..runs.len() - 1];
+        assert!(leaves.iter().all(|r| r.radius < 0.01), "{:?}", leaves.iter().map(|r| r.radius).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn a_cell_not_drawn_over_the_tool_cannot_hide_it() {
+        // A distorted camera, a thin diagonal tool drawn 0.5 m away, and hull cells of many sizes
+        // in front of it, behind it, beside it and near the camera.
+        let (camera, tool) = diagonal_tool();
         let mut seed = 11u64;
         let mut next = || {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -1339,7 +1442,7 @@ mod tests {
             })
             .collect();
         let margin = 0.006;
-        let over = tool.cells_over(&camera, &cells, margin);
+        let over = tool.cells_over(&camera, &cells, &CellRun::split(&cells), margin);
         assert!(
             !over.is_empty() && over.len() < cells.len() / 4,
             "{} of {} cells over the tool",
