@@ -454,7 +454,7 @@ impl Labelling {
             });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_ref());
-            learn_from = likelier.map(|l| (l, masks.clone()));
+            learn_from = likelier;
             (masks, LabelSource::Geometry)
         } else if colours && self.colours.is_some() {
             let mut masks = fg.clone();
@@ -471,8 +471,9 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some((likelier, handed_out)) = learn_from {
-            self.learn(set, &likelier, &handed_out);
+        if let Some(likelier) = learn_from {
+            // Only a trusted fit's labels teach: `masks` are the labels handed out.
+            self.learn(set, &likelier, &masks);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);

@@ -1387,7 +1387,7 @@ mod tests {
     #[test]
     fn runs_of_cells_rule_out_only_cells_that_cannot_hide_the_tool() {
         // A block of 3 mm leaves in front of the diagonal tool, in octree-like order (z fastest
-        // within 4x4x4 bricks), and a few larger cells: judged in runs, the same cells and boxes
+        // within 4x4x4 bricks), and one larger cell: judged in runs, the same cells and boxes
         // as judged one by one (one run whose ball holds everything rules nothing out).
         let (camera, tool) = diagonal_tool();
         let leaf = 0.003;
