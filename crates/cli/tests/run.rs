@@ -601,9 +601,11 @@ fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
 /// hand, a blue handle, a grey checkered mat under a light that casts the hand's and the blade's
 /// shadows on it), no masks: the views near the light see the hand's shadow through the hand, and
 /// the blade's cells kept only because the track expects the tool there may be its shadow; with
-/// neither taken for an object in front of the blade, the loop trusts it in at least 80% of the
-/// frame sets and cuts (measured 2026-11-27: 129-130 of 150 trusted, some 140 lattice edges cut;
-/// 108 and 53 edges before; the lobe stays on: the first stroke's turn at the table is refused).
+/// neither taken for an object in front of the blade, and the hand's shadow beside the blade not
+/// taken for its outline where the other views see it on the table, the loop trusts the blade in
+/// at least 90% of the frame sets and cuts the lobe off (measured 2026-11-27: 145 of 150 trusted,
+/// 5 of them off by more than 5° or 5 mm, two pieces; before the other views were asked, 129
+/// trusted, 14 off, the lobe left on: the first stroke's turn at the table was refused).
 #[test]
 fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and_cuts() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -611,11 +613,31 @@ fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and
     let r = run_segmented(dir.path(), &[&["--frames", "150", "--scene", "resect"][..], &look].concat(), "50");
     let c = &r["counters"];
     assert_eq!(c["frame_sets_processed"].as_u64(), Some(150), "{c}");
-    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 120, "{c}");
-    assert!(c["edges_cut"].as_u64().expect("edges") >= 100, "{c}");
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 135, "{c}");
+    assert!(r["pose"]["trusted_wrong"].as_u64().expect("trusted wrong") <= 8, "{}", r["pose"]);
+    assert_eq!(r["tissue"]["pieces"].as_u64(), Some(2), "the lobe cut off: {}", r["tissue"]);
     // The report counts the shadow cells that views saw only through the hand.
     let l = &r["labelling"]["counters"];
     assert!(l["shadow_cells_seen_through"].as_u64().expect("seen through") > 0, "{l}");
+}
+
+/// The first 40 frame sets of the resection seen by seven cameras of the random:127 rig in the
+/// random:173 look, the pointed scalpel, no masks: where the blade nears the table the hand's
+/// shadow lies beside it, darker table of the table's colour, as a dull tip over the table looks
+/// from above. Such a pixel a pixel from the drawn tool counts as the tool's outline only where
+/// the other views do not see the table behind it darkened too ([`hullcut_pose::TableShadows`]).
+/// Measured 2026-11-27: 37 of 40 trusted, none off by more than 5° or 5 mm (normal error 1.27°
+/// mean); when every such pixel counted, 37 trusted and 9 of them off (up to 12.8°: the fit crept
+/// into the shadow).
+#[test]
+fn run_does_not_trust_a_fit_that_crept_into_the_hands_shadow_on_the_table() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let look = ["--rig", "random:127", "--appearance", "random:173", "--tool", "pointed"];
+    let r = run_segmented(dir.path(), &[&["--frames", "40", "--scene", "resect"][..], &look].concat(), "40");
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(40), "{c}");
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 34, "{c}");
+    assert_eq!(r["pose"]["trusted_wrong"].as_u64(), Some(0), "{}", r["pose"]["per_frame"]);
 }
 
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.

@@ -14,7 +14,8 @@ use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
 use hullcut_hull::shadow::{cover, keep_supported};
 use hullcut_hull::{HullParams, Occupancy, Silhouette, direct_silhouettes, silhouettes};
 use hullcut_pose::{
-    LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, ToolLabeller, ToolRegion, TrackerParams, ViewInput,
+    LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, TableShadows, ToolLabeller, ToolRegion, TrackerParams,
+    ViewInput,
 };
 use image::GrayImage;
 use rayon::prelude::*;
@@ -52,6 +53,10 @@ const DEGRADED_MIN_FRACTION: f64 = 0.01;
 const DEGRADED_HISTORY: usize = 16;
 /// Marks the foreground the hull explains while a degraded view is cut back (no label uses it).
 const EXPLAINED: u8 = 254;
+
+// The segmenter's possible shadows are what the tool's labeller reads as such ([`TableShadows`]
+// reads the masks before the hull resolves them).
+const _: () = assert!(SHADOW_LIKE == POSSIBLE_SHADOW);
 /// Pixels down to this much darker than their background (relative) with their chromaticity
 /// unchanged may be cast shadows, resolved by the hull ([`hullcut_hull::shadow`]): a shadow in
 /// full (ambient light only) keeps a fifth of the light or more.
@@ -375,6 +380,10 @@ impl Labelling {
         let views = silhouettes(&self.rig, &refs).with_context(|| format!("frame {frame}"))?;
         let mut occ = carver.carve(&views, &self.hull).with_context(|| format!("frame {frame}"))?;
         let mut marked_only = Vec::new();
+        // The possible shadows as the views saw them, before the hull resolved them: where a ray
+        // meets the table, the other views tell a shadow from a dull tool ([`TableShadows`]).
+        let unresolved =
+            (shadow_pixels > 0 && self.tool.is_some() && self.rig.world_frame.is_table()).then(|| fg.clone());
         if shadow_pixels > 0 {
             (occ, marked_only) = self
                 .resolve_shadows(occ, &views, &mut fg, set.timestamp_ns)
@@ -428,7 +437,12 @@ impl Labelling {
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
-        let labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs);
+        let table = unresolved.as_ref().map(|masks| {
+            TableShadows::new(
+                self.rig.cameras.iter().zip(masks).map(|(camera, mask)| mask.as_ref().map(|m| (camera, m))).collect(),
+            )
+        });
+        let labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
         let estimate = labelled.estimate;
         let colours = self.method == LabelMethod::Both;
         let trusted = estimate.valid && estimate.fitted.is_some();

@@ -62,7 +62,7 @@ fn main() {
             .zip(&masks)
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
-        let out = labeller.label(f, set.timestamp_ns, &occ, &[], &inputs);
+        let out = labeller.label(f, set.timestamp_ns, &occ, &[], &inputs, None);
         let e = &out.estimate;
         let fit = e.fitted.as_ref().map(|p| p.tool_to_world);
         let err = fit.map(|p| {

@@ -27,12 +27,15 @@ use rayon::prelude::*;
 use crate::ToolError;
 use crate::evidence::project;
 use crate::geometry::{Convex, convex_hull};
+use crate::table_shadow::TableShadows;
 use crate::template::Template;
 use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 
 /// A hint in a labeller's view mask: a foreground pixel that may be a cast shadow (the background's
 /// colour darkened). It is evidence of the tool only where the predicted tool is drawn, or a pixel
-/// from it: a blade's own shadow beside it, where it nears the table, is not its outline.
+/// from it (a blade's own shadow beside it, where it nears the table, is not its outline), and,
+/// where the views' masks before the hull resolved the shadows are given ([`TableShadows`]), only
+/// where the other views do not see the table behind it darkened too (the hand's shadow there).
 pub const POSSIBLE_SHADOW: u8 = 128;
 
 /// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
@@ -211,7 +214,9 @@ impl ToolLabeller {
     /// masks (any non-zero label is foreground), one entry per rig camera. A foreground pixel may
     /// carry a hint for the fit: [`label::HAND`] where its colour is surely the hand's,
     /// [`label::SCALPEL`] where surely the tool's, [`POSSIBLE_SHADOW`] where it may be a cast
-    /// shadow; any other value decides nothing. `not_hand` marks (by index; shorter or empty
+    /// shadow; any other value decides nothing. `table`, where the world frame's z = 0 is the
+    /// table top: the views' masks before their possible shadows were resolved, which tell the
+    /// hand's shadow on the table beside the tool from a dull tool over it. `not_hand` marks (by index; shorter or empty
     /// marks none) cells of `occ` that are no evidence of the hand (kept only as possible parts of
     /// the tool, which may be its shadow): away from the fitted tool they hide nothing and are
     /// labelled neither hand nor scalpel.
@@ -222,6 +227,7 @@ impl ToolLabeller {
         occ: &Occupancy,
         not_hand: &[bool],
         views: &[Option<ViewInput>],
+        table: Option<&TableShadows>,
     ) -> LabelledFrame {
         let mut stats = LabelStats::default();
         let clock = Instant::now();
@@ -233,7 +239,8 @@ impl ToolLabeller {
                 hull.cells.iter().filter(|c| !c.hand && !c.scalpel).copied().collect();
             let masks: Vec<Option<GrayImage>> = views
                 .par_iter()
-                .map(|v| {
+                .enumerate()
+                .map(|(k, v)| {
                     v.map(|v| {
                         let radius = v.camera.distortion.monotonic_radius();
                         let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
@@ -243,7 +250,7 @@ impl ToolLabeller {
                             tool: depth.as_ref(),
                             margin: self.params.occlusion_margin_m,
                         };
-                        band_labels(v, &template, pose, self.params.band_px, &in_front)
+                        band_labels(v, &template, pose, self.params.band_px, &in_front, table.map(|t| (t, k)))
                     })
                 })
                 .collect();
@@ -536,7 +543,8 @@ fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f
 
 /// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless its colour
 /// is surely the hand's (a [`label::HAND`] hint in the view's mask), or it may be a shadow
-/// ([`POSSIBLE_SHADOW`]) beside the drawn tool, or a cell of the hand's hull that is not behind
+/// ([`POSSIBLE_SHADOW`]) beside the drawn tool or one the other views see on the table (`table`:
+/// the views' shadows and this view's index), or a cell of the hand's hull that is not behind
 /// the tool projects onto it (a finger along the tool, or the hand in front of it: its outline is
 /// not the tool's; see [`HandInFront`]) and its colour is not surely the tool's (a
 /// [`label::SCALPEL`] hint); other foreground: hand.
@@ -546,6 +554,7 @@ fn band_labels(
     pose: &Isometry3<f64>,
     band: f64,
     hand: &HandInFront,
+    table: Option<(&TableShadows, usize)>,
 ) -> GrayImage {
     let cam = view.camera;
     let radius = cam.distortion.monotonic_radius();
@@ -564,8 +573,14 @@ fn band_labels(
             for i in a..=b {
                 let k = j * w + i;
                 let hint = hints[k];
-                let shadow_beside =
-                    hint == POSSIBLE_SHADOW && !hand.tool.is_some_and(|t| t.near(i, j, SHADOW_REACH_PX));
+                let shadow_beside = hint == POSSIBLE_SHADOW
+                    && match hand.tool {
+                        Some(t) if t.at(i, j).is_some() => false,
+                        Some(t) if t.near(i, j, SHADOW_REACH_PX) => {
+                            table.is_some_and(|(t, view)| t.on_table(view, i, j))
+                        }
+                        _ => true,
+                    };
                 if raw[k] == label::HAND && hint != label::HAND && !shadow_beside {
                     raw[k] = label::SCALPEL;
                 }

@@ -33,12 +33,14 @@ mod geometry;
 mod init;
 pub mod labels;
 mod metrics;
+mod table_shadow;
 mod template;
 mod track;
 
 pub use filter::{OneEuro, OneEuroParams};
 pub use labels::{LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, ToolLabeller, ToolRegion};
 pub use metrics::{PoseError, pose_error};
+pub use table_shadow::TableShadows;
 pub use template::{Template, check_tool};
 pub use track::{
     BladePose, Diagnostics, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Tracker, TrackerParams, ViewInput,
