@@ -33,9 +33,10 @@ use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 
 /// A hint in a labeller's view mask: a foreground pixel that may be a cast shadow (the background's
 /// colour darkened). It is evidence of the tool only where the predicted tool is drawn, or a pixel
-/// from it (a blade's own shadow beside it, where it nears the table, is not its outline), and,
-/// where the views' masks before the hull resolved the shadows are given ([`TableShadows`]), only
-/// where the other views do not see the table behind it darkened too (the hand's shadow there).
+/// from it (a blade's own shadow beside it, where it nears the table, is not its outline); the
+/// pixel beside it only where the other views do not see the table behind it darkened too, when
+/// the views' masks before the hull resolved the shadows are given ([`TableShadows`]): there it
+/// is the hand's shadow on the table, not a dull tip over it.
 pub const POSSIBLE_SHADOW: u8 = 128;
 
 /// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
@@ -216,10 +217,10 @@ impl ToolLabeller {
     /// [`label::SCALPEL`] where surely the tool's, [`POSSIBLE_SHADOW`] where it may be a cast
     /// shadow; any other value decides nothing. `table`, where the world frame's z = 0 is the
     /// table top: the views' masks before their possible shadows were resolved, which tell the
-    /// hand's shadow on the table beside the tool from a dull tool over it. `not_hand` marks (by index; shorter or empty
-    /// marks none) cells of `occ` that are no evidence of the hand (kept only as possible parts of
-    /// the tool, which may be its shadow): away from the fitted tool they hide nothing and are
-    /// labelled neither hand nor scalpel.
+    /// hand's shadow on the table beside the tool from a dull tool over it. `not_hand` marks (by
+    /// index; shorter or empty marks none) cells of `occ` that are no evidence of the hand (kept
+    /// only as possible parts of the tool, which may be its shadow): away from the fitted tool
+    /// they hide nothing and are labelled neither hand nor scalpel.
     pub fn label(
         &mut self,
         frame: u64,
@@ -543,8 +544,8 @@ fn silhouette(cam: &Camera, radius: f64, template: &Template, pose: &Isometry3<f
 
 /// Foreground within `band` pixels of the tool's modelled silhouette: scalpel, unless its colour
 /// is surely the hand's (a [`label::HAND`] hint in the view's mask), or it may be a shadow
-/// ([`POSSIBLE_SHADOW`]) beside the drawn tool or one the other views see on the table (`table`:
-/// the views' shadows and this view's index), or a cell of the hand's hull that is not behind
+/// ([`POSSIBLE_SHADOW`]) away from the drawn tool, or a pixel from it that the other views see on
+/// the table (`table`: the views' shadows and this view's index), or a cell of the hand's hull that is not behind
 /// the tool projects onto it (a finger along the tool, or the hand in front of it: its outline is
 /// not the tool's; see [`HandInFront`]) and its colour is not surely the tool's (a
 /// [`label::SCALPEL`] hint); other foreground: hand.
