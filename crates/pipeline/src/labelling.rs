@@ -221,6 +221,9 @@ pub struct Labelling {
     label_frames: Vec<u64>,
     counters: LabelCounters,
     masks: Vec<Option<GrayImage>>,
+    /// The foreground masks before the hull resolved their possible shadows (for
+    /// [`TableShadows`]), kept from frame set to frame set so that copying them allocates nothing.
+    unresolved: Vec<Option<GrayImage>>,
     /// Per camera, its usual foreground pixel count over the last frame sets (a degraded frame
     /// set repeats the last usual count), each with how many degraded frame sets in a row led to
     /// it.
@@ -311,6 +314,7 @@ impl Labelling {
             label_frames: label_frames.to_vec(),
             counters: LabelCounters::default(),
             masks: Vec::new(),
+            unresolved: Vec::new(),
             history: Vec::new(),
         })
     }
@@ -382,8 +386,10 @@ impl Labelling {
         let mut marked_only = Vec::new();
         // The possible shadows as the views saw them, before the hull resolved them: where a ray
         // meets the table, the other views tell a shadow from a dull tool ([`TableShadows`]).
-        let unresolved =
-            (shadow_pixels > 0 && self.tool.is_some() && self.rig.world_frame.is_table()).then(|| fg.clone());
+        let table_shadows = shadow_pixels > 0 && self.tool.is_some() && self.rig.world_frame.is_table();
+        if table_shadows {
+            copy_masks(&fg, &mut self.unresolved);
+        }
         if shadow_pixels > 0 {
             (occ, marked_only) = self
                 .resolve_shadows(occ, &views, &mut fg, set.timestamp_ns)
@@ -437,9 +443,14 @@ impl Labelling {
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
-        let table = unresolved.as_ref().map(|masks| {
+        let table = table_shadows.then(|| {
             TableShadows::new(
-                self.rig.cameras.iter().zip(masks).map(|(camera, mask)| mask.as_ref().map(|m| (camera, m))).collect(),
+                self.rig
+                    .cameras
+                    .iter()
+                    .zip(&self.unresolved)
+                    .map(|(camera, mask)| mask.as_ref().map(|m| (camera, m)))
+                    .collect(),
             )
         });
         let labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
@@ -666,6 +677,17 @@ impl Labelling {
     }
 }
 
+/// Copies `from` into `to`, reusing the images already there where their sizes match.
+fn copy_masks(from: &[Option<GrayImage>], to: &mut Vec<Option<GrayImage>>) {
+    to.resize(from.len(), None);
+    for (src, dst) in from.iter().zip(to.iter_mut()) {
+        match (src, dst.as_mut()) {
+            (Some(s), Some(d)) if s.dimensions() == d.dimensions() => d.copy_from_slice(s.as_raw()),
+            _ => dst.clone_from(src),
+        }
+    }
+}
+
 /// The learned classes compiled two ways: every colour labelled; labelled only where sure
 /// ([`SHARPEN_LOG_RATIO`]).
 fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>) {
@@ -728,6 +750,18 @@ mod tests {
     use image::{Rgb, RgbImage};
 
     use super::*;
+
+    #[test]
+    fn copied_masks_equal_their_source_whatever_was_there() {
+        let a = GrayImage::from_fn(4, 3, |x, y| image::Luma([(x + 4 * y) as u8]));
+        let b = GrayImage::from_pixel(2, 2, image::Luma([7]));
+        let mut to = vec![Some(GrayImage::new(4, 3)), Some(GrayImage::new(5, 5)), None, Some(b.clone())];
+        let from = vec![Some(a.clone()), Some(b.clone()), Some(a.clone())];
+        copy_masks(&from, &mut to);
+        assert_eq!(to, from);
+        copy_masks(&[None, Some(b.clone())], &mut to);
+        assert_eq!(to, vec![None, Some(b)]);
+    }
 
     #[test]
     fn only_colours_their_class_explains_sharpen_the_labels_near_the_tool() {
