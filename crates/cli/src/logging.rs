@@ -1,11 +1,15 @@
 //! Logging dataset content to rerun: undistorted camera images (JPEG) and label masks under
 //! `world/cams/<name>`, and a tool's pose and geometry under `world/tool/<which>`.
 //!
+//! When segmenting, where each frame set's labels came from goes to `labelling/source` (text) and
+//! the colours learned so far to `metrics/appearance/<label>/{colour,pixels}` ([`log_labelling`]).
+//!
 //! Decimation policy: images and masks every `every`-th frame (they dominate a recording's size:
 //! ~40 KB per JPEG image and 300 KB per mask at 640x480); poses and scalars every frame.
 
 use anyhow::Context as _;
 use hullcut_dataset::{FrameSet, ToolGeometry, label};
+use hullcut_pipeline::{LabelSource, LabelTrace};
 use hullcut_rig::Rig;
 use hullcut_viz::{RecordingStream, UndistortMap};
 use nalgebra::{Matrix4, Point3};
@@ -17,6 +21,53 @@ pub const LABEL_CLASSES: [(u16, &str, [u8; 4]); 4] = [
     (label::SCALPEL as u16, "scalpel", [255, 200, 40, 200]),
     (label::UNKNOWN as u16, "unknown", [255, 0, 255, 120]),
 ];
+
+/// Where a frame set's label source is logged.
+pub const LABEL_SOURCE_ENTITY: &str = "labelling/source";
+
+/// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
+pub fn appearance_colour_entity(label: &str) -> String {
+    format!("metrics/appearance/{label}/colour")
+}
+
+/// The weight of a label's learned colour (pixels, decayed).
+pub fn appearance_pixels_entity(label: &str) -> String {
+    format!("metrics/appearance/{label}/pixels")
+}
+
+/// Names and colours the learned colours' series (static; once per recording).
+pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
+    for (_, name) in label::NAMED {
+        hullcut_viz::log_series_style(
+            rec,
+            &appearance_colour_entity(name),
+            &[("red", [220, 40, 40]), ("green", [40, 170, 40]), ("blue", [40, 80, 230])],
+        )?;
+    }
+    Ok(())
+}
+
+/// Logs where a frame set's labels came from (a warning when the tool's fit was not trusted and
+/// no colour could label instead) and the colours learned by then (a label with none learned yet
+/// logs nothing), at the current time.
+pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Result<()> {
+    let (text, warning) = match trace.source {
+        LabelSource::Geometry => ("geometry: the tool's trusted fit drawn into the views", false),
+        LabelSource::Colour => ("colour: the learned colours (the tool's fit was not trusted)", false),
+        LabelSource::UntrustedGeometry => {
+            ("untrusted geometry: the tool's fit drawn although the tracker did not trust it", true)
+        }
+        LabelSource::Unknown => ("unknown: neither the tool's fit nor learned colours labelled the foreground", true),
+    };
+    hullcut_viz::log_text(rec, LABEL_SOURCE_ENTITY, text, warning)?;
+    for colour in &trace.learned {
+        hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;
+        if let Some(rgb) = colour.rgb {
+            hullcut_viz::log_scalars(rec, &appearance_colour_entity(&colour.label), &rgb.map(f64::from))?;
+        }
+    }
+    Ok(())
+}
 
 /// JPEG quality of logged images.
 const JPEG_QUALITY: u8 = 85;

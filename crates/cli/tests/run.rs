@@ -571,6 +571,17 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 14, "{c}");
     assert!(c["edges_cut"].as_u64().expect("edges") > 0, "{c}");
     assert!(r["tissue"]["virtual_nodes"].as_u64().expect("virtual nodes") > 0, "{}", r["tissue"]);
+    // Every frame set logs where its labels came from; the colours learned from the trusted ones
+    // are logged from then on.
+    let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");
+    let rows_of = |e: &str| rows.get(e).copied().unwrap_or(0);
+    assert_eq!(rows_of("/labelling/source"), 24, "{rows:?}");
+    for label in ["hand", "scalpel"] {
+        for what in ["colour", "pixels"] {
+            let e = format!("/metrics/appearance/{label}/{what}");
+            assert!(rows_of(&e) >= 10, "{e}: {} rows", rows_of(&e));
+        }
+    }
 }
 
 /// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a

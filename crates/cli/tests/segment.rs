@@ -74,7 +74,21 @@ fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) ->
     let dir = tempfile::tempdir().expect("tempdir");
     let frames = 8;
     let ds = synth(dir.path(), rig, look, tool, frames, 10);
-    let r = segment(&ds, &[]);
+    let rrd = dir.path().join("segment.rrd");
+    let r = segment(&ds, &["--rrd", &path(&rrd), "--rrd-every", "1"]);
+    // Where the labels came from is in the recording for every frame set, the learned colours
+    // from the first frame set that taught them on.
+    let rows = hullcut_viz::rrd_timeline_rows(&rrd).expect("the recording reads back");
+    let rows_of = |e: &str| rows.get(e).copied().unwrap_or(0);
+    assert_eq!(rows_of("/labelling/source"), frames as usize, "{rows:?}");
+    for e in [
+        "/metrics/appearance/hand/colour",
+        "/metrics/appearance/hand/pixels",
+        "/metrics/appearance/scalpel/colour",
+        "/metrics/appearance/scalpel/pixels",
+    ] {
+        assert!(rows_of(e) >= 1, "{e}: nothing logged in {rows:?}");
+    }
     let l = &r["labelling"];
     let cams = r["views"].as_u64().expect("views") / u64::from(frames);
     assert_eq!(l["foreground"].as_array().expect("methods").len() as u64, cams, "{l}");

@@ -108,6 +108,27 @@ pub enum LabelSource {
     Unknown,
 }
 
+/// What labelled one frame set, and the colours learned by then: what the run logs for it.
+#[derive(Debug, Clone)]
+pub struct LabelTrace {
+    /// Where its labels came from.
+    pub source: LabelSource,
+    /// The colours learned so far ([`Labelling::learned`]).
+    pub learned: Vec<LearnedColour>,
+}
+
+impl LabelSource {
+    /// Its name in reports and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            LabelSource::Geometry => "geometry",
+            LabelSource::Colour => "colour",
+            LabelSource::UntrustedGeometry => "untrusted_geometry",
+            LabelSource::Unknown => "unknown",
+        }
+    }
+}
+
 /// Counts per label source, and what was learned.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct LabelCounters {
@@ -674,6 +695,12 @@ impl Labelling {
             sharpening_appearance: self.sharpening.summary(),
             appearance_sources: self.appearance.sources,
         }
+    }
+
+    /// The colours learned so far that label by colour and give the fit its hints (those of the
+    /// report's `appearance`), one per label.
+    pub fn learned(&self) -> Vec<LearnedColour> {
+        self.appearance.summary()
     }
 }
 

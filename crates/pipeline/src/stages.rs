@@ -31,7 +31,7 @@ use hullcut_sim::CutSim;
 
 use crate::backend::Carver;
 use crate::error::{Context as _, Error};
-use crate::labelling::{Labelling, LabellingReport};
+use crate::labelling::{LabelTrace, Labelling, LabellingReport};
 use crate::no_tool_estimate;
 use crate::read::{Faults, ViewFault, camera_name, read_frame_set};
 use crate::region::{CarveRegion, RegionCounts};
@@ -227,6 +227,8 @@ pub struct Work {
     pub grids: Vec<LabelGrid>,
     /// The blade's pose.
     pub estimate: Option<PoseEstimate>,
+    /// When segmenting: what labelled the views and the colours learned by then.
+    pub labels: Option<LabelTrace>,
     /// What the tissue did.
     pub tissue: Option<TissueStep>,
     /// How long each stage took on this frame set.
@@ -733,6 +735,7 @@ fn read_stage(
             occ: None,
             grids: Vec::new(),
             estimate: None,
+            labels: None,
             tissue: None,
             times,
             started,
@@ -817,6 +820,7 @@ fn hull_stage(
             labelled_hull = labelled.occupancy;
             // The tool's track is the labelling's: the pose stage takes its estimate.
             work.estimate = labelled.estimate;
+            work.labels = Some(LabelTrace { source: labelled.source, learned: labelling.learned() });
         }
         let occ = match labelled_hull {
             Some(occ) => occ,

@@ -29,9 +29,9 @@ pub use error::VizError;
 pub use log::{
     RERUN_PIXEL_OFFSET, WORLD, camera_entity_path, image_entity_path, log_box3d, log_camera, log_clear, log_image_jpeg,
     log_image_points, log_image_rgb, log_label_classes, log_labels, log_line_strips3d, log_mesh3d, log_points3d,
-    log_points3d_colored, log_rig, log_scalar, log_world,
+    log_points3d_colored, log_rig, log_scalar, log_scalars, log_series_style, log_text, log_world,
 };
-pub use read::rrd_entities;
+pub use read::{rrd_entities, rrd_timeline_rows};
 pub use recording::{
     CAPTURE_TIME_TIMELINE, FLUSH_TIMEOUT, FRAME_TIMELINE, Sink, flush, open_recording, open_recording_indexed,
     set_capture_time_ns, set_frame,

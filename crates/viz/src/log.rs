@@ -253,6 +253,27 @@ pub fn log_scalar(rec: &RecordingStream, path: &str, value: f64) -> Result<(), V
     log_at(rec, EntityPath::from(path), &Scalars::single(value), false)
 }
 
+/// Logs several scalars at `path` at the current time, one series each (styled by
+/// [`log_series_style`]).
+pub fn log_scalars(rec: &RecordingStream, path: &str, values: &[f64]) -> Result<(), VizError> {
+    log_at(rec, EntityPath::from(path), &Scalars::new(values.iter().copied()), false)
+}
+
+/// Names and colours the series of the scalars logged at `path` (static: logged once, it holds for
+/// the whole recording).
+pub fn log_series_style(rec: &RecordingStream, path: &str, series: &[(&str, [u8; 3])]) -> Result<(), VizError> {
+    let style = rerun::SeriesLines::new()
+        .with_names(series.iter().map(|(name, _)| *name))
+        .with_colors(series.iter().map(|(_, [r, g, b])| Rgba32::from_unmultiplied_rgba(*r, *g, *b, 255)));
+    log_at(rec, EntityPath::from(path), &style, true)
+}
+
+/// Logs a line of text at `path` at the current time, as a warning or as information.
+pub fn log_text(rec: &RecordingStream, path: &str, text: &str, warning: bool) -> Result<(), VizError> {
+    let level = if warning { components::TextLogLevel::WARN } else { components::TextLogLevel::INFO };
+    log_at(rec, EntityPath::from(path), &rerun::TextLog::new(text).with_level(level), false)
+}
+
 /// Clears `path` and everything under it from the current time on (an entity that has nothing to
 /// show this frame, e.g. a pose that was refused).
 pub fn log_clear(rec: &RecordingStream, path: &str) -> Result<(), VizError> {

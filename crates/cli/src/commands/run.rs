@@ -442,6 +442,11 @@ pub const ENTITIES: [&str; 13] = [
     "world/workspace",
 ];
 
+/// The rerun entities a run logs when it segments (without mask files): where each frame set's
+/// labels came from, and the colours learned by then.
+pub const SEGMENTING_ENTITIES: [&str; 3] =
+    ["labelling/source", "metrics/appearance/LABEL/colour", "metrics/appearance/LABEL/pixels"];
+
 pub fn run(args: &Args) -> anyhow::Result<()> {
     // Ctrl-C stops reading; what is in flight is processed, logged and flushed, and the report is
     // written. A second Ctrl-C quits at once.
@@ -595,6 +600,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     hullcut_viz::log_world(&rec)?;
     crate::volume::log(&rec, &volume)?;
     let cams = CameraLogger::new(&rec, ds.rig())?;
+    if !use_files {
+        crate::logging::log_appearance_style(&rec)?;
+    }
 
     // The frame sets in memory when they fit: decoding is timed apart from the loop.
     let preload = preload_fits(&ds, frames.len(), use_files, args.preload_mib);
@@ -880,7 +888,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 admission_wait: timing(&admission),
                 decode: decode.as_deref().map(timing),
             },
-            entities: ENTITIES.iter().map(|s| (*s).to_owned()).collect(),
+            entities: ENTITIES
+                .iter()
+                .chain(if use_files { &[][..] } else { &SEGMENTING_ENTITIES[..] })
+                .map(|s| (*s).to_owned())
+                .collect(),
             non_finite: Vec::new(),
         };
         non_finite = checks::non_finite_fields(&report);

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
 use crate::frames::parse_frames;
-use crate::labelling::{LabelMethod, LabelSource, Labelling, LabellingReport};
+use crate::labelling::{LabelMethod, LabelSource, LabelTrace, Labelling, LabellingReport};
 use crate::logging::CameraLogger;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
@@ -135,6 +135,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let rec = hullcut_viz::open_recording("hullcut-segment", &hullcut_viz::Sink::File(path.clone()))?;
             hullcut_viz::log_world(&rec)?;
             let cams = CameraLogger::new(&rec, ds.rig())?;
+            crate::logging::log_appearance_style(&rec)?;
             Some((rec, cams))
         }
         None => None,
@@ -148,36 +149,38 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let ms = |x: f64| Duration::from_secs_f64(x * 1e-3);
     let mut views = 0;
     // Scores, writes and logs one frame set's masks.
-    let mut emit = |set: &mut FrameSet, masks: Vec<Option<GrayImage>>, segment_ms: f64| -> anyhow::Result<()> {
-        let frame = set.frame;
-        for (view, mask) in set.views.iter_mut().zip(masks) {
-            let (Some(view), Some(mask)) = (view, mask) else { continue };
-            views += 1;
-            if let Some(truth) = &view.mask {
-                accuracy.add(view.camera, &mask, truth)?;
+    let mut emit =
+        |set: &mut FrameSet, masks: Vec<Option<GrayImage>>, segment_ms: f64, trace: LabelTrace| -> anyhow::Result<()> {
+            let frame = set.frame;
+            for (view, mask) in set.views.iter_mut().zip(masks) {
+                let (Some(view), Some(mask)) = (view, mask) else { continue };
+                views += 1;
+                if let Some(truth) = &view.mask {
+                    accuracy.add(view.camera, &mask, truth)?;
+                }
+                if let Some(out) = &args.out {
+                    let name = &ds.meta().cameras[view.camera];
+                    let dir = out.join("masks").join(name);
+                    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+                    let path = dir.join(hullcut_dataset::frame_file_name(frame));
+                    mask.save(&path).with_context(|| format!("writing {}", path.display()))?;
+                }
+                view.mask = Some(mask);
             }
-            if let Some(out) = &args.out {
-                let name = &ds.meta().cameras[view.camera];
-                let dir = out.join("masks").join(name);
-                std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-                let path = dir.join(hullcut_dataset::frame_file_name(frame));
-                mask.save(&path).with_context(|| format!("writing {}", path.display()))?;
+            if let Some((rec, cams)) = &rec
+                && frame.is_multiple_of(args.rrd_every)
+            {
+                hullcut_viz::set_frame(rec, frame as i64);
+                hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
+                cams.log_frame_set(rec, set)?;
+                hullcut_viz::log_scalar(rec, "metrics/time/segment", segment_ms)?;
+                crate::logging::log_labelling(rec, &trace)?;
             }
-            view.mask = Some(mask);
-        }
-        if let Some((rec, cams)) = &rec
-            && frame.is_multiple_of(args.rrd_every)
-        {
-            hullcut_viz::set_frame(rec, frame as i64);
-            hullcut_viz::set_capture_time_ns(rec, set.timestamp_ns);
-            cams.log_frame_set(rec, set)?;
-            hullcut_viz::log_scalar(rec, "metrics/time/segment", segment_ms)?;
-        }
-        Ok(())
-    };
+            Ok(())
+        };
     // Frame sets the tool could not label with trust wait (up to MAX_DEFERRED of them) for the
     // colours that later frames teach.
-    let mut deferred: Vec<(u64, Vec<Option<GrayImage>>, f64)> = Vec::new();
+    let mut deferred: Vec<(u64, Vec<Option<GrayImage>>, f64, LabelTrace)> = Vec::new();
     for &frame in &frames {
         let t = Instant::now();
         let mut set = ds.read_frame_set(frame, score)?;
@@ -197,27 +200,30 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), ms = ?labelled.stats.as_ref().map(|s| [s.evidence_ms, s.fit_ms, s.draw_ms]), carve_ms = labelled.carve_ms, "tool");
         }
         let segment_ms = t.elapsed().as_secs_f64() * 1e3;
+        let trace = LabelTrace { source: labelled.source, learned: labelling.learned() };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
                 if args.labels == LabelMethod::Both && deferred.len() < MAX_DEFERRED =>
             {
                 tracing::debug!(frame, source = ?labelled.source, "the tool's fit is not trusted: the frame set waits for learned colours");
-                deferred.push((frame, labelled.masks, segment_ms));
+                deferred.push((frame, labelled.masks, segment_ms, trace));
             }
-            _ => emit(&mut set, labelled.masks, segment_ms)?,
+            _ => emit(&mut set, labelled.masks, segment_ms, trace)?,
         }
         pb.inc(1);
     }
     let mut relabel_times = Vec::new();
-    for (frame, masks, segment_ms) in deferred {
+    for (frame, masks, segment_ms, trace) in deferred {
         let mut set = ds.read_frame_set(frame, score)?;
         let t = Instant::now();
-        let masks = match labelling.relabel_by_colour(&set, &mut carver)? {
-            Some(relabelled) => relabelled.masks,
-            None => masks,
+        let (masks, trace) = match labelling.relabel_by_colour(&set, &mut carver)? {
+            Some(relabelled) => {
+                (relabelled.masks, LabelTrace { source: relabelled.source, learned: labelling.learned() })
+            }
+            None => (masks, trace),
         };
         relabel_times.push(t.elapsed());
-        emit(&mut set, masks, segment_ms)?;
+        emit(&mut set, masks, segment_ms, trace)?;
     }
     pb.finish_and_clear();
     if let Some((rec, _)) = &rec {

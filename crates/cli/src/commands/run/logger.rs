@@ -18,7 +18,7 @@ use hullcut_pose::{PoseError, Template};
 use nalgebra::Isometry3;
 
 use super::{snapshot, tissue_log};
-use crate::logging::{CameraLogger, log_tool};
+use crate::logging::{CameraLogger, log_labelling, log_tool};
 use crate::pose_out::log_blade;
 
 /// Frame sets waiting to be logged at most.
@@ -192,6 +192,9 @@ impl Logger {
         }
         if let (Some(template), Some(iso)) = (&self.template, truth) {
             log_blade(rec, "truth", &hullcut_pose::BladePose::new(template, iso))?;
+        }
+        if let Some(labels) = &work.labels {
+            log_labelling(rec, labels)?;
         }
         if let Some(e) = &work.estimate {
             match e.pose.as_ref().filter(|p| p.is_finite()) {
