@@ -1026,34 +1026,53 @@ pub fn carve_within(views: &[Option<Silhouette>], params: &HullParams, seeds: &[
 /// labels go to the larger share) without carving anything: every cell is kept, one that no
 /// label reaches is left unlabelled. For masks whose labels changed after carving (the known
 /// tool drawn into the views), this costs one footprint test per cell and view.
-pub fn relabel(occ: &Occupancy, views: &[Option<Silhouette>], params: &HullParams) -> Occupancy {
-    let present: Vec<&Silhouette> = views.iter().flatten().collect();
-    let cells: Vec<Cell> = occ
+///
+/// Also returns, per cell and view (`k * views.len() + v`), whether that view sees hand pixels
+/// in the cell's footprint (what [`footprint_counts`] would count there), so that a caller need
+/// not test the footprints again.
+pub fn relabel(occ: &Occupancy, views: &[Option<Silhouette>], params: &HullParams) -> (Occupancy, Vec<bool>) {
+    /// Cells per parallel task.
+    const CHUNK: usize = 64;
+    let n = views.len();
+    let parts: Vec<(Vec<Cell>, Vec<bool>)> = occ
         .cells
-        .par_iter()
-        .map(|c| {
-            let (mut hand, mut scalpel, mut hand_share, mut scalpel_share) = (0, 0, 0.0, 0.0);
-            for view in &present {
-                let corners: [Projected; 8] =
-                    std::array::from_fn(|k| project(view, &(c.min + corner_offset(k) * c.size)));
-                if let Verdict::Sees { counts, .. } = judge(view, |m| corners[m], params.margin_px) {
-                    hand += usize::from(counts.hand > 0);
-                    scalpel += usize::from(counts.scalpel > 0);
-                    hand_share += f64::from(counts.hand) / f64::from(counts.total);
-                    scalpel_share += f64::from(counts.scalpel) / f64::from(counts.total);
+        .par_chunks(CHUNK)
+        .map(|chunk| {
+            let mut cells = Vec::with_capacity(chunk.len());
+            let mut seen = vec![false; chunk.len() * n];
+            for (k, c) in chunk.iter().enumerate() {
+                let (mut hand, mut scalpel, mut hand_share, mut scalpel_share) = (0, 0, 0.0, 0.0);
+                for (v, view) in views.iter().enumerate() {
+                    let Some(view) = view else { continue };
+                    let corners: [Projected; 8] =
+                        std::array::from_fn(|m| project(view, &(c.min + corner_offset(m) * c.size)));
+                    if let Verdict::Sees { counts, .. } = judge(view, |m| corners[m], params.margin_px) {
+                        hand += usize::from(counts.hand > 0);
+                        scalpel += usize::from(counts.scalpel > 0);
+                        hand_share += f64::from(counts.hand) / f64::from(counts.total);
+                        scalpel_share += f64::from(counts.scalpel) / f64::from(counts.total);
+                        seen[k * n + v] = counts.hand > 0;
+                    }
                 }
+                let (mut has_hand, mut has_scalpel) = (hand >= params.min_support, scalpel >= params.min_support);
+                if params.exclusive_labels && has_hand && has_scalpel {
+                    has_hand = hand_share >= scalpel_share;
+                    has_scalpel = !has_hand;
+                }
+                cells.push(Cell { hand: has_hand, scalpel: has_scalpel, ..*c });
             }
-            let (mut has_hand, mut has_scalpel) = (hand >= params.min_support, scalpel >= params.min_support);
-            if params.exclusive_labels && has_hand && has_scalpel {
-                has_hand = hand_share >= scalpel_share;
-                has_scalpel = !has_hand;
-            }
-            Cell { hand: has_hand, scalpel: has_scalpel, ..*c }
+            (cells, seen)
         })
         .collect();
+    let mut cells = Vec::with_capacity(occ.cells.len());
+    let mut seen = Vec::with_capacity(occ.cells.len() * n);
+    for (c, s) in parts {
+        cells.extend(c);
+        seen.extend(s);
+    }
     let mut stats = occ.stats.clone();
     stats.unlabelled_cells = cells.iter().filter(|c| !c.hand && !c.scalpel).count() as u64;
-    Occupancy { cells, stats, ..*occ }
+    (Occupancy { cells, stats, ..*occ }, seen)
 }
 
 /// The label counts in a cell's footprint in one view, as carving sees them (`None` where the view

@@ -18,7 +18,7 @@
 use std::time::Instant;
 
 use hullcut_dataset::{Mesh, ToolGeometry, label};
-use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette, footprint_counts};
+use hullcut_hull::{DenseGrid, HullParams, Occupancy, Silhouette};
 use hullcut_rig::Camera;
 use image::GrayImage;
 use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
@@ -235,9 +235,10 @@ impl ToolLabeller {
         let template = self.tracker.template().clone();
         let provisional_for = |pose: &Isometry3<f64>| {
             let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m, not_hand);
-            let hand: Vec<hullcut_hull::Cell> = hull.cells.iter().filter(|c| c.hand).copied().collect();
-            let doubtful: Vec<hullcut_hull::Cell> =
-                hull.cells.iter().filter(|c| !c.hand && !c.scalpel).copied().collect();
+            let hand = HandCells::new(
+                hull.cells.iter().filter(|c| c.hand).copied().collect(),
+                hull.cells.iter().filter(|c| !c.hand && !c.scalpel).copied().collect(),
+            );
             let masks: Vec<Option<GrayImage>> = views
                 .par_iter()
                 .enumerate()
@@ -245,12 +246,8 @@ impl ToolLabeller {
                     v.map(|v| {
                         let radius = v.camera.distortion.monotonic_radius();
                         let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
-                        let in_front = HandInFront {
-                            cells: &hand,
-                            doubtful: &doubtful,
-                            tool: depth.as_ref(),
-                            margin: self.params.occlusion_margin_m,
-                        };
+                        let in_front =
+                            HandInFront { hand: &hand, tool: depth.as_ref(), margin: self.params.occlusion_margin_m };
                         band_labels(v, &template, pose, self.params.band_px, &in_front, table.map(|t| (t, k)))
                     })
                 })
@@ -369,20 +366,22 @@ impl ToolLabeller {
                     ..occupancy
                 };
                 let mut hand = vec![false; occupancy.cells.len()];
-                for (&i, l) in wanted.iter().zip(&hullcut_hull::relabel(&near, &sil, &params).cells) {
+                let (relabelled, hand_seen) = hullcut_hull::relabel(&near, &sil, &params);
+                // Where each wanted cell sits in `wanted` (and in `hand_seen`'s rows).
+                let mut row = vec![usize::MAX; occupancy.cells.len()];
+                for (r, (&i, l)) in wanted.iter().zip(&relabelled.cells).enumerate() {
                     hand[i] = l.hand && !l.scalpel;
+                    row[i] = r;
                 }
+                let n = sil.len();
                 let occluders: Vec<Vec<DrawnBox>> = sil
                     .iter()
                     .zip(&over)
-                    .map(|(s, over)| match s {
-                        Some(s) => over
+                    .enumerate()
+                    .map(|(v, (s, over))| match s {
+                        Some(_) => over
                             .iter()
-                            .filter(|(i, _)| {
-                                hand[*i]
-                                    && footprint_counts(s, &occupancy.cells[*i], params.margin_px)
-                                        .is_some_and(|n| n.hand > 0)
-                            })
+                            .filter(|(i, _)| hand[*i] && hand_seen[row[*i] * n + v])
                             .map(|(_, b)| *b)
                             .collect(),
                         None => Vec::new(),
@@ -597,15 +596,33 @@ fn band_labels(
 /// behind).
 struct HandInFront<'a> {
     /// The hull's cells away from the tool.
-    cells: &'a [hullcut_hull::Cell],
-    /// Cells away from the tool that may be no object at all (a shadow kept beside the tool): they
-    /// take band pixels beside the drawn tool, never one where it is drawn.
-    doubtful: &'a [hullcut_hull::Cell],
+    hand: &'a HandCells,
     /// The tool drawn into the view.
     tool: Option<&'a ToolDepth>,
     /// A cell is behind the tool at a pixel where its nearest point lies this much farther from
     /// the camera than the tool drawn there, metres.
     margin: f64,
+}
+
+/// The hull's cells away from the tool, in runs ([`CellRun`]) that [`clear_hand`] rules out
+/// together where none of their cells can reach the tool's band.
+struct HandCells {
+    /// The hand's cells.
+    cells: Vec<hullcut_hull::Cell>,
+    /// Cells that may be no object at all (a shadow kept beside the tool): they take band pixels
+    /// beside the drawn tool, never one where it is drawn.
+    doubtful: Vec<hullcut_hull::Cell>,
+    /// `cells` in runs.
+    runs: Vec<CellRun>,
+    /// `doubtful` in runs.
+    doubtful_runs: Vec<CellRun>,
+}
+
+impl HandCells {
+    fn new(cells: Vec<hullcut_hull::Cell>, doubtful: Vec<hullcut_hull::Cell>) -> Self {
+        let (runs, doubtful_runs) = (CellRun::split(&cells), CellRun::split(&doubtful));
+        HandCells { cells, doubtful, runs, doubtful_runs }
+    }
 }
 
 /// The pixels of a `w`×`h` image within `band` of the convex `polygon`, as (row, first column,
@@ -669,7 +686,7 @@ fn row_within(polygon: &Convex, band: f64, y: f64, i0: usize, i1: usize) -> Opti
 /// the cell (its nearest point farther than the drawn depth plus the margin): the view sees the
 /// tool there (the hand's hull, fatter than the hand, would otherwise hide the blade from every
 /// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
-/// the hand's, wherever the cell lies; a doubtful cell ([`HandInFront::doubtful`]) takes only
+/// the hand's, wherever the cell lies; a doubtful cell ([`HandCells::doubtful`]) takes only
 /// those.
 fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8]) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
@@ -686,8 +703,33 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
         return;
     }
     let f = cam.fx.max(cam.fy);
+    // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
+    // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
+    // within 1.005 of its bounding radius, itself within the run's ρ, and no cell is nearer than
+    // z - ρ): a run whose disc, so widened, misses the box holds no cell that reaches it (a
+    // micro-pixel of slack for rounding).
+    let (lo_x, lo_y, hi_x, hi_y) = (lo.0 as f64, lo.1 as f64, hi.0 as f64, hi.1 as f64);
+    let run_reaches = |run: &CellRun| {
+        let z = cam.world_to_camera(&run.centre).z;
+        cam.project_ball(&run.centre, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
+            let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
+            uv.x + reach >= lo_x && uv.x - reach <= hi_x && uv.y + reach >= lo_y && uv.y - reach <= hi_y
+        })
+    };
+    let reaching = |cells: &'_ [hullcut_hull::Cell], runs: &'_ [CellRun], doubtful: bool| {
+        let cells: Vec<(hullcut_hull::Cell, bool)> = runs
+            .iter()
+            .filter(|run| run_reaches(run))
+            .flat_map(|run| cells[run.start..run.end].iter().map(move |c| (*c, doubtful)))
+            .collect();
+        cells
+    };
     let raw = labels.as_mut();
-    let cells = hand.cells.iter().map(|c| (c, false)).chain(hand.doubtful.iter().map(|c| (c, true)));
+    let cells = reaching(&hand.hand.cells, &hand.hand.runs, false).into_iter().chain(reaching(
+        &hand.hand.doubtful,
+        &hand.hand.doubtful_runs,
+        true,
+    ));
     for (c, doubtful) in cells {
         let centre = c.centre();
         let z = cam.world_to_camera(&centre).z;
@@ -870,12 +912,12 @@ impl ToolField {
 fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64, not_hand: &[bool]) -> Occupancy {
     let to_tool = pose.inverse();
     let mut out = occ.clone();
-    for (k, c) in out.cells.iter_mut().enumerate() {
+    out.cells.par_iter_mut().enumerate().for_each(|(k, c)| {
         let reach = margin + 0.87 * c.size + field.spacing;
         let is_near = field.at(&(to_tool * c.centre())) <= reach;
         c.scalpel = is_near;
         c.hand = !is_near && !not_hand.get(k).copied().unwrap_or(false);
-    }
+    });
     out
 }
 
@@ -1328,7 +1370,8 @@ mod tests {
         for (z, expected) in [(0.7, label::SCALPEL), (0.4, label::HAND), (0.5, label::HAND)] {
             let (camera, mut labels, tool, cell) = band_scene(z);
             let hints = GrayImage::new(100, 100);
-            let hand = HandInFront { cells: &[cell], doubtful: &[], tool: Some(&tool), margin: 0.003 };
+            let cells = HandCells::new(vec![cell], Vec::new());
+            let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
             clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
             assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
             assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool the band is the hand's");
@@ -1338,21 +1381,24 @@ mod tests {
         // band beside it.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
         let hints = GrayImage::new(100, 100);
-        let hand = HandInFront { cells: &[], doubtful: &[cell], tool: Some(&tool), margin: 0.003 };
+        let cells = HandCells::new(Vec::new(), vec![cell]);
+        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::SCALPEL, "where the tool is drawn");
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool");
         // Without the tool's depth every cell may be in front.
         let (camera, mut labels, _, cell) = band_scene(0.7);
         let hints = GrayImage::new(100, 100);
-        let hand = HandInFront { cells: &[cell], doubtful: &[], tool: None, margin: 0.003 };
+        let cells = HandCells::new(vec![cell], Vec::new());
+        let hand = HandInFront { hand: &cells, tool: None, margin: 0.003 };
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::HAND);
         // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
         let mut hints = GrayImage::new(100, 100);
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
-        let hand = HandInFront { cells: &[cell], doubtful: &[], tool: Some(&tool), margin: 0.003 };
+        let cells = HandCells::new(vec![cell], Vec::new());
+        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
@@ -1438,6 +1484,67 @@ mod tests {
         // The leaves' runs are compact (the last run is the large cell alone).
         let leaves = &runs[..runs.len() - 1];
         assert!(leaves.iter().all(|r| r.radius < 0.01), "{:?}", leaves.iter().map(|r| r.radius).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn runs_of_hand_cells_take_the_same_band_pixels_as_cells_one_by_one() {
+        // The diagonal tool drawn into a distorted camera, its band labelled scalpel; cells of
+        // many sizes in front of it, behind it, beside it and near the camera, each alone in its
+        // run (where the bound on a run is tightest) and, half of them, doubtful: ruled out by
+        // their run's ball, each takes the same pixels as when judged itself (one run whose ball
+        // holds everything rules nothing out).
+        let (camera, tool) = diagonal_tool();
+        let mut labels = GrayImage::new(200, 160);
+        for j in 0..tool.depth.len() / tool.w {
+            for i in 0..tool.w {
+                if tool.near(i + tool.x0, j + tool.y0, 2) {
+                    labels.put_pixel((i + tool.x0) as u32, (j + tool.y0) as u32, image::Luma([label::SCALPEL]));
+                }
+            }
+        }
+        let judged = |cells: &HandCells| {
+            let mut out = labels.clone();
+            let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003 };
+            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160]);
+            out
+        };
+        let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];
+        let mut seed = 23u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut taking, mut idle) = (0, 0);
+        for k in 0..3000 {
+            let size = 0.002 + 0.01 * next();
+            let min = Point3::new(next() * 0.6 - 0.3, next() * 0.5 - 0.25, next() * 0.7);
+            let cell = hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true };
+            let (cells, doubtful) = if k % 2 == 0 { (vec![cell], Vec::new()) } else { (Vec::new(), vec![cell]) };
+            let by_run = judged(&HandCells::new(cells.clone(), doubtful.clone()));
+            let (runs, doubtful_runs) =
+                if k % 2 == 0 { (everything.to_vec(), Vec::new()) } else { (Vec::new(), everything.to_vec()) };
+            let itself = judged(&HandCells { cells, doubtful, runs, doubtful_runs });
+            assert!(by_run == itself, "cell {k} ({cell:?}) takes other pixels when judged by its run");
+            if itself == labels { idle += 1 } else { taking += 1 }
+        }
+        assert!(taking > 50 && idle > 1000, "{taking} cells take band pixels, {idle} none");
+        // Runs of 16 small cells spread over a few centimetres: the cells at a run's rim, whose
+        // discs reach past the run's projected ball, are not ruled out either.
+        for k in 0..400 {
+            let centre = Point3::new(next() * 0.4 - 0.2, next() * 0.3 - 0.15, 0.1 + next() * 0.5);
+            let cells: Vec<hullcut_hull::Cell> = (0..RUN_CELLS)
+                .map(|_| {
+                    let size = 0.002 + 0.003 * next();
+                    let offset = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 0.04;
+                    hullcut_hull::Cell { min: centre + offset, size, hand: true, scalpel: false, solid: true }
+                })
+                .collect();
+            let by_run = judged(&HandCells::new(cells.clone(), Vec::new()));
+            let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9 }];
+            let itself =
+                judged(&HandCells { cells, doubtful: Vec::new(), runs: all.to_vec(), doubtful_runs: Vec::new() });
+            assert!(by_run == itself, "run {k} takes other pixels when judged as a run");
+        }
     }
 
     #[test]

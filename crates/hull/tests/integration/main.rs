@@ -8,7 +8,8 @@ mod robustness;
 use hullcut_dataset::{Mesh, label};
 use hullcut_hull::accuracy::grid_iou;
 use hullcut_hull::{
-    DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, carve_within, is_watertight, silhouettes,
+    DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, carve_within, footprint_counts, is_watertight,
+    relabel, silhouettes,
 };
 use hullcut_rig::{Rig, default_rig, lab8_rig, random_rig};
 use hullcut_synth::{CameraRenderer, Light, Part, TriMesh};
@@ -199,6 +200,40 @@ fn labels_separate_a_hand_from_a_scalpel_it_partly_hides() {
         let wrong = core.iter().filter(|p| occ.contains(p, Some(label::SCALPEL))).count();
         assert_eq!(wrong, 0, "{name}: {wrong} hand points labelled scalpel");
         assert_contains_all(&occ, &core, Some(label::HAND));
+    }
+}
+
+/// Relabelling a hull from its own masks gives each cell the labels carving gave it, and its
+/// record of the views that see hand pixels in a cell is what `footprint_counts` counts there.
+#[test]
+fn relabelling_keeps_carvings_labels_and_records_the_views_that_see_the_hand() {
+    let hand = TriMesh::ellipsoid(&Isometry3::translation(-0.03, 0.0, 0.12), Vector3::repeat(0.04), 64);
+    let bar = TriMesh::cuboid(Point3::new(0.0, -0.005, 0.117), Point3::new(0.09, 0.005, 0.123));
+    let parts = [
+        Part { label: label::HAND, albedo: [0.3, 0.4, 0.8], mesh: hand },
+        Part { label: label::SCALPEL, albedo: [0.6; 3], mesh: bar },
+    ];
+    for (name, rig) in rigs() {
+        let masks = render(&rig, &parts);
+        let views = views(&rig, &masks);
+        let params = params(&rig, LEAF);
+        let occ = carve(&views, &params).expect("carve");
+        let (relabelled, seen) = relabel(&occ, &views, &params);
+        assert_eq!(relabelled.cells.len(), occ.cells.len(), "{name}");
+        assert_eq!(seen.len(), occ.cells.len() * views.len(), "{name}");
+        let changed =
+            occ.cells.iter().zip(&relabelled.cells).filter(|(a, b)| (a.hand, a.scalpel) != (b.hand, b.scalpel));
+        assert!(changed.count() * 100 <= occ.cells.len(), "{name}: relabelling changed over 1% of the labels");
+        let mut hand_seen = 0;
+        for (k, c) in occ.cells.iter().enumerate() {
+            for (v, view) in views.iter().enumerate() {
+                let counted =
+                    view.as_ref().and_then(|s| footprint_counts(s, c, params.margin_px)).is_some_and(|n| n.hand > 0);
+                assert_eq!(seen[k * views.len() + v], counted, "{name}: cell {k}, view {v}");
+                hand_seen += usize::from(counted);
+            }
+        }
+        assert!(hand_seen > occ.cells.len(), "{name}: {hand_seen} cell views see the hand");
     }
 }
 
