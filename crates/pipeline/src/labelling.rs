@@ -363,9 +363,9 @@ impl Labelling {
             .par_iter()
             .map(|m| {
                 m.as_ref().map(|m| {
-                    let (foreground, shadow) = m.iter().fold((0, 0), |(n, s), &p| {
-                        (n + usize::from(p != label::BACKGROUND), s + u64::from(p == SHADOW_LIKE))
-                    });
+                    // Two branch-free counts, each of which vectorizes.
+                    let foreground = m.iter().map(|&p| usize::from(p != label::BACKGROUND)).sum();
+                    let shadow = m.iter().map(|&p| u64::from(p == SHADOW_LIKE)).sum();
                     MaskCounts { foreground, shadow, pixels: m.width() as usize * m.height() as usize }
                 })
             })

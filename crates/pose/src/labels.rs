@@ -437,12 +437,7 @@ impl ToolLabeller {
         hand_cells: &[DrawnBox],
         leaf: f64,
     ) -> (GrayImage, u64, u64) {
-        let mut out = view.mask.clone();
-        for p in out.iter_mut() {
-            if *p != label::BACKGROUND {
-                *p = label::HAND;
-            }
-        }
+        let mut out = all_hand(view.mask);
         let Some(tool) = tool else { return (out, 0, 0) };
         let (mut scalpel, mut hidden_pixels) = (0, 0);
         let mut hand = vec![f32::INFINITY; tool.depth.len()];
@@ -502,16 +497,21 @@ impl ToolLabeller {
     }
 }
 
+/// `mask` with all its foreground the hand's (every pixel stored, without a branch, so the pass
+/// vectorizes).
+fn all_hand(mask: &GrayImage) -> GrayImage {
+    let mut out = mask.clone();
+    for p in out.iter_mut() {
+        *p = if *p == label::BACKGROUND { label::BACKGROUND } else { label::HAND };
+    }
+    out
+}
+
 /// Foreground covered by the drawn tool: scalpel, whatever may hide it; other foreground: hand.
 fn labels_without_occlusion(view: ViewInput, tool: Option<&ToolDepth>) -> GrayImage {
-    let mut out = view.mask.clone();
+    let mut out = all_hand(view.mask);
     let w = out.width() as usize;
     let raw = out.as_mut();
-    for p in raw.iter_mut() {
-        if *p != label::BACKGROUND {
-            *p = label::HAND;
-        }
-    }
     if let Some(tool) = tool {
         for (k, d) in tool.depth.iter().enumerate() {
             let px = (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w;
@@ -560,14 +560,10 @@ fn band_labels(
     let radius = cam.distortion.monotonic_radius();
     let polygons = silhouette(cam, radius, template, pose);
     let hints = view.mask.as_raw();
-    let mut out = view.mask.clone();
+    let mut out = all_hand(view.mask);
     let (w, h) = (out.width() as usize, out.height() as usize);
-    for p in out.iter_mut() {
-        if *p != label::BACKGROUND {
-            *p = label::HAND;
-        }
-    }
     let raw = out.as_mut();
+    let mut scalpel = PixelBox::EMPTY;
     for poly in &polygons {
         for (j, a, b) in band_rows(poly, band, w, h) {
             for i in a..=b {
@@ -583,12 +579,45 @@ fn band_labels(
                     };
                 if raw[k] == label::HAND && hint != label::HAND && !shadow_beside {
                     raw[k] = label::SCALPEL;
+                    scalpel.add(i, j);
                 }
             }
         }
     }
-    clear_hand(&mut out, view.camera, radius, hand, hints);
+    clear_hand(&mut out, view.camera, radius, hand, hints, &scalpel);
     out
+}
+
+/// The box of a view's scalpel pixels (empty until one is added).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PixelBox {
+    lo: (usize, usize),
+    hi: (usize, usize),
+}
+
+impl PixelBox {
+    const EMPTY: PixelBox = PixelBox { lo: (usize::MAX, usize::MAX), hi: (0, 0) };
+
+    fn add(&mut self, i: usize, j: usize) {
+        self.lo = (self.lo.0.min(i), self.lo.1.min(j));
+        self.hi = (self.hi.0.max(i), self.hi.1.max(j));
+    }
+
+    fn is_empty(&self) -> bool {
+        self.lo.0 > self.hi.0
+    }
+
+    /// The box of the pixels of `labels` valued `value`.
+    #[cfg(test)]
+    fn of(labels: &GrayImage, value: u8) -> Self {
+        let mut b = PixelBox::EMPTY;
+        for (i, j, p) in labels.enumerate_pixels() {
+            if p.0[0] == value {
+                b.add(i as usize, j as usize);
+            }
+        }
+        b
+    }
 }
 
 /// The hand's hull cells that may take pixels of the tool's band from it, with what tells a cell
@@ -688,20 +717,13 @@ fn row_within(polygon: &Convex, band: f64, y: f64, i0: usize, i1: usize) -> Opti
 /// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
 /// the hand's, wherever the cell lies; a doubtful cell ([`HandCells::doubtful`]) takes only
 /// those.
-fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8]) {
+fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8], scalpel: &PixelBox) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
-    // The scalpel pixels' box: cells projecting elsewhere are skipped after one projection.
-    let (mut lo, mut hi) = ((usize::MAX, usize::MAX), (0, 0));
-    for (k, &l) in labels.as_raw().iter().enumerate() {
-        if l == label::SCALPEL {
-            let (i, j) = (k % w, k / w);
-            lo = (lo.0.min(i), lo.1.min(j));
-            hi = (hi.0.max(i), hi.1.max(j));
-        }
-    }
-    if lo.0 > hi.0 {
+    // Cells projecting outside the scalpel pixels' box are skipped after one projection.
+    if scalpel.is_empty() {
         return;
     }
+    let PixelBox { lo, hi } = *scalpel;
     let f = cam.fx.max(cam.fy);
     // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
     // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
@@ -766,14 +788,9 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
 fn thin_labels(view: ViewInput, hull: &Occupancy) -> GrayImage {
     let cam = view.camera;
     let radius = cam.distortion.monotonic_radius();
-    let mut out = view.mask.clone();
+    let mut out = all_hand(view.mask);
     let (w, h) = (out.width() as f64, out.height() as f64);
     let stride = out.width() as usize;
-    for p in out.iter_mut() {
-        if *p != label::BACKGROUND {
-            *p = label::HAND;
-        }
-    }
     let raw = out.as_mut();
     for c in hull.cells.iter().filter(|c| c.scalpel) {
         let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
@@ -1372,7 +1389,8 @@ mod tests {
             let hints = GrayImage::new(100, 100);
             let cells = HandCells::new(vec![cell], Vec::new());
             let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
-            clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
+            let scalpel = PixelBox::of(&labels, label::SCALPEL);
+            clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
             assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
             assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool the band is the hand's");
             assert_eq!(labels.get_pixel(45, 45).0[0], label::SCALPEL, "the cell's disc is a few pixels wide");
@@ -1383,7 +1401,8 @@ mod tests {
         let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(Vec::new(), vec![cell]);
         let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
-        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
+        let scalpel = PixelBox::of(&labels, label::SCALPEL);
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL, "where the tool is drawn");
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool");
         // Without the tool's depth every cell may be in front.
@@ -1391,7 +1410,8 @@ mod tests {
         let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(vec![cell], Vec::new());
         let hand = HandInFront { hand: &cells, tool: None, margin: 0.003 };
-        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
+        let scalpel = PixelBox::of(&labels, label::SCALPEL);
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::HAND);
         // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
@@ -1399,7 +1419,8 @@ mod tests {
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
         let cells = HandCells::new(vec![cell], Vec::new());
         let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
-        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw());
+        let scalpel = PixelBox::of(&labels, label::SCALPEL);
+        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
     }
@@ -1502,10 +1523,11 @@ mod tests {
                 }
             }
         }
+        let scalpel = PixelBox::of(&labels, label::SCALPEL);
         let judged = |cells: &HandCells| {
             let mut out = labels.clone();
             let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003 };
-            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160]);
+            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160], &scalpel);
             out
         };
         let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];
