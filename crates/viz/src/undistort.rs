@@ -7,13 +7,61 @@ use nalgebra::{Point2, Vector2};
 
 /// For each pixel of the ideal (undistorted) image, where to read in the distorted image.
 ///
-/// Build once per camera and reuse: it holds one source position per pixel.
+/// Build once per camera and reuse: it holds one source tap (8 bytes) per pixel.
 #[derive(Debug, Clone)]
 pub struct UndistortMap {
     width: u32,
     height: u32,
-    /// Source pixel (u, v) per destination pixel, row-major; NaN where it falls outside.
-    source: Vec<[f32; 2]>,
+    /// Source tap per destination pixel, row-major.
+    source: Vec<Tap>,
+}
+
+/// Where one destination pixel reads: the source pixel at the top left of its bilinear 2x2
+/// (`NONE` where it falls outside the image) and its position within it in 1/256 of a pixel, with
+/// the steps to the right and down (0 at the image's last column or row) and the nearest of the
+/// four.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Tap {
+    /// Index of the top-left source pixel.
+    base: u32,
+    /// Weight of the right column, 1/256.
+    fu: u8,
+    /// Weight of the bottom row, 1/256.
+    fv: u8,
+    /// [`Tap::RIGHT`], [`Tap::DOWN`]: the 2x2 goes right and down; [`Tap::NEAR_RIGHT`],
+    /// [`Tap::NEAR_DOWN`]: the nearest pixel is to the right of or below the top left one.
+    flags: u8,
+}
+
+impl Tap {
+    const NONE: u32 = u32::MAX;
+    const RIGHT: u8 = 1;
+    const DOWN: u8 = 2;
+    const NEAR_RIGHT: u8 = 4;
+    const NEAR_DOWN: u8 = 8;
+
+    /// The tap of source position (`u`, `v`) in a `w` x `h` image (inside it).
+    fn new(u: f64, v: f64, w: usize, h: usize) -> Tap {
+        let (i0, j0) = ((u.floor().max(0.0) as usize).min(w - 1), (v.floor().max(0.0) as usize).min(h - 1));
+        let (fu, fv) = ((u - i0 as f64).clamp(0.0, 1.0), (v - j0 as f64).clamp(0.0, 1.0));
+        let (ni, nj) = ((u.round().max(0.0) as usize).min(w - 1), (v.round().max(0.0) as usize).min(h - 1));
+        let mut flags = 0;
+        if i0 + 1 < w {
+            flags |= Tap::RIGHT;
+        }
+        if j0 + 1 < h {
+            flags |= Tap::DOWN;
+        }
+        if ni > i0 {
+            flags |= Tap::NEAR_RIGHT;
+        }
+        if nj > j0 {
+            flags |= Tap::NEAR_DOWN;
+        }
+        // A weight of 256/256 only where the 2x2 cannot step on (u at the last column).
+        let q = |f: f64| (f * 256.0).round().min(255.0) as u8;
+        Tap { base: u32::try_from(j0 * w + i0).unwrap_or(Tap::NONE), fu: q(fu), fv: q(fv), flags }
+    }
 }
 
 impl UndistortMap {
@@ -27,7 +75,13 @@ impl UndistortMap {
                 let xn: Vector2<f64> = camera.pixel_to_normalized(Point2::new(f64::from(i), f64::from(j)));
                 let uv = camera.normalized_to_pixel(camera.distortion.distort(xn));
                 let ok = xn.norm() < limit && camera.contains_pixel(uv);
-                source.push(if ok { [uv.x as f32, uv.y as f32] } else { [f32::NAN; 2] });
+                // Positions rounded to f32 as before, so that the nearest pixel is the same.
+                let (u, v) = (f64::from(uv.x as f32), f64::from(uv.y as f32));
+                source.push(if ok {
+                    Tap::new(u, v, w as usize, h as usize)
+                } else {
+                    Tap { base: Tap::NONE, fu: 0, fv: 0, flags: 0 }
+                });
             }
         }
         UndistortMap { width: w, height: h, source }
@@ -61,26 +115,27 @@ impl UndistortMap {
         }
         out.clear();
         out.resize(pixels.len(), 0);
-        let at = |i: usize, j: usize, c: usize| f32::from(pixels[(j * w + i) * channels + c]);
-        for (k, &[u, v]) in self.source.iter().enumerate() {
-            if u.is_nan() {
+        let row = w * channels;
+        for (tap, dst) in self.source.iter().zip(out.chunks_exact_mut(channels)) {
+            if tap.base == Tap::NONE {
                 continue;
             }
-            let dst = &mut out[k * channels..(k + 1) * channels];
+            let a = tap.base as usize * channels;
             if interpolate {
-                let (i0, j0) = ((u.floor().max(0.0) as usize).min(w - 1), (v.floor().max(0.0) as usize).min(h - 1));
-                let (i1, j1) = ((i0 + 1).min(w - 1), (j0 + 1).min(h - 1));
-                let (fu, fv) = ((u - i0 as f32).clamp(0.0, 1.0), (v - j0 as f32).clamp(0.0, 1.0));
+                // Fixed point: weights in 1/256 per axis, the sum rounded back to 8 bits.
+                let right = if tap.flags & Tap::RIGHT != 0 { channels } else { 0 };
+                let down = if tap.flags & Tap::DOWN != 0 { row } else { 0 };
+                let (fu, fv) = (u32::from(tap.fu), u32::from(tap.fv));
                 for (c, d) in dst.iter_mut().enumerate() {
-                    let top = at(i0, j0, c) * (1.0 - fu) + at(i1, j0, c) * fu;
-                    let bottom = at(i0, j1, c) * (1.0 - fu) + at(i1, j1, c) * fu;
-                    *d = (top * (1.0 - fv) + bottom * fv).round() as u8;
+                    let p = |k: usize| u32::from(pixels[a + k + c]);
+                    let top = p(0) * (256 - fu) + p(right) * fu;
+                    let bottom = p(down) * (256 - fu) + p(down + right) * fu;
+                    *d = ((top * (256 - fv) + bottom * fv + (1 << 15)) >> 16) as u8;
                 }
             } else {
-                let (i, j) = ((u.round().max(0.0) as usize).min(w - 1), (v.round().max(0.0) as usize).min(h - 1));
-                for (c, d) in dst.iter_mut().enumerate() {
-                    *d = pixels[(j * w + i) * channels + c];
-                }
+                let right = if tap.flags & Tap::NEAR_RIGHT != 0 { channels } else { 0 };
+                let down = if tap.flags & Tap::NEAR_DOWN != 0 { row } else { 0 };
+                dst.copy_from_slice(&pixels[a + right + down..a + right + down + channels]);
             }
         }
         true
@@ -108,5 +163,53 @@ mod tests {
         assert!(out.iter().all(|v| [0u8, 1, 2].contains(v)));
         // Barrel distortion pulls the edges in: undistorting moves the centre column outward.
         assert_ne!(out, labels);
+    }
+
+    /// The fixed-point remap against the same sampling in floating point: bilinear within one
+    /// grey level, nearest exact, on a distorted camera and random pixels of three channels.
+    #[test]
+    fn fixed_point_taps_sample_as_floating_point_does() {
+        let mut cam = Camera::new("c", 97, 61, 70.0, 72.0, 47.3, 30.8);
+        cam.distortion = Distortion { k1: -0.25, k2: 0.06, p1: 1e-3, p2: -5e-4, k3: 0.0 };
+        let (w, h, channels) = (97usize, 61usize, 3usize);
+        let mut seed = 7u64;
+        let pixels: Vec<u8> = (0..w * h * channels)
+            .map(|_| {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (seed >> 56) as u8
+            })
+            .collect();
+        let map = UndistortMap::new(&cam);
+        let bilinear = map.remap(&pixels, channels, true).unwrap_or_default();
+        let nearest = map.remap(&pixels, channels, false).unwrap_or_default();
+        let limit = cam.distortion.monotonic_radius();
+        let at = |i: usize, j: usize, c: usize| f32::from(pixels[(j * w + i) * channels + c]);
+        let (mut sampled, mut worst) = (0, 0i32);
+        for j in 0..h {
+            for i in 0..w {
+                let xn = cam.pixel_to_normalized(Point2::new(i as f64, j as f64));
+                let uv = cam.normalized_to_pixel(cam.distortion.distort(xn));
+                let k = (j * w + i) * channels;
+                if !(xn.norm() < limit && cam.contains_pixel(uv)) {
+                    assert!(bilinear[k..k + channels].iter().chain(&nearest[k..k + channels]).all(|&p| p == 0));
+                    continue;
+                }
+                sampled += 1;
+                let (u, v) = (uv.x as f32, uv.y as f32);
+                let (i0, j0) = ((u.floor().max(0.0) as usize).min(w - 1), (v.floor().max(0.0) as usize).min(h - 1));
+                let (i1, j1) = ((i0 + 1).min(w - 1), (j0 + 1).min(h - 1));
+                let (fu, fv) = ((u - i0 as f32).clamp(0.0, 1.0), (v - j0 as f32).clamp(0.0, 1.0));
+                let (ni, nj) = ((u.round().max(0.0) as usize).min(w - 1), (v.round().max(0.0) as usize).min(h - 1));
+                for c in 0..channels {
+                    let top = at(i0, j0, c) * (1.0 - fu) + at(i1, j0, c) * fu;
+                    let bottom = at(i0, j1, c) * (1.0 - fu) + at(i1, j1, c) * fu;
+                    let expected = (top * (1.0 - fv) + bottom * fv).round() as i32;
+                    worst = worst.max((i32::from(bilinear[k + c]) - expected).abs());
+                    assert_eq!(nearest[k + c], pixels[(nj * w + ni) * channels + c], "pixel ({i}, {j})");
+                }
+            }
+        }
+        assert!(sampled > w * h / 2, "{sampled} pixels sampled");
+        assert!(worst <= 1, "bilinear off by {worst} grey levels");
     }
 }
