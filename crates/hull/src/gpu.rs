@@ -424,7 +424,8 @@ impl GpuCarver {
         let mut table: Vec<u32> = Vec::new();
         let mut cams = Vec::with_capacity(present.len());
         for s in &present {
-            let Some((entries, stride)) = s.table() else {
+            let offset = table.len() / 3;
+            let Some(stride) = s.extend_whole_table(&mut table) else {
                 return Err(HullError::Gpu(
                     "a silhouette without summed-area tables cannot be carved on the GPU".into(),
                 ));
@@ -445,13 +446,12 @@ impl GpuCarver {
                     cam.height as f32,
                 ],
                 table: [
-                    (table.len() / 3) as u32,
+                    offset as u32,
                     stride as u32,
                     u32::from(s.field_radius().is_some()),
                     (s.curvature() as f32).to_bits(),
                 ],
             });
-            table.extend(entries.iter().flatten());
         }
         let tables = self.tables.with_room(gpu, "silhouette tables", 4 * table.len() as u64)?;
         gpu.queue.write_buffer(tables, 0, bytemuck::cast_slice(&table));

@@ -90,12 +90,14 @@ pub struct Silhouette {
 /// How a [`Silhouette`] counts the labels in a rectangle.
 #[derive(Debug, Clone)]
 enum Store {
-    /// `(w + 1) × (h + 1)` entries of (hand, scalpel, unknown) counts, interleaved so that a
-    /// rectangle query touches four cache lines, not twelve; `blocks` counts the foreground
-    /// pixels per block of `BLOCK`² pixels, as a summed-area table over blocks
-    /// (`(w / BLOCK + 2)` columns): small enough to stay in cache, so that a footprint over
-    /// background (most of them) is settled without touching `table`.
-    Summed { stride: usize, table: Vec<[u32; 3]>, blocks: Vec<u32>, block_stride: usize },
+    /// Summed-area tables over `window`, the box of the mask's foreground (nothing outside it
+    /// but background, so a rectangle's counts are those of its part inside the window): `table`
+    /// has `(window width + 1) × (window height + 1)` entries of (hand, scalpel, unknown) counts,
+    /// interleaved so that a rectangle query touches four cache lines, not twelve; `blocks` counts
+    /// the foreground pixels per block of `BLOCK`² pixels of the window, as a summed-area table
+    /// over blocks (`block_stride` columns): small enough to stay in cache, so that a footprint
+    /// over background (most of them) is settled without touching `table`.
+    Summed { window: Window, stride: usize, table: Vec<[u32; 3]>, blocks: Vec<u32>, block_stride: usize },
     /// The mask's labels, counted pixel by pixel over each rectangle asked for.
     Direct { width: usize, labels: Vec<u8> },
 }
@@ -103,17 +105,56 @@ enum Store {
 /// Side of the blocks of [`Silhouette`]'s coarse table, pixels.
 const BLOCK: usize = 8;
 
+/// The pixel box `[x0, x0 + w) × [y0, y0 + h)` a summed-area table covers (empty: `w` or `h` 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Window {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+}
+
+impl Window {
+    /// The box of the pixels of `raw` (rows of `w`) that are not background.
+    fn of_foreground(raw: &[u8], w: usize) -> Window {
+        let (mut lo, mut hi, mut rows) = (usize::MAX, 0, None::<(usize, usize)>);
+        for (j, row) in raw.chunks_exact(w.max(1)).enumerate() {
+            let Some(first) = row.iter().position(|&p| p != label::BACKGROUND) else { continue };
+            let last = row.iter().rposition(|&p| p != label::BACKGROUND).unwrap_or(first);
+            lo = lo.min(first);
+            hi = hi.max(last);
+            rows = Some((rows.map_or(j, |r| r.0), j));
+        }
+        match rows {
+            Some((j0, j1)) => Window { x0: lo, y0: j0, w: hi + 1 - lo, h: j1 + 1 - j0 },
+            None => Window { x0: 0, y0: 0, w: 0, h: 0 },
+        }
+    }
+
+    /// The part of the inclusive rectangle `[i0, i1] × [j0, j1]` inside the window, in window
+    /// coordinates (inclusive); `None` when they do not meet.
+    #[inline]
+    fn clip(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Option<(usize, usize, usize, usize)> {
+        let (a0, b0) = (i0.max(self.x0), j0.max(self.y0));
+        let (a1, b1) = (i1.min((self.x0 + self.w).checked_sub(1)?), j1.min((self.y0 + self.h).checked_sub(1)?));
+        (a0 <= a1 && b0 <= b1).then(|| (a0 - self.x0, b0 - self.y0, a1 - self.x0, b1 - self.y0))
+    }
+}
+
 impl Silhouette {
     /// Builds the tables of a mask taken by `camera` (sizes must agree; the caller checks).
     pub fn new(camera: &Camera, mask: &GrayImage) -> Self {
-        let (w, h) = (mask.width() as usize, mask.height() as usize);
-        let stride = w + 1;
-        let mut table = vec![[0u32; 3]; stride * (h + 1)];
+        let w = mask.width() as usize;
         let raw = mask.as_raw();
-        for j in 0..h {
+        // Only the foreground's box is tabled: a hand and a tool fill a fraction of the image.
+        let window = Window::of_foreground(raw, w);
+        let stride = window.w + 1;
+        let mut table = vec![[0u32; 3]; stride * (window.h + 1)];
+        for j in 0..window.h {
             let mut row = [0u32; 3];
-            for i in 0..w {
-                match raw[j * w + i] {
+            let start = (window.y0 + j) * w + window.x0;
+            for (i, &p) in raw[start..start + window.w].iter().enumerate() {
+                match p {
                     label::BACKGROUND => {}
                     label::HAND => row[0] += 1,
                     label::SCALPEL => row[1] += 1,
@@ -123,14 +164,14 @@ impl Silhouette {
                 table[(j + 1) * stride + i + 1] = [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
             }
         }
-        let (bw, bh) = (w.div_ceil(BLOCK), h.div_ceil(BLOCK));
+        let (bw, bh) = (window.w.div_ceil(BLOCK), window.h.div_ceil(BLOCK));
         let block_stride = bw + 1;
         let mut blocks = vec![0u32; block_stride * (bh + 1)];
         for bj in 0..bh {
             let mut row = 0u32;
             for bi in 0..bw {
                 let (i0, j0) = (bi * BLOCK, bj * BLOCK);
-                let (i1, j1) = ((i0 + BLOCK).min(w) - 1, (j0 + BLOCK).min(h) - 1);
+                let (i1, j1) = ((i0 + BLOCK).min(window.w) - 1, (j0 + BLOCK).min(window.h) - 1);
                 let at = |i: usize, j: usize| table[j * stride + i];
                 let (a, b, c, d) = (at(i1 + 1, j1 + 1), at(i0, j0), at(i1 + 1, j0), at(i0, j1 + 1));
                 let fg: u32 = (0..3).map(|k| a[k] + b[k] - c[k] - d[k]).sum();
@@ -138,7 +179,7 @@ impl Silhouette {
                 blocks[(bj + 1) * block_stride + bi + 1] = blocks[bj * block_stride + bi + 1] + row;
             }
         }
-        Self::with_store(camera, Store::Summed { stride, table, blocks, block_stride })
+        Self::with_store(camera, Store::Summed { window, stride, table, blocks, block_stride })
     }
 
     /// A silhouette that counts labels by visiting the mask's pixels in each rectangle asked
@@ -182,14 +223,23 @@ impl Silhouette {
         self.monotonic_radius
     }
 
-    /// The summed-area table (`(w + 1) × (h + 1)` entries of hand, scalpel, unknown counts, row
-    /// by row) and its row stride; `None` for a [`Silhouette::direct`] one.
+    /// Appends the image's whole summed-area table (`(w + 1) × (h + 1)` entries of hand,
+    /// scalpel, unknown counts, row by row, flattened) to `out` and returns its row stride;
+    /// `None` for a [`Silhouette::direct`] one. Built from the foreground's window: outside it
+    /// every count is the window's nearest edge entry (nothing but background there).
     #[cfg(feature = "gpu")]
-    pub(crate) fn table(&self) -> Option<(&[[u32; 3]], usize)> {
-        match &self.store {
-            Store::Summed { table, stride, .. } => Some((table, *stride)),
-            Store::Direct { .. } => None,
+    pub(crate) fn extend_whole_table(&self, out: &mut Vec<u32>) -> Option<usize> {
+        let Store::Summed { window, stride, table, .. } = &self.store else { return None };
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        out.reserve(3 * (w + 1) * (h + 1));
+        for j in 0..=h {
+            let b = j.saturating_sub(window.y0).min(window.h);
+            for i in 0..=w {
+                let a = i.saturating_sub(window.x0).min(window.w);
+                out.extend_from_slice(&table[b * stride + a]);
+            }
         }
+        Some(w + 1)
     }
 
     /// Whether the blocks covering the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside
@@ -197,7 +247,8 @@ impl Silhouette {
     /// a [`Silhouette::direct`] one: its counts tell).
     #[inline]
     pub fn may_have_foreground(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> bool {
-        let Store::Summed { blocks: b, block_stride: s, .. } = &self.store else { return true };
+        let Store::Summed { window, blocks: b, block_stride: s, .. } = &self.store else { return true };
+        let Some((i0, j0, i1, j1)) = window.clip(i0, j0, i1, j1) else { return false };
         let (b0, c0, b1, c1) = (i0 / BLOCK, j0 / BLOCK, i1 / BLOCK + 1, j1 / BLOCK + 1);
         b[c1 * s + b1] + b[c0 * s + b0] != b[c0 * s + b1] + b[c1 * s + b0]
     }
@@ -206,7 +257,10 @@ impl Silhouette {
     pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
         let total = ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32;
         match &self.store {
-            Store::Summed { stride: s, table, .. } => {
+            Store::Summed { window, stride: s, table, .. } => {
+                let Some((i0, j0, i1, j1)) = window.clip(i0, j0, i1, j1) else {
+                    return Counts { total, ..Counts::default() };
+                };
                 let (a, b, c, d) = (
                     table[(j1 + 1) * s + i1 + 1],
                     table[j0 * s + i0],
@@ -229,6 +283,69 @@ impl Silhouette {
                     }
                 }
                 counts
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `w`×`h` mask with a few labelled pixels at the given places (hand, scalpel, unknown in
+    /// turn), and the camera it belongs to.
+    fn mask_with(w: u32, h: u32, at: &[(u32, u32)]) -> (Camera, GrayImage) {
+        let mut m = GrayImage::new(w, h);
+        for (n, &(i, j)) in at.iter().enumerate() {
+            m.put_pixel(i, j, image::Luma([[label::HAND, label::SCALPEL, label::UNKNOWN][n % 3]]));
+        }
+        (Camera::new("c", w, h, 50.0, 50.0, f64::from(w) / 2.0, f64::from(h) / 2.0), m)
+    }
+
+    /// The tables cover the foreground's box only; every rectangle of the image, inside it,
+    /// across its edges or away from it, counts what the mask holds there, and the blocks never
+    /// rule out a rectangle that holds foreground.
+    #[test]
+    fn tables_over_the_foregrounds_box_count_as_the_whole_image() {
+        let cases: [&[(u32, u32)]; 4] =
+            [&[(7, 5), (9, 5), (8, 11), (20, 14), (13, 9)], &[(0, 0), (30, 20)], &[(30, 3)], &[]];
+        for at in cases {
+            let (camera, mask) = mask_with(31, 21, at);
+            let tabled = Silhouette::new(&camera, &mask);
+            let direct = Silhouette::direct(&camera, mask.clone());
+            for j0 in 0..21 {
+                for i0 in (0..31).step_by(3) {
+                    for (di, dj) in [(0, 0), (2, 1), (5, 7), (30, 20)] {
+                        let (i1, j1) = ((i0 + di).min(30), (j0 + dj).min(20));
+                        let counts = tabled.counts(i0, j0, i1, j1);
+                        assert_eq!(counts, direct.counts(i0, j0, i1, j1), "{at:?}: [{i0}, {i1}] x [{j0}, {j1}]");
+                        if counts.foreground() > 0 {
+                            assert!(tabled.may_have_foreground(i0, j0, i1, j1), "{at:?}: [{i0}, {i1}] x [{j0}, {j1}]");
+                        }
+                    }
+                }
+            }
+            if let Store::Summed { window, .. } = &tabled.store {
+                let expected = if at.is_empty() { 0 } else { at.len() };
+                assert!(window.w * window.h >= expected, "{window:?}");
+            }
+        }
+    }
+
+    /// The whole-image table handed to the GPU equals one built over the whole image.
+    #[cfg(feature = "gpu")]
+    #[test]
+    fn the_whole_table_rebuilt_from_the_window_is_the_whole_images() {
+        let (camera, mask) = mask_with(31, 21, &[(7, 5), (9, 5), (8, 11), (20, 14), (13, 9)]);
+        let mut out = Vec::new();
+        let stride = Silhouette::new(&camera, &mask).extend_whole_table(&mut out);
+        assert_eq!(stride, Some(32));
+        let direct = Silhouette::direct(&camera, mask);
+        for j in 0..=21usize {
+            for i in 0..=31usize {
+                let c = if i == 0 || j == 0 { Counts::default() } else { direct.counts(0, 0, i - 1, j - 1) };
+                let k = 3 * (j * 32 + i);
+                assert_eq!(out[k..k + 3], [c.hand, c.scalpel, c.unknown], "entry ({i}, {j})");
             }
         }
     }
