@@ -78,7 +78,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// world/tool/{estimate,truth} and the swept blade surface under world/tissue/cut; the pieces'
 /// surfaces (cut faces included) under world/tissue/surface whenever they changed (a cut, or a
 /// vertex moved by more than 0.2 mm); stage timings under metrics/time/STAGE and accuracy under
-/// metrics/accuracy/NAME, on the `frame` and `capture_time` timelines (a file of more than 3,600
+/// metrics/accuracy/NAME; when segmenting, where each frame set's labels came from under
+/// labelling/source and the learned colours under metrics/appearance/LABEL/{colour,pixels}; on
+/// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
 /// fps, latency, each stage against its 60 fps budget, pose accuracy where the dataset has truth,

@@ -34,7 +34,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// Writes: OUT/masks/CAM/NNNNNN.png with --out; REPORT (JSON: foreground method per camera, the
 /// frame sets labelled by geometry, by colour or left unknown, the learned colours, IoU,
 /// precision and recall per label, timings per frame set) with --report; an .rrd (images and
-/// predicted masks under world/cams/NAME every --rrd-every frames) with --rrd.
+/// predicted masks under world/cams/NAME, where the labels came from under labelling/source and
+/// the learned colours under metrics/appearance/LABEL/{colour,pixels}, every --rrd-every frames)
+/// with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
