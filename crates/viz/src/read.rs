@@ -9,7 +9,7 @@ use rerun::log::{Chunk, LogMsg};
 use crate::VizError;
 
 /// Every entity path an `.rrd` file logs data to (e.g. `/world/tissue/surface`), read with
-/// rerun's own decoder.
+/// rerun's own decoder; an error for a file that is not a recording (or holds no message).
 pub fn rrd_entities(path: &Path) -> Result<BTreeSet<String>, VizError> {
     let mut entities = BTreeSet::new();
     for_each_chunk(path, |chunk| {
@@ -34,10 +34,13 @@ fn for_each_chunk(path: &Path, mut f: impl FnMut(&Chunk)) -> Result<(), VizError
     let read = |message: String| VizError::Read { path: path.display().to_string(), message };
     let file = std::fs::File::open(path).map_err(|e| read(e.to_string()))?;
     let messages = DecoderApp::decode_eager(std::io::BufReader::new(file)).map_err(|e| read(e.to_string()))?;
+    let mut any = false;
     for message in messages {
+        any = true;
         if let LogMsg::ArrowMsg(_, arrow) = message.map_err(|e| read(e.to_string()))? {
             f(&Chunk::from_arrow_msg(&arrow).map_err(|e| read(e.to_string()))?);
         }
     }
-    Ok(())
+    // A recording holds its store's description at least: nothing at all is not one.
+    if any { Ok(()) } else { Err(read("no rerun message in it (empty, or not a recording)".to_owned())) }
 }
