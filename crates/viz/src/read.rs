@@ -1,9 +1,10 @@
 //! Reading a recording back: which entities an `.rrd` file holds, for tests and checks.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::io::{Read as _, Seek as _, SeekFrom};
 use std::path::Path;
 
-use rerun::external::re_log_encoding::DecoderApp;
+use rerun::external::re_log_encoding::{DecoderApp, MessageHeader, RRD_FOURCC, StreamFooter, StreamHeader};
 use rerun::log::{Chunk, LogMsg};
 
 use crate::VizError;
@@ -32,8 +33,11 @@ pub fn rrd_timeline_rows(path: &Path) -> Result<BTreeMap<String, usize>, VizErro
 /// Calls `f` with every chunk of an `.rrd` file, decoded by rerun's own decoder.
 fn for_each_chunk(path: &Path, mut f: impl FnMut(&Chunk)) -> Result<(), VizError> {
     let read = |message: String| VizError::Read { path: path.display().to_string(), message };
-    let file = std::fs::File::open(path).map_err(|e| read(e.to_string()))?;
-    let messages = DecoderApp::decode_eager(std::io::BufReader::new(file)).map_err(|e| read(e.to_string()))?;
+    let mut file = std::fs::File::open(path).map_err(|e| read(e.to_string()))?;
+    let whole = whole_frames(&mut file).map_err(|e| read(e.to_string()))?;
+    file.seek(SeekFrom::Start(0)).map_err(|e| read(e.to_string()))?;
+    let messages =
+        DecoderApp::decode_eager(std::io::BufReader::new(file.take(whole))).map_err(|e| read(e.to_string()))?;
     let mut any = false;
     for message in messages {
         any = true;
@@ -43,4 +47,62 @@ fn for_each_chunk(path: &Path, mut f: impl FnMut(&Chunk)) -> Result<(), VizError
     }
     // A recording holds its store's description at least: nothing at all is not one.
     if any { Ok(()) } else { Err(read("no rerun message in it (empty, or not a recording)".to_owned())) }
+}
+
+/// How many leading bytes of an `.rrd` file hold whole frames: the file up to the first message
+/// whose stated length runs past its end (a recording cut short, or a damaged length that
+/// rerun's decoder would try to allocate whole, up to exabytes), else the whole file. Walks the
+/// framing by its headers (a stream header, then messages of a 16-byte header and their payload,
+/// an end message followed by the stream's footer), reading nothing else; whatever it does not
+/// recognize is left to the decoder.
+fn whole_frames(file: &mut std::fs::File) -> std::io::Result<u64> {
+    let size = file.metadata()?.len();
+    let (stream, header, footer) = (
+        StreamHeader::ENCODED_SIZE_BYTES as u64,
+        MessageHeader::ENCODED_SIZE_BYTES as u64,
+        StreamFooter::ENCODED_SIZE_BYTES as u64,
+    );
+    let mut at = 0u64;
+    loop {
+        // A stream's header.
+        let mut fourcc = [0u8; 4];
+        if size - at < stream {
+            return Ok(size);
+        }
+        file.seek(SeekFrom::Start(at))?;
+        file.read_exact(&mut fourcc)?;
+        if fourcc != RRD_FOURCC {
+            return Ok(size);
+        }
+        at += stream;
+        // Its messages.
+        loop {
+            if size - at < header {
+                return Ok(size);
+            }
+            let mut bytes = [0u8; 16];
+            file.seek(SeekFrom::Start(at))?;
+            file.read_exact(&mut bytes)?;
+            let (kind, len) = (
+                u64::from_le_bytes(bytes[..8].try_into().unwrap_or_default()),
+                u64::from_le_bytes(bytes[8..].try_into().unwrap_or_default()),
+            );
+            if kind > 3 {
+                // Not a message: the decoder looks for another stream here.
+                break;
+            }
+            if len > size - at - header {
+                return Ok(at);
+            }
+            at += header + len;
+            if kind == 0 {
+                // The end of a stream: its footer, then maybe another stream.
+                if size - at < footer {
+                    return Ok(size);
+                }
+                at += footer;
+                break;
+            }
+        }
+    }
 }
