@@ -185,8 +185,9 @@ impl Silhouette {
     /// A silhouette that counts labels by visiting the mask's pixels in each rectangle asked
     /// for, without building tables (sizes must agree; the caller checks): for a mask that is
     /// asked about few, small rectangles (the cells near the tool, the few cells a shadow test
-    /// leaves open), where building the 3.7 MB table of a 640x480 view would cost more than all
-    /// the queries. Counts and verdicts are those of [`Silhouette::new`].
+    /// leaves open), where building the table over the foreground's box (up to 3.7 MB for a
+    /// 640x480 view) would cost more than all the queries. Counts and verdicts are those of
+    /// [`Silhouette::new`].
     pub fn direct(camera: &Camera, mask: GrayImage) -> Self {
         let width = mask.width() as usize;
         Self::with_store(camera, Store::Direct { width, labels: mask.into_raw() })
@@ -325,10 +326,17 @@ mod tests {
                     }
                 }
             }
-            if let Store::Summed { window, .. } = &tabled.store {
-                let expected = if at.is_empty() { 0 } else { at.len() };
-                assert!(window.w * window.h >= expected, "{window:?}");
-            }
+            // The window is the labelled pixels' box exactly (empty without any).
+            let Store::Summed { window, .. } = &tabled.store else { panic!("a tabled silhouette") };
+            let expected = match (at.iter().map(|p| p.0).min(), at.iter().map(|p| p.1).min()) {
+                (Some(x0), Some(y0)) => {
+                    let (x1, y1) =
+                        (at.iter().map(|p| p.0).max().unwrap_or(x0), at.iter().map(|p| p.1).max().unwrap_or(y0));
+                    Window { x0: x0 as usize, y0: y0 as usize, w: (x1 - x0 + 1) as usize, h: (y1 - y0 + 1) as usize }
+                }
+                _ => Window { x0: 0, y0: 0, w: 0, h: 0 },
+            };
+            assert_eq!(*window, expected, "{at:?}");
         }
     }
 

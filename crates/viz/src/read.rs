@@ -56,6 +56,8 @@ fn for_each_chunk(path: &Path, mut f: impl FnMut(&Chunk)) -> Result<(), VizError
 /// an end message followed by the stream's footer), reading nothing else; whatever it does not
 /// recognize is left to the decoder.
 fn whole_frames(file: &mut std::fs::File) -> std::io::Result<u64> {
+    /// rerun 0.36's message kinds are 0 (the end of a stream) to 3; any other is no message.
+    const LAST_MESSAGE_KIND: u64 = 3;
     let size = file.metadata()?.len();
     let (stream, header, footer) = (
         StreamHeader::ENCODED_SIZE_BYTES as u64,
@@ -80,14 +82,15 @@ fn whole_frames(file: &mut std::fs::File) -> std::io::Result<u64> {
             if size - at < header {
                 return Ok(size);
             }
-            let mut bytes = [0u8; 16];
+            // Its kind and its payload's length, little-endian u64 each.
+            let mut bytes = [0u8; MessageHeader::ENCODED_SIZE_BYTES];
             file.seek(SeekFrom::Start(at))?;
             file.read_exact(&mut bytes)?;
             let (kind, len) = (
                 u64::from_le_bytes(bytes[..8].try_into().unwrap_or_default()),
-                u64::from_le_bytes(bytes[8..].try_into().unwrap_or_default()),
+                u64::from_le_bytes(bytes[8..16].try_into().unwrap_or_default()),
             );
-            if kind > 3 {
+            if kind > LAST_MESSAGE_KIND {
                 // Not a message: the decoder looks for another stream here.
                 break;
             }
