@@ -43,6 +43,17 @@ const SHARPEN_LOG_RATIO: f64 = 3.0;
 /// nor the tool has (a shadow on a green mat kept beside the blade) is likelier under the broader
 /// class, but decides nothing.
 const SURE_MAHALANOBIS2: f64 = 11.34;
+/// The fit's hand hints are given only while the sure colours call at most this share of the
+/// drawn blade's pixels the hand's (on the frame sets learned from): above it, the blade looks
+/// like the hand to them (a thin steel blade, eroded away as too thin to learn from, beside a
+/// handle of another colour), and a hint would hide the blade from the fit, which then never
+/// takes hold again. Measured (`hullcut segment`): random:59 in random:101, where the hints keep
+/// the track, 0.1-0.3%; the pointed tool in random:137 17% from its first learned frame set, in
+/// random:271 64%.
+const TOOL_AS_HAND_MAX: f64 = 0.1;
+/// How much of the drawn tool's tally each learned frame set keeps of the one before (the
+/// appearance model forgets at the same pace).
+const TOOL_AS_HAND_KEEP: f64 = 0.97;
 /// A view's foreground is degraded when it is this many times its usual (the median over its
 /// last [`DEGRADED_HISTORY`] frame sets)...
 const DEGRADED_JUMP: f64 = 3.0;
@@ -161,6 +172,20 @@ pub struct LabelCounters {
     /// Views whose foreground jumped far above their usual (someone behind the table, a light
     /// switched on): their foreground was cut to what the hull explains, the frame set kept.
     pub degraded_views: u64,
+    /// The share of the drawn blade's pixels (the tool's labels within the blade's outline), on
+    /// the frame sets learned from (recent ones weighing more), that the sure colours call the
+    /// hand's.
+    #[serde(default)]
+    pub tool_as_hand: f64,
+    /// Whether the tool's fit gets hints where a colour is surely the hand's (while
+    /// `tool_as_hand` is at most 0.1: above it the colours would hide the blade from the fit).
+    #[serde(default = "yes")]
+    pub hand_hints: bool,
+}
+
+/// Reports written before `hand_hints` was counted gave the fit its hand hints throughout.
+fn yes() -> bool {
+    true
 }
 
 /// What the labelling of a run did, for its report.
@@ -237,6 +262,9 @@ pub struct Labelling {
     /// The sharpening colours where sure and their class also explains them
     /// ([`SURE_MAHALANOBIS2`]): they sharpen the labels near the drawn tool.
     explained: Option<ColourLut>,
+    /// The drawn blade's pixels on the frame sets learned from, and those of them the sure colours
+    /// call the hand's (with forgetting): whether the fit gets hand hints ([`TOOL_AS_HAND_MAX`]).
+    tool_as_hand: (f64, f64),
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -330,10 +358,11 @@ impl Labelling {
             colours,
             sure,
             explained,
+            tool_as_hand: (0.0, 0.0),
             hull,
             rig: ds.rig().clone(),
             label_frames: label_frames.to_vec(),
-            counters: LabelCounters::default(),
+            counters: LabelCounters { hand_hints: true, ..LabelCounters::default() },
             masks: Vec::new(),
             unresolved: Vec::new(),
             history: Vec::new(),
@@ -393,11 +422,12 @@ impl Labelling {
         // The fit's hints (the learned colours', the possible shadows) are taken before possible
         // shadows become foreground or background.
         let sure = self.sure.as_ref().filter(|_| self.method == LabelMethod::Both);
+        let hand_hints = self.hand_hints();
         let hints: Option<Vec<Option<GrayImage>>> = (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0))
             .then(|| {
                 fg.par_iter()
                     .zip(set.views.par_iter())
-                    .map(|(m, view)| Some(fit_hints(sure, &view.as_ref()?.image, m.as_ref()?)))
+                    .map(|(m, view)| Some(fit_hints(sure, hand_hints, &view.as_ref()?.image, m.as_ref()?)))
                     .collect()
             });
         let clock = Instant::now();
@@ -493,10 +523,12 @@ impl Labelling {
             };
             // The colours that label and hint are learned from the labels sharpened wherever a
             // colour is surely the likelier, the sharpening colours from the labels handed out.
+            let pose = estimate.fitted.as_ref().map(|f| f.tool_to_world);
             let likelier = learns.then(|| {
-                let mut masks = labelled.masks.clone();
+                let drawn = (labelled.masks.clone(), pose);
+                let mut masks = drawn.0.clone();
                 sharpen_all(&mut masks, self.sure.as_ref());
-                masks
+                (masks, drawn)
             });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_ref());
@@ -517,9 +549,12 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some(likelier) = learn_from {
+        if let Some((likelier, drawn)) = learn_from {
             // Only a trusted fit's labels teach: `masks` are the labels handed out.
             self.learn(set, &likelier, &masks);
+            if let (drawn, Some(pose)) = drawn {
+                self.judge_hand_hints(set, &drawn, &pose);
+            }
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
@@ -683,6 +718,42 @@ impl Labelling {
         }
     }
 
+    /// Tallies how much of a learned frame set's drawn blade (`drawn`, its geometric labels
+    /// before any colour sharpened them, within the blade's outline at `pose`) the sure colours,
+    /// as just learned, call the hand's.
+    fn judge_hand_hints(&mut self, set: &FrameSet, drawn: &[Option<GrayImage>], pose: &nalgebra::Isometry3<f64>) {
+        let (Some(sure), Some(labeller)) = (&self.sure, &self.tool) else { return };
+        let (blade, hand) = set
+            .views
+            .par_iter()
+            .zip(drawn)
+            .zip(&self.rig.cameras)
+            .map(|((view, mask), camera)| match (view, mask) {
+                (Some(view), Some(mask)) if view.image.dimensions() == mask.dimensions() => {
+                    let outline = labeller.blade_outline(camera, pose);
+                    blade_as_hand(sure, &view.image, mask, &outline)
+                }
+                _ => (0, 0),
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let (b, h) = self.tool_as_hand;
+        self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + blade as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
+        self.counters.tool_as_hand = self.tool_as_hand_share();
+        self.counters.hand_hints = self.hand_hints();
+    }
+
+    /// The share of the drawn blade the sure colours call the hand's (0 before any was drawn).
+    fn tool_as_hand_share(&self) -> f64 {
+        let (tool, hand) = self.tool_as_hand;
+        if tool > 0.0 { hand / tool } else { 0.0 }
+    }
+
+    /// Whether the fit gets hand hints: while the sure colours call little of the drawn blade the
+    /// hand's ([`TOOL_AS_HAND_MAX`]).
+    fn hand_hints(&self) -> bool {
+        self.tool_as_hand_share() <= TOOL_AS_HAND_MAX
+    }
+
     /// What the labelling did so far.
     pub fn report(&self) -> LabellingReport {
         LabellingReport {
@@ -729,12 +800,49 @@ fn compile_explained(classes: Option<ColourClasses>) -> Option<ColourLut> {
     Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO))
 }
 
+/// The drawn scalpel pixels of `mask` inside the convex `outline` (counter-clockwise pixels), and
+/// how many of them `sure` calls the hand's.
+fn blade_as_hand(
+    sure: &ColourLut,
+    image: &image::RgbImage,
+    mask: &GrayImage,
+    outline: &[nalgebra::Point2<f64>],
+) -> (u64, u64) {
+    if outline.len() < 3 {
+        return (0, 0);
+    }
+    let (w, h) = (f64::from(mask.width()), f64::from(mask.height()));
+    let lo = outline.iter().fold((f64::MAX, f64::MAX), |a, p| (a.0.min(p.x), a.1.min(p.y)));
+    let hi = outline.iter().fold((f64::MIN, f64::MIN), |a, p| (a.0.max(p.x), a.1.max(p.y)));
+    let (x0, y0) = (lo.0.floor().max(0.0), lo.1.floor().max(0.0));
+    let (x1, y1) = (hi.0.ceil().min(w - 1.0), hi.1.ceil().min(h - 1.0));
+    if !(x1 >= x0 && y1 >= y0) {
+        return (0, 0);
+    }
+    let inside = |q: nalgebra::Point2<f64>| {
+        outline.iter().zip(outline.iter().cycle().skip(1)).all(|(a, b)| (b - a).perp(&(q - a)) >= 0.0)
+    };
+    let (mut blade, mut hand) = (0, 0);
+    for y in y0 as u32..=y1 as u32 {
+        for x in x0 as u32..=x1 as u32 {
+            if mask.get_pixel(x, y).0[0] == label::SCALPEL && inside(nalgebra::Point2::new(f64::from(x), f64::from(y)))
+            {
+                blade += 1;
+                hand += u64::from(sure.get(image.get_pixel(x, y).0) == label::HAND);
+            }
+        }
+    }
+    (blade, hand)
+}
+
 /// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
 /// decides ([`label::UNKNOWN`] where it does not, or without colours), and a possible shadow
 /// ([`SHADOW_LIKE`]) [`POSSIBLE_SHADOW`], or [`label::HAND`] where its colour is surely the hand's:
 /// its colour is the background's darkened, so it may speak against the tool, never for it;
-/// background elsewhere.
-fn fit_hints(sure: Option<&ColourLut>, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
+/// background elsewhere. Without `hand_hints` ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of
+/// the hand's colour is [`label::UNKNOWN`] (a possible shadow of that colour stays the hand's: it
+/// is no shadow, and the hint only keeps it from the tool's shadows).
+fn fit_hints(sure: Option<&ColourLut>, hand_hints: bool, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
     let mut out = GrayImage::new(mask.width(), mask.height());
     if image.dimensions() != mask.dimensions() {
         return out;
@@ -744,7 +852,10 @@ fn fit_hints(sure: Option<&ColourLut>, image: &image::RgbImage, mask: &GrayImage
         if m == SHADOW_LIKE {
             *o = if colour(p) == label::HAND { label::HAND } else { POSSIBLE_SHADOW };
         } else if m != label::BACKGROUND {
-            *o = colour(p);
+            *o = match colour(p) {
+                label::HAND if !hand_hints => label::UNKNOWN,
+                c => c,
+            };
         }
     }
     out
@@ -812,5 +923,59 @@ mod tests {
         assert_eq!(mask.as_raw(), &vec![label::SCALPEL, label::HAND, label::HAND]);
         // Without the test of explanation the broader class would take the shadow.
         assert_eq!(likelier.expect("compiled").get(green_shadow), label::SCALPEL);
+    }
+
+    /// A skin-toned hand and a dark blue handle, learned (the thin steel blade was not).
+    fn skin_and_blue() -> ColourLut {
+        let classes = ColourClasses {
+            classes: vec![
+                ColourClass::from_albedo(label::HAND, [200.0, 150.0, 120.0], (0.3, 1.0), 0.05),
+                ColourClass::from_albedo(label::SCALPEL, [40.0, 60.0, 200.0], (0.3, 1.0), 0.03),
+            ],
+            reject_mahalanobis2: None,
+        };
+        compile(Some(classes)).1.expect("compiled")
+    }
+
+    #[test]
+    fn the_blade_the_sure_colours_call_the_hand_is_counted_inside_its_outline_only() {
+        let sure = skin_and_blue();
+        let (steel, skin, blue) = ([128, 128, 128], [190, 142, 114], [38, 58, 190]);
+        assert_eq!((sure.get(steel), sure.get(skin), sure.get(blue)), (label::HAND, label::HAND, label::SCALPEL));
+        // A 12x8 view: the drawn tool fills rows 2..6 of columns 0..12; steel in columns 6..12,
+        // the blue handle left of it; a finger (hand label) at column 8 on row 3. The blade's
+        // outline is the square from (6, 1) to (10, 6): columns 6..=10.
+        let image = RgbImage::from_fn(12, 8, |x, _| Rgb(if x >= 6 { steel } else { blue }));
+        let mask = GrayImage::from_fn(12, 8, |x, y| {
+            image::Luma([match (x, y) {
+                (8, 3) => label::HAND,
+                (_, 2..6) => label::SCALPEL,
+                _ => label::BACKGROUND,
+            }])
+        });
+        let outline = [(6.0, 1.0), (10.0, 1.0), (10.0, 6.0), (6.0, 6.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
+        // 5 columns by 4 rows of drawn tool, less the finger; every one of them steel.
+        assert_eq!(blade_as_hand(&sure, &image, &mask, &outline), (19, 19));
+        // Fewer than three points outline nothing.
+        assert_eq!(blade_as_hand(&sure, &image, &mask, &outline[..2]), (0, 0));
+        // An outline over the handle counts blade pixels the colours call the tool's.
+        let handle = [(0.0, 2.0), (3.0, 2.0), (3.0, 5.0), (0.0, 5.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
+        assert_eq!(blade_as_hand(&sure, &image, &mask, &handle), (16, 0));
+        // An outline beyond the image counts the part inside it.
+        let wide = [(-5.0, -5.0), (40.0, -5.0), (40.0, 40.0), (-5.0, 40.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
+        assert_eq!(blade_as_hand(&sure, &image, &mask, &wide), (47, 23));
+    }
+
+    #[test]
+    fn without_hand_hints_the_hands_colour_decides_nothing_but_a_shadow() {
+        let sure = skin_and_blue();
+        let (steel, blue, grey) = ([128, 128, 128], [38, 58, 190], [60, 62, 64]);
+        let image = RgbImage::from_fn(4, 1, |x, _| Rgb([steel, blue, steel, grey][x as usize]));
+        let mask = GrayImage::from_raw(4, 1, vec![label::UNKNOWN, label::UNKNOWN, SHADOW_LIKE, label::BACKGROUND])
+            .expect("mask");
+        let with = fit_hints(Some(&sure), true, &image, &mask);
+        assert_eq!(with.as_raw(), &vec![label::HAND, label::SCALPEL, label::HAND, label::BACKGROUND]);
+        let without = fit_hints(Some(&sure), false, &image, &mask);
+        assert_eq!(without.as_raw(), &vec![label::UNKNOWN, label::SCALPEL, label::HAND, label::BACKGROUND]);
     }
 }

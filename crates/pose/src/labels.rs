@@ -203,6 +203,20 @@ impl ToolLabeller {
         &self.tracker
     }
 
+    /// The blade's outline in `camera` with the tool at `tool_to_world`: the convex hull of its
+    /// projected outline (counter-clockwise pixels; fewer than three where it barely projects).
+    pub fn blade_outline(&self, camera: &Camera, tool_to_world: &Isometry3<f64>) -> Vec<Point2<f64>> {
+        let radius = camera.distortion.monotonic_radius();
+        let pixels: Vec<Point2<f64>> = self
+            .tracker
+            .template()
+            .blade
+            .iter()
+            .filter_map(|p| project(camera, radius, &(tool_to_world * p)))
+            .collect();
+        convex_hull(&pixels)
+    }
+
     /// Which cells of `occ` come within `margin` metres of the tool where its track predicts it
     /// at `timestamp_ns` (`None` while the track predicts nothing): cells of an object, whatever
     /// their shading says.
