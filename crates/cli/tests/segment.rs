@@ -45,6 +45,31 @@ fn synth(dir: &Path, rig: &str, look: &str, tool: &str, frames: u32, fps: u32) -
     out
 }
 
+/// The first `frames` frame sets of the resection scene (its own trajectory, 30 fps, seed 1) on
+/// `rig` with `look` and `tool`.
+fn resection(dir: &Path, rig: &str, look: &str, tool: &str, frames: u32) -> PathBuf {
+    let out = dir.join("resect");
+    let frames = frames.to_string();
+    let o = hullcut(&[
+        "synth",
+        "--scene",
+        "resect",
+        "--frames",
+        &frames,
+        "--rig",
+        rig,
+        "--appearance",
+        look,
+        "--tool",
+        tool,
+        "--no-truth-meshes",
+        "--out",
+        &path(&out),
+    ]);
+    assert!(o.status.success(), "synth {rig} {look} {tool}: {}", stderr(&o));
+    out
+}
+
 /// Runs `hullcut segment` with `extra` arguments and returns its report.
 fn segment(dataset: &Path, extra: &[&str]) -> serde_json::Value {
     let report = dataset.with_extension("segment.json");
@@ -141,23 +166,7 @@ fn a_shadow_kept_beside_the_blade_does_not_become_the_tool_by_its_colour() {
     // a colour also sharpened the labels wherever one class was the likelier 0.746, 0.778 and
     // 0.983.
     let dir = tempfile::tempdir().expect("tempdir");
-    let ds = dir.path().join("resect");
-    let o = hullcut(&[
-        "synth",
-        "--scene",
-        "resect",
-        "--frames",
-        "40",
-        "--rig",
-        "random:89",
-        "--appearance",
-        "random:131",
-        "--no-truth-meshes",
-        "--out",
-        &path(&ds),
-    ]);
-    assert!(o.status.success(), "synth: {}", stderr(&o));
-    let r = segment(&ds, &[]);
+    let r = segment(&resection(dir.path(), "random:89", "random:131", "standard", 40), &[]);
     let scalpel = r["accuracy"]["labels"].as_array().expect("labels").iter().find(|l| l["name"] == "scalpel");
     let precision = scalpel.and_then(|l| l["precision"].as_f64()).expect("scalpel precision");
     let got = [iou(&r, "hand"), iou(&r, "scalpel"), precision];
@@ -178,25 +187,7 @@ fn a_blade_the_learned_colours_take_for_the_hand_gets_no_hand_hints() {
     // blade the hand's. On 150 frame sets the fit was trusted in 18 (scalpel IoU 0.599) with hand
     // hints throughout, the hints hiding the blade from it; in 102 (0.636) with this gate.
     let dir = tempfile::tempdir().expect("tempdir");
-    let ds = dir.path().join("resect");
-    let o = hullcut(&[
-        "synth",
-        "--scene",
-        "resect",
-        "--frames",
-        "24",
-        "--rig",
-        "random:97",
-        "--appearance",
-        "random:137",
-        "--tool",
-        "pointed",
-        "--no-truth-meshes",
-        "--out",
-        &path(&ds),
-    ]);
-    assert!(o.status.success(), "synth: {}", stderr(&o));
-    let r = segment(&ds, &[]);
+    let r = segment(&resection(dir.path(), "random:97", "random:137", "pointed", 24), &[]);
     let c = &r["labelling"]["counters"];
     let share = c["tool_as_hand"].as_f64().expect("tool_as_hand");
     assert!(c["hand_hints"] == false && share > 0.1, "{c}");
