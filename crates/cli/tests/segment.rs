@@ -19,55 +19,29 @@ fn path(p: &Path) -> String {
     p.to_str().expect("utf-8").to_owned()
 }
 
+/// `hullcut synth` into `out` on `rig` with `look` and `tool`, without truth meshes, with `extra`
+/// arguments.
+fn synth_into(out: PathBuf, rig: &str, look: &str, tool: &str, extra: &[&str]) -> PathBuf {
+    let out_arg = path(&out);
+    let mut args =
+        vec!["synth", "--out", &out_arg, "--rig", rig, "--appearance", look, "--tool", tool, "--no-truth-meshes"];
+    args.extend_from_slice(extra);
+    let o = hullcut(&args);
+    assert!(o.status.success(), "synth {rig} {look} {tool}: {}", stderr(&o));
+    out
+}
+
 /// A synthetic recording of `frames` frame sets at `fps` on `rig` with `look` and `tool`.
 fn synth(dir: &Path, rig: &str, look: &str, tool: &str, frames: u32, fps: u32) -> PathBuf {
     let out = dir.join(format!("{rig}-{look}-{tool}").replace(':', "_"));
     let (frames, fps) = (frames.to_string(), fps.to_string());
-    let o = hullcut(&[
-        "synth",
-        "--out",
-        &path(&out),
-        "--frames",
-        &frames,
-        "--fps",
-        &fps,
-        "--seed",
-        "4",
-        "--rig",
-        rig,
-        "--appearance",
-        look,
-        "--tool",
-        tool,
-        "--no-truth-meshes",
-    ]);
-    assert!(o.status.success(), "synth {rig} {look} {tool}: {}", stderr(&o));
-    out
+    synth_into(out, rig, look, tool, &["--frames", &frames, "--fps", &fps, "--seed", "4"])
 }
 
 /// The first `frames` frame sets of the resection scene (its own trajectory, 30 fps, seed 1) on
 /// `rig` with `look` and `tool`.
 fn resection(dir: &Path, rig: &str, look: &str, tool: &str, frames: u32) -> PathBuf {
-    let out = dir.join("resect");
-    let frames = frames.to_string();
-    let o = hullcut(&[
-        "synth",
-        "--scene",
-        "resect",
-        "--frames",
-        &frames,
-        "--rig",
-        rig,
-        "--appearance",
-        look,
-        "--tool",
-        tool,
-        "--no-truth-meshes",
-        "--out",
-        &path(&out),
-    ]);
-    assert!(o.status.success(), "synth {rig} {look} {tool}: {}", stderr(&o));
-    out
+    synth_into(dir.join("resect"), rig, look, tool, &["--scene", "resect", "--frames", &frames.to_string()])
 }
 
 /// Runs `hullcut segment` with `extra` arguments and returns its report.
