@@ -51,7 +51,7 @@ const SURE_MAHALANOBIS2: f64 = 11.34;
 /// the track, 0.1-0.3%; the pointed tool in random:137 17% from its first learned frame set, in
 /// random:271 64%.
 const TOOL_AS_HAND_MAX: f64 = 0.1;
-/// How much of the drawn tool's tally each learned frame set keeps of the one before (the
+/// How much of the drawn blade's tally each learned frame set keeps of the one before (the
 /// appearance model forgets at the same pace).
 const TOOL_AS_HAND_KEEP: f64 = 0.97;
 /// A view's foreground is degraded when it is this many times its usual (the median over its

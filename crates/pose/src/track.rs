@@ -40,9 +40,8 @@ pub struct TrackerParams {
     pub edge_on_deg: f64,
     /// A view where less than this fraction of the blade lands on scalpel pixels has it hidden.
     pub min_visible_fraction: f64,
-    /// On a rig where fewer than six views have a mask, views that must see the
-    /// blade's face for a fit to be trusted. Two silhouettes never refute a thin object between
-    /// them (a finger held out is a blade to two views); on a rig of four or five cameras the
+    /// On a rig where fewer than six views have a mask, the views that must see the blade's face
+    /// for a fit to be trusted. Two silhouettes never refute a thin object between them (a finger held out is a blade to two views); on a rig of four or five cameras the
     /// third view that sees the blade is the first that can. On a larger rig the four or more
     /// views that do not see its face still hold it (inside the hand's silhouette, or edge-on),
     /// and two seeing views give two thirds of full confidence, as on any rig before this bound.
