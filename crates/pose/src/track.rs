@@ -41,14 +41,15 @@ pub struct TrackerParams {
     /// A view where less than this fraction of the blade lands on scalpel pixels has it hidden.
     pub min_visible_fraction: f64,
     /// On a rig where fewer than six views have a mask, the views that must see the blade's face
-    /// for a fit to be trusted. Two silhouettes never refute a thin object between them (a finger held out is a blade to two views); on a rig of four or five cameras the
-    /// third view that sees the blade is the first that can. On a larger rig the four or more
-    /// views that do not see its face still hold it (inside the hand's silhouette, or edge-on),
-    /// and two seeing views give two thirds of full confidence, as on any rig before this bound.
-    /// Measured over 22 recordings' `run` reports: fits trusted with two views seeing were off
-    /// (over 5° or 5 mm) in 10 of 14 on four-camera rigs (a finger taken for the blade 40-55 mm
-    /// off), in 13 of 51 on rigs of six to nine; refusing those too on a nine-camera rig broke
-    /// the track in the second stroke (random:59 in random:101: the lobe was left on).
+    /// for a fit to be trusted. Two silhouettes never refute a thin object between them (a
+    /// finger held out is a blade to two views); on a rig of four or five cameras the third view
+    /// that sees the blade is the first that can. On a larger rig the four or more views that do
+    /// not see its face still hold it (inside the hand's silhouette, or edge-on), and two seeing
+    /// views give two thirds of full confidence, as on any rig before this bound. Measured over
+    /// 22 recordings' `run` reports: fits trusted with two views seeing were off (over 5° or 5
+    /// mm) in 10 of 14 on four-camera rigs (a finger taken for the blade 40-55 mm off), in 13 of
+    /// 51 on rigs of six to nine; refusing those too on a nine-camera rig broke the track in the
+    /// second stroke (random:59 in random:101: the lobe was left on).
     pub min_views_seen_few: usize,
     /// Scalpel leaves at which the leaf count stops lowering the confidence.
     pub full_leaves: usize,
