@@ -523,12 +523,25 @@ impl Labelling {
             };
             // The colours that label and hint are learned from the labels sharpened wherever a
             // colour is surely the likelier, the sharpening colours from the labels handed out.
-            let pose = estimate.fitted.as_ref().map(|f| f.tool_to_world);
             let likelier = learns.then(|| {
-                let drawn = (labelled.masks.clone(), pose);
-                let mut masks = drawn.0.clone();
+                // The drawn blade's pixels, before any colour sharpens them.
+                let blade = match (&self.tool, &estimate.fitted) {
+                    (Some(labeller), Some(fitted)) => self
+                        .rig
+                        .cameras
+                        .par_iter()
+                        .zip(labelled.masks.par_iter())
+                        .map(|(camera, mask)| {
+                            mask.as_ref().map_or_else(Vec::new, |m| {
+                                blade_pixels(m, &labeller.blade_outline(camera, &fitted.tool_to_world))
+                            })
+                        })
+                        .collect(),
+                    _ => Vec::new(),
+                };
+                let mut masks = labelled.masks.clone();
                 sharpen_all(&mut masks, self.sure.as_ref());
-                (masks, drawn)
+                (masks, blade)
             });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_ref());
@@ -549,12 +562,10 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some((likelier, drawn)) = learn_from {
+        if let Some((likelier, blade)) = learn_from {
             // Only a trusted fit's labels teach: `masks` are the labels handed out.
             self.learn(set, &likelier, &masks);
-            if let (drawn, Some(pose)) = drawn {
-                self.judge_hand_hints(set, &drawn, &pose);
-            }
+            self.judge_hand_hints(set, &blade);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
@@ -718,26 +729,21 @@ impl Labelling {
         }
     }
 
-    /// Tallies how much of a learned frame set's drawn blade (`drawn`, its geometric labels
-    /// before any colour sharpened them, within the blade's outline at `pose`) the sure colours,
-    /// as just learned, call the hand's.
-    fn judge_hand_hints(&mut self, set: &FrameSet, drawn: &[Option<GrayImage>], pose: &nalgebra::Isometry3<f64>) {
-        let (Some(sure), Some(labeller)) = (&self.sure, &self.tool) else { return };
-        let (blade, hand) = set
+    /// Tallies how much of a learned frame set's drawn blade (`blade`, per view the indices of its
+    /// scalpel pixels within the blade's outline, taken before any colour sharpened the labels)
+    /// the sure colours, as just learned, call the hand's.
+    fn judge_hand_hints(&mut self, set: &FrameSet, blade: &[Vec<usize>]) {
+        let Some(sure) = &self.sure else { return };
+        let (pixels, hand) = set
             .views
-            .par_iter()
-            .zip(drawn)
-            .zip(&self.rig.cameras)
-            .map(|((view, mask), camera)| match (view, mask) {
-                (Some(view), Some(mask)) if view.image.dimensions() == mask.dimensions() => {
-                    let outline = labeller.blade_outline(camera, pose);
-                    blade_as_hand(sure, &view.image, mask, &outline)
-                }
-                _ => (0, 0),
+            .iter()
+            .zip(blade)
+            .filter_map(|(view, pixels)| {
+                Some((pixels.len() as u64, blade_as_hand(sure, &view.as_ref()?.image, pixels)))
             })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         let (b, h) = self.tool_as_hand;
-        self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + blade as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
+        self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + pixels as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
     }
@@ -800,16 +806,11 @@ fn compile_explained(classes: Option<ColourClasses>) -> Option<ColourLut> {
     Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO))
 }
 
-/// The drawn scalpel pixels of `mask` inside the convex `outline` (counter-clockwise pixels), and
-/// how many of them `sure` calls the hand's.
-fn blade_as_hand(
-    sure: &ColourLut,
-    image: &image::RgbImage,
-    mask: &GrayImage,
-    outline: &[nalgebra::Point2<f64>],
-) -> (u64, u64) {
+/// The indices of `mask`'s scalpel pixels inside the convex `outline` (counter-clockwise pixels;
+/// none for fewer than three points).
+fn blade_pixels(mask: &GrayImage, outline: &[nalgebra::Point2<f64>]) -> Vec<usize> {
     if outline.len() < 3 {
-        return (0, 0);
+        return Vec::new();
     }
     let (w, h) = (f64::from(mask.width()), f64::from(mask.height()));
     let lo = outline.iter().fold((f64::MAX, f64::MAX), |a, p| (a.0.min(p.x), a.1.min(p.y)));
@@ -817,22 +818,33 @@ fn blade_as_hand(
     let (x0, y0) = (lo.0.floor().max(0.0), lo.1.floor().max(0.0));
     let (x1, y1) = (hi.0.ceil().min(w - 1.0), hi.1.ceil().min(h - 1.0));
     if !(x1 >= x0 && y1 >= y0) {
-        return (0, 0);
+        return Vec::new();
     }
     let inside = |q: nalgebra::Point2<f64>| {
         outline.iter().zip(outline.iter().cycle().skip(1)).all(|(a, b)| (b - a).perp(&(q - a)) >= 0.0)
     };
-    let (mut blade, mut hand) = (0, 0);
-    for y in y0 as u32..=y1 as u32 {
-        for x in x0 as u32..=x1 as u32 {
-            if mask.get_pixel(x, y).0[0] == label::SCALPEL && inside(nalgebra::Point2::new(f64::from(x), f64::from(y)))
-            {
-                blade += 1;
-                hand += u64::from(sure.get(image.get_pixel(x, y).0) == label::HAND);
+    let (stride, raw) = (mask.width() as usize, mask.as_raw());
+    let mut pixels = Vec::new();
+    for y in y0 as usize..=y1 as usize {
+        for x in x0 as usize..=x1 as usize {
+            let k = y * stride + x;
+            if raw[k] == label::SCALPEL && inside(nalgebra::Point2::new(x as f64, y as f64)) {
+                pixels.push(k);
             }
         }
     }
-    (blade, hand)
+    pixels
+}
+
+/// How many of `image`'s pixels at `pixels` (indices) `sure` calls the hand's (an index outside
+/// the image counts none).
+fn blade_as_hand(sure: &ColourLut, image: &image::RgbImage, pixels: &[usize]) -> u64 {
+    let raw = image.as_raw();
+    pixels
+        .iter()
+        .filter_map(|&k| raw.get(3 * k..3 * k + 3))
+        .map(|p| u64::from(sure.get([p[0], p[1], p[2]]) == label::HAND))
+        .sum()
 }
 
 /// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
@@ -953,17 +965,21 @@ mod tests {
                 _ => label::BACKGROUND,
             }])
         });
+        let counted = |outline: &[nalgebra::Point2<f64>]| {
+            let pixels = blade_pixels(&mask, outline);
+            (pixels.len() as u64, blade_as_hand(&sure, &image, &pixels))
+        };
         let outline = [(6.0, 1.0), (10.0, 1.0), (10.0, 6.0), (6.0, 6.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
         // 5 columns by 4 rows of drawn tool, less the finger; every one of them steel.
-        assert_eq!(blade_as_hand(&sure, &image, &mask, &outline), (19, 19));
+        assert_eq!(counted(&outline), (19, 19));
         // Fewer than three points outline nothing.
-        assert_eq!(blade_as_hand(&sure, &image, &mask, &outline[..2]), (0, 0));
+        assert_eq!(counted(&outline[..2]), (0, 0));
         // An outline over the handle counts blade pixels the colours call the tool's.
         let handle = [(0.0, 2.0), (3.0, 2.0), (3.0, 5.0), (0.0, 5.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
-        assert_eq!(blade_as_hand(&sure, &image, &mask, &handle), (16, 0));
+        assert_eq!(counted(&handle), (16, 0));
         // An outline beyond the image counts the part inside it.
         let wide = [(-5.0, -5.0), (40.0, -5.0), (40.0, 40.0), (-5.0, 40.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
-        assert_eq!(blade_as_hand(&sure, &image, &mask, &wide), (47, 23));
+        assert_eq!(counted(&wide), (47, 23));
     }
 
     #[test]
