@@ -24,6 +24,9 @@ pub const LABEL_CLASSES: [(u16, &str, [u8; 4]); 4] = [
 
 /// Where a frame set's label source is logged.
 pub const LABEL_SOURCE_ENTITY: &str = "labelling/source";
+/// The share of the drawn blade the learned colours call the hand's (the fit's hand hints stop
+/// above 0.1).
+pub const BLADE_AS_HAND_ENTITY: &str = "metrics/appearance/blade_as_hand";
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -48,8 +51,9 @@ pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
 }
 
 /// Logs where a frame set's labels came from (a warning when the tool's fit was not trusted and
-/// no colour could label instead) and the colours learned by then (a label with none learned yet
-/// logs nothing), at the current time.
+/// no colour could label instead), the colours learned by then (a label with none learned yet
+/// logs nothing) and the share of the drawn blade they call the hand's (once there is one), at
+/// the current time.
 pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Result<()> {
     let (text, warning) = match trace.source {
         LabelSource::Geometry => ("geometry: the tool's trusted fit drawn into the views", false),
@@ -60,6 +64,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
         LabelSource::Unknown => ("unknown: neither the tool's fit nor learned colours labelled the foreground", true),
     };
     hullcut_viz::log_text(rec, LABEL_SOURCE_ENTITY, text, warning)?;
+    if let Some(share) = trace.blade_as_hand {
+        hullcut_viz::log_scalar(rec, BLADE_AS_HAND_ENTITY, share)?;
+    }
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;
         if let Some(rgb) = colour.rgb {

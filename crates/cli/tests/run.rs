@@ -582,6 +582,9 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
             assert!(rows_of(&e) >= 10, "{e}: {} rows", rows_of(&e));
         }
     }
+    // So is the share of the drawn blade those colours call the hand's.
+    let share = "/metrics/appearance/blade_as_hand";
+    assert!(rows_of(share) >= 10, "{share}: {} rows", rows_of(share));
 }
 
 /// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a

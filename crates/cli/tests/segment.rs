@@ -85,6 +85,7 @@ fn labels_from_the_scene(rig: &str, look: &str, tool: &str, floors: [f64; 3]) ->
         "/metrics/appearance/hand/pixels",
         "/metrics/appearance/scalpel/colour",
         "/metrics/appearance/scalpel/pixels",
+        "/metrics/appearance/blade_as_hand",
     ] {
         assert!(rows_of(e) >= 1, "{e}: nothing logged in {rows:?}");
     }

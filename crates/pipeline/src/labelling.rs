@@ -126,6 +126,9 @@ pub struct LabelTrace {
     pub source: LabelSource,
     /// The colours learned so far ([`Labelling::learned`]).
     pub learned: Vec<LearnedColour>,
+    /// The share of the drawn blade the learned colours call the hand's, once a blade was drawn
+    /// on a frame set learned from ([`Labelling::blade_as_hand`]).
+    pub blade_as_hand: Option<f64>,
 }
 
 impl LabelSource {
@@ -746,6 +749,13 @@ impl Labelling {
         self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + pixels as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
+    }
+
+    /// The share of the drawn blade the sure colours call the hand's, on the frame sets learned
+    /// from (recent ones weighing more); `None` before any blade pixel was drawn on one. Above 0.1
+    /// the fit gets no hand hints.
+    pub fn blade_as_hand(&self) -> Option<f64> {
+        (self.tool_as_hand.0 > 0.0).then(|| self.tool_as_hand_share())
     }
 
     /// The share of the drawn blade the sure colours call the hand's (0 before any was drawn).

@@ -820,7 +820,11 @@ fn hull_stage(
             labelled_hull = labelled.occupancy;
             // The tool's track is the labelling's: the pose stage takes its estimate.
             work.estimate = labelled.estimate;
-            work.labels = Some(LabelTrace { source: labelled.source, learned: labelling.learned() });
+            work.labels = Some(LabelTrace {
+                source: labelled.source,
+                learned: labelling.learned(),
+                blade_as_hand: labelling.blade_as_hand(),
+            });
         }
         let occ = match labelled_hull {
             Some(occ) => occ,

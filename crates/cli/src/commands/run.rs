@@ -79,7 +79,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// surfaces (cut faces included) under world/tissue/surface whenever they changed (a cut, or a
 /// vertex moved by more than 0.2 mm); stage timings under metrics/time/STAGE and accuracy under
 /// metrics/accuracy/NAME; when segmenting, where each frame set's labels came from under
-/// labelling/source and the learned colours under metrics/appearance/LABEL/{colour,pixels}; on
+/// labelling/source, the learned colours under metrics/appearance/LABEL/{colour,pixels} and the
+/// share of the drawn blade they call the hand's under metrics/appearance/blade_as_hand; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -445,9 +446,14 @@ pub const ENTITIES: [&str; 13] = [
 ];
 
 /// The rerun entities a run logs when it segments (without mask files): where each frame set's
-/// labels came from, and the colours learned by then.
-pub const SEGMENTING_ENTITIES: [&str; 3] =
-    ["labelling/source", "metrics/appearance/LABEL/colour", "metrics/appearance/LABEL/pixels"];
+/// labels came from, the colours learned by then, and the share of the drawn blade they call the
+/// hand's.
+pub const SEGMENTING_ENTITIES: [&str; 4] = [
+    "labelling/source",
+    "metrics/appearance/LABEL/colour",
+    "metrics/appearance/LABEL/pixels",
+    "metrics/appearance/blade_as_hand",
+];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
     // Ctrl-C stops reading; what is in flight is processed, logged and flushed, and the report is

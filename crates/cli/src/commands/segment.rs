@@ -35,7 +35,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// frame sets labelled by geometry, by colour or left unknown, the learned colours, IoU,
 /// precision and recall per label, timings per frame set) with --report; an .rrd (images and
 /// predicted masks under world/cams/NAME, where the labels came from under labelling/source and
-/// the learned colours under metrics/appearance/LABEL/{colour,pixels}, every --rrd-every frames)
+/// the learned colours under metrics/appearance/LABEL/{colour,pixels} and the share of the drawn
+/// blade they call the hand's under metrics/appearance/blade_as_hand, every --rrd-every frames)
 /// with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
@@ -202,7 +203,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), ms = ?labelled.stats.as_ref().map(|s| [s.evidence_ms, s.fit_ms, s.draw_ms]), carve_ms = labelled.carve_ms, "tool");
         }
         let segment_ms = t.elapsed().as_secs_f64() * 1e3;
-        let trace = LabelTrace { source: labelled.source, learned: labelling.learned() };
+        let trace = LabelTrace {
+            source: labelled.source,
+            learned: labelling.learned(),
+            blade_as_hand: labelling.blade_as_hand(),
+        };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
                 if args.labels == LabelMethod::Both && deferred.len() < MAX_DEFERRED =>
@@ -219,9 +224,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let mut set = ds.read_frame_set(frame, score)?;
         let t = Instant::now();
         let (masks, trace) = match labelling.relabel_by_colour(&set, &mut carver)? {
-            Some(relabelled) => {
-                (relabelled.masks, LabelTrace { source: relabelled.source, learned: labelling.learned() })
-            }
+            Some(relabelled) => (
+                relabelled.masks,
+                LabelTrace {
+                    source: relabelled.source,
+                    learned: labelling.learned(),
+                    blade_as_hand: labelling.blade_as_hand(),
+                },
+            ),
             None => (masks, trace),
         };
         relabel_times.push(t.elapsed());
