@@ -223,10 +223,60 @@ impl Front {
     }
 }
 
+/// Which cells of `occ` still show foreground (any non-zero pixel) in their footprint in every
+/// view of `masks` given: masks changed after carving (possible shadows given back to the
+/// background once shown to lie on the table). `views` are the silhouettes carved from, for
+/// their cameras; a view not given in `masks` (`None`, or shorter) is not asked, nor is a cell
+/// wholly above [`SHADOW_HULL_HEIGHT`] (no shadow's hull rises there), nor a view its footprint
+/// misses. One footprint scan per low cell and view asked.
+pub fn still_seen(
+    occ: &Occupancy,
+    views: &[Option<Silhouette>],
+    masks: &[Option<&GrayImage>],
+    margin_px: f64,
+) -> Vec<bool> {
+    let asked: Vec<(&Silhouette, &GrayImage)> = views
+        .iter()
+        .zip(masks)
+        .filter_map(|(v, m)| v.as_ref().zip(*m))
+        .filter(|(v, m)| m.dimensions() == (v.camera().width, v.camera().height))
+        .collect();
+    occ.cells
+        .par_iter()
+        .map(|c| {
+            if c.min.z > SHADOW_HULL_HEIGHT {
+                return true;
+            }
+            asked.iter().all(|(view, mask)| {
+                let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, c, margin_px) else { return true };
+                let w = mask.width() as usize;
+                (j0..=j1).any(|j| mask.as_raw()[j * w + i0..=j * w + i1].iter().any(|&p| p != 0))
+            })
+        })
+        .collect()
+}
+
 /// Sets the pixels of `mask` valued `from` that the footprint of a cell of `occ` covers in `view`
 /// to `to`, and every other `from` pixel to 0; returns how many became `to`. `view` must be the
 /// silhouette of this view's camera (its tables are not read).
 pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8, to: u8, margin_px: f64) -> u64 {
+    let covered = cover_split(occ, view, mask, from, margin_px, |_| true, [to, to]);
+    covered[0] + covered[1]
+}
+
+/// [`cover`] in two kinds: a `from` pixel that the footprint of a cell `firm` holds (by index in
+/// `occ`) covers becomes `to[0]`, one that only other cells cover `to[1]`; every other `from`
+/// pixel becomes 0. Returns how many became each (with `to[0] == to[1]`, all count as the first).
+/// `to[1]` must be a value `mask` does not hold before.
+pub fn cover_split(
+    occ: &Occupancy,
+    view: &Silhouette,
+    mask: &mut GrayImage,
+    from: u8,
+    margin_px: f64,
+    firm: impl Fn(usize) -> bool,
+    to: [u8; 2],
+) -> [u64; 2] {
     let (w, h) = (mask.width() as usize, mask.height() as usize);
     let raw: &mut [u8] = mask;
     // Which blocks of `BLOCK`² pixels hold a `from` pixel: a cell whose footprint can only reach
@@ -239,7 +289,7 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
         any = true;
     }
     if !any {
-        return 0;
+        return [0, 0];
     }
     let reaches = |lo: [f64; 2], hi: [f64; 2]| {
         let clip = |x: f64, n: usize| (x.max(0.0) as usize / BLOCK).min(n - 1);
@@ -251,8 +301,9 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
     };
     let cam = view.camera();
     let limit = view.field_radius().unwrap_or(view.monotonic_radius());
-    let mut covered = 0;
-    for c in &occ.cells {
+    let split = to[0] != to[1];
+    let mut covered = [0u64, 0];
+    for (k, c) in occ.cells.iter().enumerate() {
         // Every pixel of the footprint lies within the disc holding the cell's projection, widened
         // by the margin, the lens' bow over the footprint and a pixel of rounding.
         if let Some((uv, r)) = cam.project_ball(&c.centre(), c.bounding_radius(), 1e-3, limit) {
@@ -262,11 +313,17 @@ pub fn cover(occ: &Occupancy, view: &Silhouette, mask: &mut GrayImage, from: u8,
             }
         }
         let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(view, c, margin_px) else { continue };
+        let kind = usize::from(split && !firm(k));
         for j in j0..=j1 {
             for p in raw.get_mut(j * w + i0..=j * w + i1).into_iter().flatten() {
                 if *p == from {
-                    *p = to;
-                    covered += 1;
+                    *p = to[kind];
+                    covered[kind] += 1;
+                } else if split && kind == 0 && *p == to[1] {
+                    // A firm cell covers what another cell only covered before it.
+                    *p = to[0];
+                    covered[0] += 1;
+                    covered[1] = covered[1].saturating_sub(1);
                 }
             }
         }
@@ -303,6 +360,22 @@ mod tests {
             stats: Default::default(),
         };
         (camera, occ)
+    }
+
+    #[test]
+    fn a_low_cell_whose_footprint_went_back_to_the_background_is_no_longer_seen() {
+        let (camera, occ) = scene();
+        let view = Silhouette::new(&camera, &GrayImage::from_pixel(200, 200, Luma([255])));
+        let views = [Some(view)];
+        let empty = GrayImage::new(200, 200);
+        assert_eq!(still_seen(&occ, &views, &[Some(&empty)], 0.5), vec![false], "its view shows it no foreground now");
+        let mut one = GrayImage::new(200, 200);
+        one.put_pixel(100, 100, Luma([1]));
+        assert_eq!(still_seen(&occ, &views, &[Some(&one)], 0.5), vec![true], "one pixel in its footprint keeps it");
+        assert_eq!(still_seen(&occ, &views, &[None], 0.5), vec![true], "a view not asked keeps it");
+        let mut high = occ.clone();
+        high.cells[0].min.z = SHADOW_HULL_HEIGHT + 0.01;
+        assert_eq!(still_seen(&high, &views, &[Some(&empty)], 0.5), vec![true], "above any shadow's hull");
     }
 
     #[test]
@@ -419,24 +492,41 @@ mod tests {
             }
         }
         let view = Silhouette::new(&camera, &mask);
-        let mut expected = mask.clone();
-        for c in &occ.cells {
-            if let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(&view, c, 0.5) {
-                for j in j0..=j1 {
-                    for i in i0..=i1 {
-                        let p = expected.get_pixel_mut(i as u32, j as u32);
-                        if p.0[0] == from {
-                            p.0[0] = to;
+        // Paints the footprints of the cells `which` picks, `from` (or `over`) pixels to `to`.
+        let paint = |expected: &mut GrayImage, which: &dyn Fn(usize) -> bool, over: u8, to: u8| {
+            for (_, c) in occ.cells.iter().enumerate().filter(|(k, _)| which(*k)) {
+                if let Footprint::Pixels { i0, j0, i1, j1, .. } = footprint(&view, c, 0.5) {
+                    for j in j0..=j1 {
+                        for i in i0..=i1 {
+                            let p = expected.get_pixel_mut(i as u32, j as u32);
+                            if p.0[0] == from || p.0[0] == over {
+                                p.0[0] = to;
+                            }
                         }
                     }
                 }
             }
-        }
+        };
+        let original = mask.clone();
+        let mut expected = mask.clone();
+        paint(&mut expected, &|_| true, from, to);
         let painted = expected.iter().filter(|&&p| p == to).count() as u64;
         expected.iter_mut().filter(|p| **p == from).for_each(|p| *p = 0);
         let covered = cover(&occ, &view, &mut mask, from, to, 0.5);
         assert!(painted > 0 && expected.contains(&0), "the scene covers some pixels, not all");
         assert_eq!(covered, painted);
         assert!(mask == expected, "cover differs from painting every cell's footprint");
+        // In two kinds: the odd cells' pixels become 11, then the even (firm) cells' 9, over them.
+        let firm = |k: usize| k.is_multiple_of(2);
+        let mut expected = original.clone();
+        paint(&mut expected, &|k| !firm(k), from, 11);
+        paint(&mut expected, &firm, 11, to);
+        expected.iter_mut().filter(|p| **p == from).for_each(|p| *p = 0);
+        let mut mask = original;
+        let covered = cover_split(&occ, &view, &mut mask, from, 0.5, firm, [to, 11]);
+        let count = |v: u8| expected.iter().filter(|&&p| p == v).count() as u64;
+        assert!(count(to) > 0 && count(11) > 0, "both kinds cover some pixels");
+        assert_eq!(covered, [count(to), count(11)]);
+        assert!(mask == expected, "cover_split differs from painting the other cells, then the firm ones");
     }
 }

@@ -11,11 +11,11 @@ use hullcut_capture::segment::{
     AppearanceModel, ColourClasses, ColourLut, LearnedColour, Method, SHADOW_LIKE, SegmentParams, Segmenter,
 };
 use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
-use hullcut_hull::shadow::{cover, keep_supported};
+use hullcut_hull::shadow::{SHADOW_HULL_HEIGHT, cover, cover_split, keep_supported, still_seen};
 use hullcut_hull::{HullParams, Occupancy, Silhouette, direct_silhouettes, silhouettes};
 use hullcut_pose::{
-    LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, TableShadows, ToolLabeller, ToolRegion, TrackerParams,
-    ViewInput,
+    LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, Shading, TABLE_SHADOW, TableShadows, ToolLabeller,
+    ToolRegion, TrackerParams, ViewInput,
 };
 use image::GrayImage;
 use rayon::prelude::*;
@@ -64,6 +64,10 @@ const DEGRADED_MIN_FRACTION: f64 = 0.01;
 const DEGRADED_HISTORY: usize = 16;
 /// Marks the foreground the hull explains while a degraded view is cut back (no label uses it).
 const EXPLAINED: u8 = 254;
+/// Marks the possible shadows that only hull cells low over the table cover, to be asked of the
+/// other views whether they lie on the table (no label uses it).
+const ASK_TABLE: u8 = 253;
+const _: () = assert!(ASK_TABLE != SHADOW_LIKE && ASK_TABLE != EXPLAINED && ASK_TABLE != label::UNKNOWN);
 
 // The segmenter's possible shadows are what the tool's labeller reads as such ([`TableShadows`]
 // reads the masks before the hull resolves them).
@@ -172,6 +176,11 @@ pub struct LabelCounters {
     /// direction).
     #[serde(default)]
     pub shadow_cells_seen_through: u64,
+    /// Of `shadow_foreground`, pixels given back to the background: their ray meets the table at
+    /// a point the other views see darkened as much (a shadow on the table under the hand's hull,
+    /// which the hull alone kept).
+    #[serde(default)]
+    pub shadow_on_table: u64,
     /// Views whose foreground jumped far above their usual (someone behind the table, a light
     /// switched on): their foreground was cut to what the hull explains, the frame set kept.
     pub degraded_views: u64,
@@ -444,10 +453,12 @@ impl Labelling {
         if table_shadows {
             copy_masks(&fg, &mut self.unresolved);
         }
+        let mut given_back: Vec<Vec<usize>> = Vec::new();
         if shadow_pixels > 0 {
-            (occ, marked_only) = self
-                .resolve_shadows(occ, &views, &mut fg, set.timestamp_ns)
+            let resolved = self
+                .resolve_shadows(occ, &views, &mut fg, set, table_shadows)
                 .with_context(|| format!("frame {frame}"))?;
+            (occ, marked_only, given_back) = (resolved.occupancy, resolved.marked_only, resolved.given_back);
         }
         for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -472,17 +483,37 @@ impl Labelling {
                 stats: None,
             });
         }
-        // The hints for the tool's fit, on the foreground as the hull left it.
+        // The hints for the tool's fit, on the foreground as the hull left it. The shadows the other
+        // views put on the table stay foreground to the fit where the track expects the tool, a
+        // pixel inside its drawn outline (a dull blade over the hand's shadow near the table is as
+        // dark as the shadow behind it), but never evidence of it ([`TABLE_SHADOW`]); elsewhere
+        // they are background, which keeps a thin blade from rolling into them.
+        let expected: Vec<Option<ToolRegion>> = match &self.tool {
+            Some(tool) if given_back.iter().any(|b| !b.is_empty()) => self
+                .rig
+                .cameras
+                .par_iter()
+                .map(|camera| tool.predicted_region(set.timestamp_ns, camera).map(|r| r.eroded(1)))
+                .collect(),
+            _ => Vec::new(),
+        };
         let hinted: Option<Vec<Option<GrayImage>>> = hints.map(|hints| {
             fg.par_iter()
                 .zip(hints.par_iter())
-                .map(|(m, hint)| {
+                .enumerate()
+                .map(|(k, (m, hint))| {
                     let mut m = m.clone()?;
                     if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
                         for (p, &h) in m.iter_mut().zip(hint.iter()) {
                             if *p != label::BACKGROUND && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW) {
                                 *p = h;
                             }
+                        }
+                    }
+                    if let Some(region) = expected.get(k).and_then(Option::as_ref) {
+                        let w = m.width() as usize;
+                        for &i in given_back.get(k).into_iter().flatten().filter(|&&i| region.covers(i % w, i / w)) {
+                            m.as_mut()[i] = TABLE_SHADOW;
                         }
                     }
                     Some(m)
@@ -497,17 +528,11 @@ impl Labelling {
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
-        let table = table_shadows.then(|| {
-            TableShadows::new(
-                self.rig
-                    .cameras
-                    .iter()
-                    .zip(&self.unresolved)
-                    .map(|(camera, mask)| mask.as_ref().map(|m| (camera, m)))
-                    .collect(),
-            )
-        });
-        let labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
+        let table = table_shadows.then(|| table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter));
+        let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
+        // The shadows given back to the table are background, unless the tool is drawn there;
+        // neither the labels handed out nor the colours learned take them for the hand.
+        to_background(&mut labelled.masks, &given_back, true);
         let estimate = labelled.estimate;
         let colours = self.method == LabelMethod::Both;
         let trusted = estimate.valid && estimate.fitted.is_some();
@@ -553,6 +578,7 @@ impl Labelling {
         } else if colours && self.colours.is_some() {
             let mut masks = fg.clone();
             self.colour(set, &mut masks);
+            to_background(&mut masks, &given_back, false);
             (masks, LabelSource::Colour)
         } else if estimate.fitted.is_some() {
             (labelled.masks, LabelSource::UntrustedGeometry)
@@ -639,16 +665,23 @@ impl Labelling {
 
     /// Keeps the hull's cells some view sees as sure foreground, and makes the views' possible
     /// shadows foreground where those cells cover them, background elsewhere; the cells near the
-    /// tool where its track predicts it at `timestamp_ns` are kept as objects. Returns the kept
-    /// cells and which of them only that prediction kept (the tool's, or its shadow beside it:
-    /// never the hand).
+    /// tool where its track predicts it at `set`'s time are kept as objects. With `on_table`
+    /// (`unresolved` holds this frame set's masks as the segmenter gave them), a possible shadow
+    /// that only cells less than [`SHADOW_HULL_HEIGHT`] above the table cover is asked of the
+    /// other views ([`TableShadows`]): where they see the table behind it darkened as much, it
+    /// goes back to the background, and the low cells no longer seen in that view go too (the
+    /// hand's hull over its own shadow near the table: kept, it hid the blade from the fit as
+    /// the hand's, and its pixels beside the blade became the tool's). Returns the kept cells,
+    /// which of them only that prediction kept (the tool's, or its shadow beside it: never the
+    /// hand), and the pixels given back to the background.
     fn resolve_shadows(
         &mut self,
         occ: Occupancy,
         views: &[Option<Silhouette>],
         fg: &mut [Option<GrayImage>],
-        timestamp_ns: i64,
-    ) -> Result<(Occupancy, Vec<bool>), Error> {
+        set: &FrameSet,
+        on_table: bool,
+    ) -> Result<Resolved, Error> {
         let sure: Vec<Option<GrayImage>> = fg
             .iter()
             .map(|m| {
@@ -664,7 +697,7 @@ impl Labelling {
         let sure = direct_silhouettes(&self.rig, sure).context("the sure foreground's silhouettes")?;
         // Where the tool's track predicts it, the hull is the tool's: a dull blade's tip over a table
         // of its shade looks like a shadow to most views.
-        let tool = self.tool.as_ref().and_then(|t| t.near_predicted(timestamp_ns, &occ, TOOL_OBJECT_MARGIN));
+        let tool = self.tool.as_ref().and_then(|t| t.near_predicted(set.timestamp_ns, &occ, TOOL_OBJECT_MARGIN));
         let kept = keep_supported(
             &occ,
             views,
@@ -673,19 +706,39 @@ impl Labelling {
             self.rig.world_frame.is_table(),
             tool.as_deref().unwrap_or_default(),
         );
-        let occ = kept.occupancy;
+        let mut occ = kept.occupancy;
+        let mut marked_only = kept.marked_only;
         self.counters.shadow_cells_dropped += kept.dropped as u64;
         self.counters.shadow_cells_seen_through += kept.seen_through as u64;
         let margin = self.hull.margin_px;
-        self.counters.shadow_foreground += views
+        // Firm: a cell above any shadow's hull.
+        let firm = |k: usize| !on_table || occ.cells[k].min.z > SHADOW_HULL_HEIGHT;
+        let covered: Vec<[u64; 2]> = views
             .par_iter()
             .zip(fg.par_iter_mut())
             .map(|(view, mask)| match (view, mask) {
-                (Some(view), Some(mask)) => cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, margin),
-                _ => 0,
+                (Some(view), Some(mask)) => {
+                    cover_split(&occ, view, mask, SHADOW_LIKE, margin, firm, [label::UNKNOWN, ASK_TABLE])
+                }
+                _ => [0, 0],
             })
-            .sum::<u64>();
-        Ok((occ, kept.marked_only))
+            .collect();
+        self.counters.shadow_foreground += covered.iter().map(|c| c[0] + c[1]).sum::<u64>();
+        if !covered.iter().any(|c| c[1] > 0) {
+            return Ok(Resolved { occupancy: occ, marked_only, given_back: Vec::new() });
+        }
+        let table = table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter);
+        let back = shadows_to_table(&table, fg);
+        self.counters.shadow_on_table += back.iter().map(|b| b.len() as u64).sum::<u64>();
+        let changed: Vec<Option<&GrayImage>> =
+            fg.iter().zip(&back).map(|(m, b)| m.as_ref().filter(|_| !b.is_empty())).collect();
+        if back.iter().any(|b| !b.is_empty()) {
+            let seen = still_seen(&occ, views, &changed, margin);
+            let marks = marked_only.iter().copied().chain(std::iter::repeat(false));
+            (occ.cells, marked_only) =
+                occ.cells.iter().zip(marks).zip(&seen).filter(|(_, seen)| **seen).map(|((c, m), _)| (*c, m)).unzip();
+        }
+        Ok(Resolved { occupancy: occ, marked_only, given_back: back })
     }
 
     /// Labels the foreground of `masks` by colour (unknown where no colours are learned yet).
@@ -798,6 +851,76 @@ fn copy_masks(from: &[Option<GrayImage>], to: &mut Vec<Option<GrayImage>>) {
         match (src, dst.as_mut()) {
             (Some(s), Some(d)) if s.dimensions() == d.dimensions() => d.copy_from_slice(s.as_raw()),
             _ => dst.clone_from(src),
+        }
+    }
+}
+
+/// What resolving a frame set's possible shadows kept ([`Labelling::resolve_shadows`]).
+struct Resolved {
+    /// The hull's kept cells.
+    occupancy: Occupancy,
+    /// Per kept cell: kept only because the track predicts the tool there.
+    marked_only: Vec<bool>,
+    /// Per view, the possible shadows given back to the background as shadows on the table
+    /// (pixel indices).
+    given_back: Vec<Vec<usize>>,
+}
+
+/// The views' possible shadows before the hull resolved them (`unresolved`), with each view's
+/// image, background and exposure gain where its background is one image ([`TableShadows`]).
+fn table_shadows_of<'a>(
+    rig: &'a hullcut_rig::Rig,
+    unresolved: &'a [Option<GrayImage>],
+    set: &'a FrameSet,
+    segmenter: &'a Segmenter,
+) -> TableShadows<'a> {
+    let views = rig.cameras.iter().zip(unresolved).map(|(camera, mask)| mask.as_ref().map(|m| (camera, m))).collect();
+    let shading = (0..rig.cameras.len())
+        .map(|k| {
+            let view = set.views.get(k)?.as_ref()?;
+            Some(Shading {
+                image: &view.image,
+                background: segmenter.background_mean(k)?,
+                gain: segmenter.last_exposure_gain(k)?,
+            })
+        })
+        .collect();
+    TableShadows::new(views).with_shading(shading)
+}
+
+/// Gives back to the background the possible shadows marked [`ASK_TABLE`] in `fg` where `table`
+/// finds them a shadow on the table, the rest becoming unknown foreground; returns those given
+/// back (pixel indices), per view.
+fn shadows_to_table(table: &TableShadows, fg: &mut [Option<GrayImage>]) -> Vec<Vec<usize>> {
+    fg.par_iter_mut()
+        .enumerate()
+        .map(|(view, mask)| {
+            let Some(mask) = mask.as_mut() else { return Vec::new() };
+            let w = mask.width() as usize;
+            let mut back = Vec::new();
+            for (k, p) in mask.iter_mut().enumerate().filter(|(_, p)| **p == ASK_TABLE) {
+                *p = if table.on_table(view, k % w, k / w) {
+                    back.push(k);
+                    label::BACKGROUND
+                } else {
+                    label::UNKNOWN
+                };
+            }
+            back
+        })
+        .collect()
+}
+
+/// Sets the pixels `given_back` lists (indices, per view) to the background in `masks`, those
+/// labelled the scalpel too unless `keep_scalpel` (where the fitted tool is drawn over them).
+fn to_background(masks: &mut [Option<GrayImage>], given_back: &[Vec<usize>], keep_scalpel: bool) {
+    for (mask, back) in masks.iter_mut().zip(given_back) {
+        let Some(mask) = mask.as_mut() else { continue };
+        let raw: &mut [u8] = mask;
+        for &i in back {
+            if let Some(p) = raw.get_mut(i).filter(|p| !keep_scalpel || **p != label::SCALPEL) {
+                *p = label::BACKGROUND;
+            }
         }
     }
 }

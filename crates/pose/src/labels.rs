@@ -39,6 +39,13 @@ use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
 /// is the hand's shadow on the table, not a dull tip over it.
 pub const POSSIBLE_SHADOW: u8 = 128;
 
+/// A hint in a labeller's view mask: a foreground pixel that the other views see as a shadow on
+/// the table ([`TableShadows`]). The tool may cover it (a dull blade over the hand's shadow near
+/// the table is as dark as the shadow behind it), but it is never evidence of the tool: a fit
+/// drawn into a shadow beside the blade would otherwise explain it, and creep into it (roll the
+/// blade about its long axis, frame set after frame set).
+pub const TABLE_SHADOW: u8 = 129;
+
 /// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
 /// puts the outline to a pixel or so).
 const SHADOW_REACH_PX: usize = 1;
@@ -163,6 +170,28 @@ impl ToolRegion {
         ToolRegion { x0, y0, width: w, height: h, covered }
     }
 
+    /// The region shrunk by `r` pixels: the pixels whose whole square neighbourhood of radius `r`
+    /// it covers.
+    pub fn eroded(&self, r: usize) -> ToolRegion {
+        let covered = (0..self.covered.len())
+            .map(|k| {
+                let (x, y) = (k % self.width.max(1), k / self.width.max(1));
+                x >= r
+                    && y >= r
+                    && x + r < self.width
+                    && y + r < self.height
+                    && (y - r..=y + r).all(|yy| (x - r..=x + r).all(|xx| self.covered[yy * self.width + xx]))
+            })
+            .collect();
+        ToolRegion { covered, ..self.clone() }
+    }
+
+    /// Whether the region covers pixel (`i`, `j`) of the image.
+    pub fn covers(&self, i: usize, j: usize) -> bool {
+        let (Some(x), Some(y)) = (i.checked_sub(self.x0), j.checked_sub(self.y0)) else { return false };
+        x < self.width && y < self.height && self.covered.get(y * self.width + x).copied().unwrap_or(false)
+    }
+
     /// The covered pixels, as image coordinates.
     pub fn pixels(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.covered
@@ -223,6 +252,13 @@ impl ToolLabeller {
     pub fn near_predicted(&self, timestamp_ns: i64, occ: &Occupancy, margin: f64) -> Option<Vec<bool>> {
         let pose = self.tracker.predicted(timestamp_ns)?;
         Some(near_tool(occ, &self.field, &pose, margin, &[]).cells.iter().map(|c| c.scalpel).collect())
+    }
+
+    /// The tool drawn in `camera` where its track predicts it at `timestamp_ns` (`None` while the
+    /// track predicts nothing, or where it is out of the view).
+    pub fn predicted_region(&self, timestamp_ns: i64, camera: &Camera) -> Option<ToolRegion> {
+        let pose = self.tracker.predicted(timestamp_ns)?;
+        ToolDepth::draw(camera, camera.distortion.monotonic_radius(), &self.mesh, &pose).map(|d| d.region())
     }
 
     /// Labels one frame set: `occ` is the hull of the views' foreground, `views` their foreground
@@ -591,7 +627,7 @@ fn band_labels(
                         }
                         _ => true,
                     };
-                if raw[k] == label::HAND && hint != label::HAND && !shadow_beside {
+                if raw[k] == label::HAND && hint != label::HAND && hint != TABLE_SHADOW && !shadow_beside {
                     raw[k] = label::SCALPEL;
                     scalpel.add(i, j);
                 }
@@ -1437,6 +1473,53 @@ mod tests {
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
+    }
+
+    #[test]
+    fn a_shadow_the_other_views_put_on_the_table_is_never_the_tool() {
+        // The standard scalpel lying face-up under a camera 0.5 m above it.
+        let scalpel = hullcut_synth::Scalpel::new();
+        let template = Template::new(&scalpel.geometry).expect("the scalpel's template");
+        let camera = Camera::new("top", 200, 200, 400.0, 400.0, 100.0, 100.0)
+            .looking_at(Point3::new(0.0, 0.0, 0.5), Point3::origin(), Vector3::y())
+            .expect("a camera looking down");
+        let pose = Isometry3::identity();
+        let radius = camera.distortion.monotonic_radius();
+        let depth = ToolDepth::draw(&camera, radius, &scalpel.geometry.mesh, &pose);
+        let cells = HandCells::new(Vec::new(), Vec::new());
+        let hand = HandInFront { hand: &cells, tool: depth.as_ref(), margin: 0.003 };
+        // A pixel in the middle of the blade's face.
+        let uv = project(&camera, radius, &Point3::new(0.02, 0.0, 0.0)).expect("the blade in view");
+        let (i, j) = (uv.x.round() as u32, uv.y.round() as u32);
+        let label_with = |hint: u8| {
+            let mut mask = GrayImage::from_pixel(200, 200, image::Luma([label::UNKNOWN]));
+            mask.put_pixel(i, j, image::Luma([hint]));
+            band_labels(ViewInput { camera: &camera, mask: &mask }, &template, &pose, 3.0, &hand, None)
+                .get_pixel(i, j)
+                .0[0]
+        };
+        assert_eq!(label_with(label::UNKNOWN), label::SCALPEL, "foreground where the tool is drawn");
+        assert_eq!(label_with(POSSIBLE_SHADOW), label::SCALPEL, "a possible shadow where the tool is drawn");
+        assert_eq!(label_with(TABLE_SHADOW), label::HAND, "a shadow on the table, even where the tool is drawn");
+    }
+
+    #[test]
+    fn a_region_shrinks_to_the_pixels_whose_neighbours_it_all_covers() {
+        // A 4x3 block at (11, 21) in a 6x5 box at (10, 20).
+        let mut covered = vec![false; 30];
+        for y in 1..4 {
+            for x in 1..5 {
+                covered[y * 6 + x] = true;
+            }
+        }
+        let region = ToolRegion { x0: 10, y0: 20, width: 6, height: 5, covered };
+        assert!(region.covers(11, 21) && region.covers(14, 23));
+        assert!(!region.covers(10, 21) && !region.covers(15, 22) && !region.covers(9, 22) && !region.covers(12, 25));
+        let eroded = region.eroded(1);
+        let kept: Vec<(usize, usize)> = eroded.pixels().collect();
+        assert_eq!(kept, vec![(12, 22), (13, 22)], "the block's inner row");
+        assert!(region.eroded(2).pixels().next().is_none(), "three rows erode away");
+        assert_eq!(region.eroded(0), region);
     }
 
     #[test]

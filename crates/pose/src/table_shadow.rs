@@ -9,13 +9,22 @@
 //! table the two meet, and the test cannot tell them apart: the other views then see the tool
 //! itself, darkened, where the ray meets the table.
 //!
-//! [`TableShadows::on_table`] is that test for one pixel. The labeller asks it only for the
-//! possible shadows beside the tool drawn where its track predicts it (a few hundred pixels per
-//! frame set), whose colour alone would let the fit creep into the hand's shadow.
+//! With the views' images and backgrounds ([`TableShadows::with_shading`]) the test also asks
+//! how dark: a shadow on a matte table keeps the same share of the light in every view, so a view
+//! counts the point as darkened only where it sees it about as much darker than its background as
+//! the tested pixel is. A steel blade over the hand's shadow, near the table, is then no shadow:
+//! it is brighter than the shadow behind it (random:317 in random:331, frame 96: the blade's
+//! possible-shadow pixels at 0.75-0.8 of their background, the shadow at 0.48-0.52; a black
+//! handle at 0.12-0.2).
+//!
+//! [`TableShadows::on_table`] is that test for one pixel. The labeller asks it for the possible
+//! shadows beside the tool drawn where its track predicts it, whose colour alone would let the
+//! fit creep into the hand's shadow; the labelling asks it for every possible shadow the hull
+//! kept, which the hand's hull over its own shadow near the table covers.
 
 use hullcut_dataset::label;
 use hullcut_rig::Camera;
-use image::GrayImage;
+use image::{GrayImage, RgbImage};
 use nalgebra::Point2;
 
 use crate::labels::POSSIBLE_SHADOW;
@@ -25,11 +34,48 @@ use crate::labels::POSSIBLE_SHADOW;
 /// calibration and the shadow's soft edge put it a pixel or so off.
 const NEIGHBOURHOOD_PX: i64 = 1;
 
+/// With shading, a view sees a point darkened like the tested pixel where one of its possible
+/// shadows within a pixel of the point's projection keeps within this much of the tested pixel's
+/// share of its background's light (a shadow's core spans some 0.03, its soft edge more).
+pub const SHADE_TOLERANCE: f32 = 0.1;
+
+/// One view's image, its background (the expected image of the empty scene) and the exposure
+/// gain of the image against it: how much of the light a pixel keeps.
+#[derive(Debug, Clone, Copy)]
+pub struct Shading<'a> {
+    /// The view's image.
+    pub image: &'a RgbImage,
+    /// The background's mean image, of the same size.
+    pub background: &'a RgbImage,
+    /// The image's exposure gain against the background (1 without compensation).
+    pub gain: f64,
+}
+
+impl Shading<'_> {
+    /// The share of its background's light that pixel (`i`, `j`) keeps (`None` outside the
+    /// image, or over a black background).
+    fn kept(&self, i: usize, j: usize) -> Option<f32> {
+        let (w, h) = (self.image.width() as usize, self.image.height() as usize);
+        if i >= w || j >= h {
+            return None;
+        }
+        let k = 3 * (j * w + i);
+        let sum = |img: &RgbImage| -> Option<f32> {
+            let p = img.as_raw().get(k..k + 3)?;
+            Some(p.iter().map(|&v| f32::from(v)).sum())
+        };
+        let (s, e) = (sum(self.image)?, sum(self.background)? * self.gain as f32);
+        (e > 0.0).then(|| s / e)
+    }
+}
+
 /// The views' foreground masks before their possible shadows were resolved: what tells a shadow
 /// on the table from an object in front of it ([`TableShadows::on_table`]).
 #[derive(Debug, Clone)]
 pub struct TableShadows<'a> {
     views: Vec<Option<(&'a Camera, &'a GrayImage)>>,
+    /// Per view, where given ([`TableShadows::with_shading`]).
+    shading: Vec<Option<Shading<'a>>>,
 }
 
 /// How one view sees a point of the table.
@@ -43,6 +89,9 @@ enum Seen {
     Undecided,
 }
 
+/// What a view compares its possible shadows with: the tested pixel's share of the light.
+type Shade<'s, 'a> = Option<(&'s Shading<'a>, f32)>;
+
 impl<'a> TableShadows<'a> {
     /// One entry per rig camera: its camera and its mask, whose [`POSSIBLE_SHADOW`] pixels may be
     /// cast shadows and whose [`label::BACKGROUND`] pixels are the plain background (any other
@@ -51,13 +100,38 @@ impl<'a> TableShadows<'a> {
     pub fn new(views: Vec<Option<(&'a Camera, &'a GrayImage)>>) -> Self {
         let views =
             views.into_iter().map(|v| v.filter(|(c, m)| m.width() == c.width && m.height() == c.height)).collect();
-        TableShadows { views }
+        TableShadows { views, shading: Vec::new() }
+    }
+
+    /// Adds the views' shading, one entry per rig camera (see the module docs); an entry whose
+    /// image or background is not its camera's size is left out, and a view without shading
+    /// counts any possible shadow there as darkened.
+    pub fn with_shading(mut self, shading: Vec<Option<Shading<'a>>>) -> Self {
+        self.shading = shading
+            .into_iter()
+            .zip(&self.views)
+            .map(|(s, v)| {
+                let (camera, _) = v.as_ref()?;
+                s.filter(|s| {
+                    s.image.dimensions() == (camera.width, camera.height)
+                        && s.background.dimensions() == s.image.dimensions()
+                })
+            })
+            .collect();
+        self
+    }
+
+    /// View `view`'s shading, where given.
+    fn shading(&self, view: usize) -> Option<&Shading<'a>> {
+        self.shading.get(view).and_then(Option::as_ref)
     }
 
     /// Whether the possible shadow at pixel (`i`, `j`) of view `view` is a shadow on the table as
     /// the other views see it: its ray meets the table at a point that more of the other views
     /// see darkened than see plain. Views that see foreground there, or do not see the point, do
-    /// not count; a ray that does not go down to the table is no shadow on it.
+    /// not count; a ray that does not go down to the table is no shadow on it. With shading for
+    /// `view` and another view, that view sees the point darkened only as much as this pixel
+    /// (within [`SHADE_TOLERANCE`]); darkened otherwise, it counts as plain.
     pub fn on_table(&self, view: usize, i: usize, j: usize) -> bool {
         let Some(Some((camera, _))) = self.views.get(view) else { return false };
         let Some(ray) = camera.pixel_ray(Point2::new(i as f64, j as f64)) else { return false };
@@ -67,6 +141,7 @@ impl<'a> TableShadows<'a> {
             return false;
         }
         let point = ray.at(-ray.origin.z / down);
+        let kept = self.shading(view).and_then(|s| s.kept(i, j));
         let (mut darkened, mut plain) = (0usize, 0usize);
         for (k, other) in self.views.iter().enumerate() {
             let Some((camera, mask)) = other.filter(|_| k != view) else { continue };
@@ -74,7 +149,8 @@ impl<'a> TableShadows<'a> {
             if !projection.visible {
                 continue;
             }
-            match seen(mask, projection.pixel) {
+            let shade = self.shading(k).zip(kept);
+            match seen(mask, projection.pixel, shade) {
                 Seen::Darkened => darkened += 1,
                 Seen::Plain => plain += 1,
                 Seen::Undecided => {}
@@ -84,8 +160,11 @@ impl<'a> TableShadows<'a> {
     }
 }
 
-/// How `mask` shows the table at `pixel` (within [`NEIGHBOURHOOD_PX`]).
-fn seen(mask: &GrayImage, pixel: Point2<f64>) -> Seen {
+/// How `mask` shows the table at `pixel` (within [`NEIGHBOURHOOD_PX`]); with `shade` (this
+/// view's shading and the tested pixel's share of the light), a possible shadow darkened
+/// otherwise than the tested pixel is no darkening of the same point: counted as plain where no
+/// foreground is near.
+fn seen(mask: &GrayImage, pixel: Point2<f64>, shade: Shade) -> Seen {
     let (w, h) = (i64::from(mask.width()), i64::from(mask.height()));
     let (ci, cj) = (pixel.x.round() as i64, pixel.y.round() as i64);
     let raw = mask.as_raw();
@@ -93,7 +172,14 @@ fn seen(mask: &GrayImage, pixel: Point2<f64>) -> Seen {
     for y in (cj - NEIGHBOURHOOD_PX).max(0)..=(cj + NEIGHBOURHOOD_PX).min(h - 1) {
         for x in (ci - NEIGHBOURHOOD_PX).max(0)..=(ci + NEIGHBOURHOOD_PX).min(w - 1) {
             match raw[(y * w + x) as usize] {
-                POSSIBLE_SHADOW => return Seen::Darkened,
+                POSSIBLE_SHADOW => {
+                    let alike = shade.is_none_or(|(s, kept)| {
+                        s.kept(x as usize, y as usize).is_some_and(|k| (k - kept).abs() <= SHADE_TOLERANCE)
+                    });
+                    if alike {
+                        return Seen::Darkened;
+                    }
+                }
                 label::BACKGROUND => {}
                 _ => all_plain = false,
             }
@@ -158,6 +244,55 @@ mod tests {
         let views = TableShadows::new(cams.iter().zip(&masks).map(|(c, m)| Some((c, m))).collect());
         let (i, j) = pixel_of(&cams[0], &tip);
         assert!(!views.on_table(0, i, j));
+    }
+
+    /// Images of a grey table (`grey` everywhere) with the pixels around each view's projection
+    /// of `point` at `value`.
+    fn images_with(cameras: &[Camera], point: &Point3<f64>, grey: u8, value: u8) -> Vec<RgbImage> {
+        cameras
+            .iter()
+            .map(|c| {
+                let mut m = RgbImage::from_pixel(c.width, c.height, image::Rgb([grey; 3]));
+                let p = c.project(point).pixel;
+                for y in (p.y.round() as u32 - 3)..=(p.y.round() as u32 + 3) {
+                    for x in (p.x.round() as u32 - 3)..=(p.x.round() as u32 + 3) {
+                        m.put_pixel(x, y, image::Rgb([value; 3]));
+                    }
+                }
+                m
+            })
+            .collect()
+    }
+
+    #[test]
+    fn with_shading_a_pixel_brighter_than_the_shadow_behind_it_is_no_shadow() {
+        let cams = cameras();
+        let on_table = Point3::new(0.02, 0.01, 0.0);
+        // Every view sees the patch of table darkened to half its light: a shadow.
+        let masks = masks_with(&cams, &on_table, POSSIBLE_SHADOW);
+        let background: Vec<RgbImage> =
+            cams.iter().map(|c| RgbImage::from_pixel(c.width, c.height, image::Rgb([120; 3]))).collect();
+        let mut images = images_with(&cams, &on_table, 120, 60);
+        fn shading<'a>(images: &'a [RgbImage], background: &'a [RgbImage], gain: f64) -> Vec<Option<Shading<'a>>> {
+            images.iter().zip(background).map(|(image, background)| Some(Shading { image, background, gain })).collect()
+        }
+        let views = || cams.iter().zip(&masks).map(|(c, m)| Some((c, m))).collect::<Vec<_>>();
+        let (i, j) = pixel_of(&cams[0], &on_table);
+        assert!(TableShadows::new(views()).with_shading(shading(&images, &background, 1.0)).on_table(0, i, j));
+        // View 0's pixel keeps 0.8 of its light (a steel blade over the shadow): still a
+        // possible shadow to view 0, but not as dark as what the others see there.
+        images[0].put_pixel(i as u32, j as u32, image::Rgb([96; 3]));
+        assert!(TableShadows::new(views()).on_table(0, i, j), "without shading, any darkening is the shadow");
+        assert!(!TableShadows::new(views()).with_shading(shading(&images, &background, 1.0)).on_table(0, i, j));
+        // The exposure gain scales the background: at gain 1.6, 96 of 120 keeps half the light.
+        let mut gained = shading(&images, &background, 1.0);
+        gained[0] = Some(Shading { image: &images[0], background: &background[0], gain: 1.6 });
+        assert!(TableShadows::new(views()).with_shading(gained).on_table(0, i, j));
+        // Shading of the wrong size is left out: the view counts any darkening.
+        let small = RgbImage::new(10, 10);
+        let mut odd = shading(&images, &background, 1.0);
+        odd[0] = Some(Shading { image: &small, background: &small, gain: 1.0 });
+        assert!(TableShadows::new(views()).with_shading(odd).on_table(0, i, j));
     }
 
     #[test]

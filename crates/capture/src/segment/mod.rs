@@ -298,6 +298,15 @@ impl Segmenter {
         })
     }
 
+    /// The mean image of camera `camera`'s background model (`None` outside the rig, and for
+    /// MOG2, whose background is not one image).
+    pub fn background_mean(&self, camera: usize) -> Option<&RgbImage> {
+        self.cameras.get(camera).and_then(|c| match &c.model {
+            Model::Background(m, _) => Some(m.mean_image()),
+            Model::Mog2(_) => None,
+        })
+    }
+
     /// Exposure gain estimated for camera `camera`'s last image (1 without compensation or MOG2).
     pub fn last_exposure_gain(&self, camera: usize) -> Option<f64> {
         self.cameras.get(camera).map(|c| c.last_gain)
