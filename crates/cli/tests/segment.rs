@@ -175,7 +175,8 @@ fn the_hands_shadow_near_the_table_goes_back_to_the_background() {
     // hand's dark shadow right under the blade's tip from frame set 27 on. The hand's hull over
     // its shadow kept the shadow as foreground, labelled the tool's beside the blade (scalpel
     // precision 0.761, IoU 0.696, foreground 0.984); asked of the other views, whose masks see
-    // the table behind it darkened as much, it is the background: 0.926, 0.836 and 0.993.
+    // the table behind it darkened as much, it is the background: 0.963, 0.868 and 0.994 (0.926,
+    // 0.836 and 0.993 while the shadow beside a fingertip's cell above 4 cm was not asked).
     let dir = tempfile::tempdir().expect("tempdir");
     let r = segment(&resection(dir.path(), "random:317", "random:331", "pointed", 36), &[]);
     let scalpel = r["accuracy"]["labels"].as_array().expect("labels").iter().find(|l| l["name"] == "scalpel");
@@ -183,7 +184,7 @@ fn the_hands_shadow_near_the_table_goes_back_to_the_background() {
     let foreground = r["accuracy"]["foreground"]["iou_pooled"].as_f64().expect("foreground IoU");
     let got = [iou(&r, "hand"), iou(&r, "scalpel"), precision, foreground];
     assert!(
-        got[0] >= 0.98 && got[1] >= 0.8 && got[2] >= 0.9 && got[3] >= 0.99,
+        got[0] >= 0.98 && got[1] >= 0.83 && got[2] >= 0.94 && got[3] >= 0.99,
         "hand IoU, scalpel IoU and precision, foreground IoU {got:?}"
     );
     let on_table = r["labelling"]["counters"]["shadow_on_table"].as_u64().expect("shadow_on_table");

@@ -64,10 +64,21 @@ const DEGRADED_MIN_FRACTION: f64 = 0.01;
 const DEGRADED_HISTORY: usize = 16;
 /// Marks the foreground the hull explains while a degraded view is cut back (no label uses it).
 const EXPLAINED: u8 = 254;
-/// Marks the possible shadows that only hull cells low over the table cover, to be asked of the
+/// Marks the possible shadows that a hull cell low over the table covers, to be asked of the
 /// other views whether they lie on the table (no label uses it).
 const ASK_TABLE: u8 = 253;
-const _: () = assert!(ASK_TABLE != SHADOW_LIKE && ASK_TABLE != EXPLAINED && ASK_TABLE != label::UNKNOWN);
+/// Marks, for a moment, the possible shadows that only cells high over the table cover (they
+/// become unknown foreground).
+const COVERED: u8 = 252;
+const _: () = assert!(
+    ASK_TABLE != SHADOW_LIKE
+        && ASK_TABLE != EXPLAINED
+        && ASK_TABLE != label::UNKNOWN
+        && COVERED != SHADOW_LIKE
+        && COVERED != EXPLAINED
+        && COVERED != ASK_TABLE
+        && COVERED != label::UNKNOWN
+);
 
 // The segmenter's possible shadows are what the tool's labeller reads as such ([`TableShadows`]
 // reads the masks before the hull resolves them).
@@ -667,7 +678,7 @@ impl Labelling {
     /// shadows foreground where those cells cover them, background elsewhere; the cells near the
     /// tool where its track predicts it at `set`'s time are kept as objects. With `on_table`
     /// (`unresolved` holds this frame set's masks as the segmenter gave them), a possible shadow
-    /// that only cells less than [`SHADOW_HULL_HEIGHT`] above the table cover is asked of the
+    /// that a cell less than [`SHADOW_HULL_HEIGHT`] above the table covers is asked of the
     /// other views ([`TableShadows`]): where they see the table behind it darkened as much, it
     /// goes back to the background, and the low cells no longer seen in that view go too (the
     /// hand's hull over its own shadow near the table: kept, it hid the blade from the fit as
@@ -711,20 +722,25 @@ impl Labelling {
         self.counters.shadow_cells_dropped += kept.dropped as u64;
         self.counters.shadow_cells_seen_through += kept.seen_through as u64;
         let margin = self.hull.margin_px;
-        // Firm: a cell above any shadow's hull.
-        let firm = |k: usize| !on_table || occ.cells[k].min.z > SHADOW_HULL_HEIGHT;
+        // A possible shadow that a cell low over the table covers is asked, even where a cell above
+        // covers it too (the footprint of a fingertip's cell reaches the shadow beside it).
+        let low = |k: usize| on_table && occ.cells[k].min.z <= SHADOW_HULL_HEIGHT;
         let covered: Vec<[u64; 2]> = views
             .par_iter()
             .zip(fg.par_iter_mut())
             .map(|(view, mask)| match (view, mask) {
                 (Some(view), Some(mask)) => {
-                    cover_split(&occ, view, mask, SHADOW_LIKE, margin, firm, [label::UNKNOWN, ASK_TABLE])
+                    let covered = cover_split(&occ, view, mask, SHADOW_LIKE, margin, low, [ASK_TABLE, COVERED]);
+                    if covered[1] > 0 {
+                        mask.iter_mut().filter(|p| **p == COVERED).for_each(|p| *p = label::UNKNOWN);
+                    }
+                    covered
                 }
                 _ => [0, 0],
             })
             .collect();
         self.counters.shadow_foreground += covered.iter().map(|c| c[0] + c[1]).sum::<u64>();
-        if !covered.iter().any(|c| c[1] > 0) {
+        if !covered.iter().any(|c| c[0] > 0) {
             return Ok(Resolved { occupancy: occ, marked_only, given_back: Vec::new() });
         }
         let table = table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter);
