@@ -2,7 +2,8 @@
 //! `world/cams/<name>`, and a tool's pose and geometry under `world/tool/<which>`.
 //!
 //! When segmenting, where each frame set's labels came from goes to `labelling/source` (text) and
-//! the colours learned so far to `metrics/appearance/<label>/{colour,pixels}` ([`log_labelling`]).
+//! the colours learned so far to `metrics/appearance/<label>/{colour,pixels}`, the possible
+//! shadows given back to the table to `metrics/shadows/on_table` ([`log_labelling`]).
 //!
 //! Decimation policy: images and masks every `every`-th frame (they dominate a recording's size:
 //! ~40 KB per JPEG image and 300 KB per mask at 640x480); poses and scalars every frame.
@@ -27,6 +28,9 @@ pub const LABEL_SOURCE_ENTITY: &str = "labelling/source";
 /// The share of the drawn blade the learned colours call the hand's (the fit's hand hints stop
 /// above 0.1).
 pub const BLADE_AS_HAND_ENTITY: &str = "metrics/appearance/blade_as_hand";
+/// The possible shadows given back to the table in a frame set, pixels over its views (the
+/// report's `shadow_on_table`, frame set by frame set).
+pub const SHADOW_ON_TABLE_ENTITY: &str = "metrics/shadows/on_table";
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -52,8 +56,8 @@ pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
 
 /// Logs where a frame set's labels came from (a warning when the tool's fit was not trusted and
 /// no colour could label instead), the colours learned by then (a label with none learned yet
-/// logs nothing) and the share of the drawn blade they call the hand's (once there is one), at
-/// the current time.
+/// logs nothing), the share of the drawn blade they call the hand's (once there is one) and the
+/// possible shadows given back to the table (where any were asked), at the current time.
 pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Result<()> {
     let (text, warning) = match trace.source {
         LabelSource::Geometry => ("geometry: the tool's trusted fit drawn into the views", false),
@@ -66,6 +70,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     hullcut_viz::log_text(rec, LABEL_SOURCE_ENTITY, text, warning)?;
     if let Some(share) = trace.blade_as_hand {
         hullcut_viz::log_scalar(rec, BLADE_AS_HAND_ENTITY, share)?;
+    }
+    if let Some(pixels) = trace.shadow_on_table {
+        hullcut_viz::log_scalar(rec, SHADOW_ON_TABLE_ENTITY, pixels as f64)?;
     }
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;

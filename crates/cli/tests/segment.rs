@@ -178,7 +178,8 @@ fn the_hands_shadow_near_the_table_goes_back_to_the_background() {
     // the table behind it darkened as much, it is the background: 0.963, 0.868 and 0.994 (0.926,
     // 0.836 and 0.993 while the shadow beside a fingertip's cell above 4 cm was not asked).
     let dir = tempfile::tempdir().expect("tempdir");
-    let r = segment(&resection(dir.path(), "random:317", "random:331", "pointed", 36), &[]);
+    let rrd = dir.path().join("segment.rrd");
+    let r = segment(&resection(dir.path(), "random:317", "random:331", "pointed", 36), &["--rrd", &path(&rrd)]);
     let scalpel = r["accuracy"]["labels"].as_array().expect("labels").iter().find(|l| l["name"] == "scalpel");
     let precision = scalpel.and_then(|l| l["precision"].as_f64()).expect("scalpel precision");
     let foreground = r["accuracy"]["foreground"]["iou_pooled"].as_f64().expect("foreground IoU");
@@ -189,6 +190,11 @@ fn the_hands_shadow_near_the_table_goes_back_to_the_background() {
     );
     let on_table = r["labelling"]["counters"]["shadow_on_table"].as_u64().expect("shadow_on_table");
     assert!(on_table > 0, "{}", r["labelling"]["counters"]);
+    // In the recording with each logged frame set's labels: every frame set has possible shadows
+    // to ask of.
+    let rows = hullcut_viz::rrd_timeline_rows(&rrd).expect("the recording reads back");
+    let logged = rows.get("/labelling/source").copied().unwrap_or(0);
+    assert!(logged > 0 && rows.get("/metrics/shadows/on_table") == Some(&logged), "{rows:?}");
 }
 
 #[test]

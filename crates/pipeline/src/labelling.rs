@@ -144,6 +144,9 @@ pub struct LabelTrace {
     /// The share of the drawn blade the learned colours call the hand's, once a blade was drawn
     /// on a frame set learned from ([`Labelling::blade_as_hand`]).
     pub blade_as_hand: Option<f64>,
+    /// Possible shadows given back to the table in the frame set, over its views (`None` where
+    /// none were asked: no shadows, no tool, or no table; [`Labelling::shadow_on_table`]).
+    pub shadow_on_table: Option<u64>,
 }
 
 impl LabelSource {
@@ -288,6 +291,8 @@ pub struct Labelling {
     /// The drawn blade's pixels on the frame sets learned from, and those of them the sure colours
     /// call the hand's (with forgetting): whether the fit gets hand hints ([`TOOL_AS_HAND_MAX`]).
     tool_as_hand: (f64, f64),
+    /// The last frame set's possible shadows given back to the table (`None`: none were asked).
+    shadow_on_table: Option<u64>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -382,6 +387,7 @@ impl Labelling {
             sure,
             explained,
             tool_as_hand: (0.0, 0.0),
+            shadow_on_table: None,
             hull,
             rig: ds.rig().clone(),
             label_frames: label_frames.to_vec(),
@@ -465,11 +471,13 @@ impl Labelling {
             copy_masks(&fg, &mut self.unresolved);
         }
         let mut given_back: Vec<Vec<usize>> = Vec::new();
+        self.shadow_on_table = None;
         if shadow_pixels > 0 {
             let resolved = self
                 .resolve_shadows(occ, &views, &mut fg, set, table_shadows)
                 .with_context(|| format!("frame {frame}"))?;
             (occ, marked_only, given_back) = (resolved.occupancy, resolved.marked_only, resolved.given_back);
+            self.shadow_on_table = table_shadows.then(|| given_back.iter().map(|b| b.len() as u64).sum());
         }
         for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -818,6 +826,13 @@ impl Labelling {
         self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + pixels as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
+    }
+
+    /// The last labelled frame set's possible shadows given back to the table as the other views
+    /// saw them, over its views (`None` where none were asked: no possible shadows, no tool, or a
+    /// world frame that is not a table).
+    pub fn shadow_on_table(&self) -> Option<u64> {
+        self.shadow_on_table
     }
 
     /// The share of the drawn blade the sure colours call the hand's, on the frame sets learned

@@ -824,6 +824,7 @@ fn hull_stage(
                 source: labelled.source,
                 learned: labelling.learned(),
                 blade_as_hand: labelling.blade_as_hand(),
+                shadow_on_table: labelling.shadow_on_table(),
             });
         }
         let occ = match labelled_hull {

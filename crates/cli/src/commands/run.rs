@@ -80,7 +80,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// vertex moved by more than 0.2 mm); stage timings under metrics/time/STAGE and accuracy under
 /// metrics/accuracy/NAME; when segmenting, where each frame set's labels came from under
 /// labelling/source, the learned colours under metrics/appearance/LABEL/{colour,pixels} and the
-/// share of the drawn blade they call the hand's under metrics/appearance/blade_as_hand; on
+/// share of the drawn blade they call the hand's under metrics/appearance/blade_as_hand, the
+/// possible shadows given back to the table under metrics/shadows/on_table; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -446,13 +447,14 @@ pub const ENTITIES: [&str; 13] = [
 ];
 
 /// The rerun entities a run logs when it segments (without mask files): where each frame set's
-/// labels came from, the colours learned by then, and the share of the drawn blade they call the
-/// hand's.
-pub const SEGMENTING_ENTITIES: [&str; 4] = [
+/// labels came from, the colours learned by then, the share of the drawn blade they call the
+/// hand's, and the possible shadows given back to the table.
+pub const SEGMENTING_ENTITIES: [&str; 5] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
     "metrics/appearance/blade_as_hand",
+    "metrics/shadows/on_table",
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

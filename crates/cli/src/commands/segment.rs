@@ -36,7 +36,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// precision and recall per label, timings per frame set) with --report; an .rrd (images and
 /// predicted masks under world/cams/NAME, where the labels came from under labelling/source and
 /// the learned colours under metrics/appearance/LABEL/{colour,pixels} and the share of the drawn
-/// blade they call the hand's under metrics/appearance/blade_as_hand, every --rrd-every frames)
+/// blade they call the hand's under metrics/appearance/blade_as_hand, the possible shadows given
+/// back to the table under metrics/shadows/on_table, every --rrd-every frames)
 /// with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
@@ -207,6 +208,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             source: labelled.source,
             learned: labelling.learned(),
             blade_as_hand: labelling.blade_as_hand(),
+            shadow_on_table: labelling.shadow_on_table(),
         };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
@@ -230,6 +232,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     source: relabelled.source,
                     learned: labelling.learned(),
                     blade_as_hand: labelling.blade_as_hand(),
+                    // Relabelling by colour asks no shadows: the frame set's first pass did.
+                    shadow_on_table: trace.shadow_on_table,
                 },
             ),
             None => (masks, trace),
