@@ -67,8 +67,8 @@ const EXPLAINED: u8 = 254;
 /// Marks the possible shadows that a hull cell low over the table covers, to be asked of the
 /// other views whether they lie on the table (no label uses it).
 const ASK_TABLE: u8 = 253;
-/// Marks, for a moment, the possible shadows that only cells high over the table cover (they
-/// become unknown foreground).
+/// Marks, for a moment, the covered possible shadows that are not asked (only cells high over
+/// the table cover them, or no table is asked of): they become unknown foreground.
 const COVERED: u8 = 252;
 const _: () = assert!(
     ASK_TABLE != SHADOW_LIKE
