@@ -68,7 +68,7 @@ const EXPLAINED: u8 = 254;
 /// other views whether they lie on the table (no label uses it).
 const ASK_TABLE: u8 = 253;
 /// Marks, for a moment, the covered possible shadows that are not asked (only cells high over
-/// the table cover them, or no table is asked of): they become unknown foreground.
+/// the table cover them): they become unknown foreground.
 const COVERED: u8 = 252;
 const _: () = assert!(
     ASK_TABLE != SHADOW_LIKE
@@ -730,9 +730,20 @@ impl Labelling {
         self.counters.shadow_cells_dropped += kept.dropped as u64;
         self.counters.shadow_cells_seen_through += kept.seen_through as u64;
         let margin = self.hull.margin_px;
+        if !on_table {
+            self.counters.shadow_foreground += views
+                .par_iter()
+                .zip(fg.par_iter_mut())
+                .map(|(view, mask)| match (view, mask) {
+                    (Some(view), Some(mask)) => cover(&occ, view, mask, SHADOW_LIKE, label::UNKNOWN, margin),
+                    _ => 0,
+                })
+                .sum::<u64>();
+            return Ok(Resolved { occupancy: occ, marked_only, given_back: Vec::new() });
+        }
         // A possible shadow that a cell low over the table covers is asked, even where a cell above
         // covers it too (the footprint of a fingertip's cell reaches the shadow beside it).
-        let low = |k: usize| on_table && occ.cells[k].min.z <= SHADOW_HULL_HEIGHT;
+        let low = |k: usize| occ.cells[k].min.z <= SHADOW_HULL_HEIGHT;
         let covered: Vec<[u64; 2]> = views
             .par_iter()
             .zip(fg.par_iter_mut())

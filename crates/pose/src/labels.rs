@@ -183,7 +183,7 @@ impl ToolRegion {
                     && (y - r..=y + r).all(|yy| (x - r..=x + r).all(|xx| self.covered[yy * self.width + xx]))
             })
             .collect();
-        ToolRegion { covered, ..self.clone() }
+        ToolRegion { x0: self.x0, y0: self.y0, width: self.width, height: self.height, covered }
     }
 
     /// Whether the region covers pixel (`i`, `j`) of the image.
