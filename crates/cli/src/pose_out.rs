@@ -114,6 +114,8 @@ pub struct FrameError {
     explained: f64,
     covered: f64,
     fit_rms_px: f64,
+    /// How much fatter (px, negative: thinner) than the fitted tool the scalpel silhouettes are.
+    fit_offset_px: f64,
     /// Views seeing the blade's face, edge-on, hidden by the hand.
     views_seen: usize,
     views_edge_on: usize,
@@ -204,6 +206,7 @@ impl PoseReport {
             explained: e.diagnostics.explained,
             covered: e.diagnostics.covered,
             fit_rms_px: e.diagnostics.fit_rms_px,
+            fit_offset_px: e.diagnostics.fit_offset_px,
             views_seen: e.diagnostics.views_seen,
             views_edge_on: e.diagnostics.views_edge_on,
             views_hidden: e.diagnostics.views_hidden,

@@ -363,7 +363,7 @@ impl Labelling {
             .map(|t| {
                 ToolLabeller::new(
                     t,
-                    TrackerParams { agreement: GEOMETRY_AGREEMENT, ..TrackerParams::default() },
+                    TrackerParams { agreement: GEOMETRY_AGREEMENT, outline_offset: false, ..TrackerParams::default() },
                     LabelParams::default(),
                 )
             })

@@ -13,7 +13,7 @@ fn main() {
     let truth = ds.truth_poses().expect("truth").expect("poses");
     let mut labeller = ToolLabeller::new(
         &tool,
-        TrackerParams { agreement: (0.82, 0.92), ..TrackerParams::default() },
+        TrackerParams { agreement: (0.82, 0.92), outline_offset: false, ..TrackerParams::default() },
         LabelParams::default(),
     )
     .expect("labeller");

@@ -12,8 +12,17 @@
 //! model), the second keeps it from covering background; together they fix the blade's plane from
 //! its projected width in the views that see it face-on and its line in those that see it
 //! edge-on. Residuals are Huber-weighted (one bad pixel cannot pull far).
+//!
+//! A seventh parameter, the *outline offset*, lets the silhouettes be uniformly fatter (or
+//! thinner) than the tool by up to [`MAX_OFFSET_PX`]: every outline residual is measured from the
+//! projected outline pushed out by the offset. Segmented masks take in a blade's blended edge
+//! pixels or lose them, depending on the contrast; a thin blade's pose cannot tell a pixel of
+//! width in a view that sees it at a slant from a turn about its long axis, so without the offset
+//! one pixel of fattening turns the blade by 5-10°. One offset for all views: a turn about the
+//! long axis widens the blade in some views and narrows it in others, a fattening widens it in
+//! all, so the two stay apart.
 
-use nalgebra::{Isometry3, Matrix6, Point2, Point3, Translation3, UnitQuaternion, Vector2, Vector3, Vector6};
+use nalgebra::{Isometry3, Point2, Point3, SMatrix, SVector, Translation3, UnitQuaternion, Vector2, Vector3};
 
 use crate::evidence::{Twist2, ViewEvidence};
 use crate::geometry::{Convex, convex_hull_indices};
@@ -26,8 +35,19 @@ pub(crate) const AGREE_PX: f64 = 1.5;
 /// Steps smaller than these end the fit (radians, metres): a micrometre at the blade's size.
 const MIN_STEP_ROTATION: f64 = 2e-5;
 const MIN_STEP_TRANSLATION: f64 = 1e-6;
+/// An outline offset step smaller than this (pixels) counts as none.
+const MIN_STEP_OFFSET_PX: f64 = 1e-3;
 /// Sine of the angle within which a blade counts as edge-on to a view (15 degrees).
 const EDGE_ON_SIN: f64 = 0.2588;
+/// The outline offset's bound, pixels: the silhouettes may be this much fatter or thinner than the
+/// projected tool all around (a pixel of blended edge, and a half more).
+pub(crate) const MAX_OFFSET_PX: f64 = 1.5;
+
+/// The fit's parameters: a twist about the blade's centre (rotation, translation) and the outline
+/// offset.
+const PARAMS: usize = 7;
+/// One residual's derivatives with respect to the parameters.
+type Row = [f64; PARAMS];
 
 /// The result of a fit.
 #[derive(Debug, Clone, Copy)]
@@ -44,6 +64,9 @@ pub(crate) struct Fit {
     pub covered: f64,
     /// Root mean square of the raw residuals, pixels.
     pub rms_px: f64,
+    /// The outline offset, pixels: how much fatter (positive) than the projected tool the
+    /// silhouettes' outlines are, all around.
+    pub offset_px: f64,
 }
 
 /// Residual bookkeeping of one evaluation.
@@ -145,13 +168,14 @@ fn residuals(
     template: &Template,
     views: &[ViewEvidence],
     pose: &Isometry3<f64>,
+    offset_px: f64,
     out: &mut Vec<f64>,
-    jacobian: Option<&mut Vec<[f64; 6]>>,
+    jacobian: Option<&mut Vec<Row>>,
 ) -> Tally {
     let with_jacobian = jacobian.is_some();
     let part = |views: &[ViewEvidence]| {
         let (mut r, mut j) = (Vec::new(), Vec::new());
-        let t = residuals_of(template, views, pose, &mut r, with_jacobian.then_some(&mut j));
+        let t = residuals_of(template, views, pose, offset_px, &mut r, with_jacobian.then_some(&mut j));
         (r, j, t)
     };
     let mid = views.len() / 2;
@@ -178,8 +202,9 @@ fn residuals_of(
     template: &Template,
     views: &[ViewEvidence],
     pose: &Isometry3<f64>,
+    offset_px: f64,
     out: &mut Vec<f64>,
-    mut jacobian: Option<&mut Vec<[f64; 6]>>,
+    mut jacobian: Option<&mut Vec<Row>>,
 ) -> Tally {
     let pivot = pose * template.blade_centre;
     let mut tally = Tally::default();
@@ -193,14 +218,14 @@ fn residuals_of(
                 (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
                 (a, b) => a.or(b),
             };
-            let (d, g) = nearest.unwrap_or((1e3, [0.0; 6]));
+            let (d, g) = nearest.map_or((1e3, [0.0; 6]), |(d, g)| (d - offset_px, g));
             tally.samples += 1;
             tally.explained += usize::from(d.abs() <= AGREE_PX);
             tally.sum_sq += d * d;
             out.push(huber(d));
             if let Some(j) = jacobian.as_mut() {
                 let slope = huber_slope(d);
-                j.push(g.map(|x| x * slope));
+                j.push(std::array::from_fn(|k| if k < 6 { g[k] * slope } else { -slope }));
             }
         }
         // A blade seen nearly edge-on projects thinner than a pixel: its silhouette may be a
@@ -212,21 +237,36 @@ fn residuals_of(
             if skip {
                 out.push(0.0);
                 if let Some(j) = jacobian.as_mut() {
-                    j.push([0.0; 6]);
+                    j.push([0.0; PARAMS]);
                 }
                 continue;
             }
             let world = pose * p;
+            // Silhouettes thinner than the tool (a negative offset) leave the tool's rim that much
+            // off the foreground: only the distance beyond it counts.
+            let thinner = (-offset_px).max(0.0);
             let d = match jacobian.as_mut() {
-                None => view.project(&world).map(|uv| view.outside_foreground_with_gradient(&uv).0),
+                None => {
+                    view.project(&world).map(|uv| (view.outside_foreground_with_gradient(&uv).0 - thinner).max(0.0))
+                }
                 Some(j) => {
                     let projected = view.project_with_jacobian(&world, &pivot);
                     let (d, g) = match projected {
                         Some((uv, jp)) => {
                             let (d, grad) = view.outside_foreground_with_gradient(&uv);
-                            (Some(d), std::array::from_fn(|k| grad.x * jp[0][k] + grad.y * jp[1][k]))
+                            let beyond = d - thinner;
+                            let g: Row = if beyond > 0.0 {
+                                std::array::from_fn(|k| match k {
+                                    6 if offset_px < 0.0 => 1.0,
+                                    6 => 0.0,
+                                    _ => grad.x * jp[0][k] + grad.y * jp[1][k],
+                                })
+                            } else {
+                                [0.0; PARAMS]
+                            };
+                            (Some(beyond.max(0.0)), g)
                         }
-                        None => (None, [0.0; 6]),
+                        None => (None, [0.0; PARAMS]),
                     };
                     let slope = huber_slope(d.unwrap_or(0.0));
                     j.push(g.map(|x: f64| x * slope));
@@ -248,38 +288,68 @@ fn fraction(k: usize, n: usize) -> f64 {
     if n == 0 { 0.0 } else { k as f64 / n as f64 }
 }
 
-/// Cost of a pose without fitting.
+/// Cost of a pose without fitting (no outline offset).
 pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3<f64>) -> f64 {
     let mut r = Vec::new();
-    residuals(template, views, pose, &mut r, None);
+    residuals(template, views, pose, 0.0, &mut r, None);
     r.iter().map(|x| x * x).sum()
 }
 
-/// Levenberg–Marquardt from `start`, at most `max_iterations`.
-pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3<f64>, max_iterations: usize) -> Fit {
+/// How a fit treats the outline offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Offset {
+    /// Held at 0.
+    Fixed,
+    /// Held at 0 until the pose alone converges, then fitted with it from there: from a far start
+    /// the offset refines the fit and never steers the search.
+    Refine,
+    /// Fitted with the pose from this value on (a start near the answer: the track's prediction
+    /// and the last trusted offset).
+    From(f64),
+}
+
+/// Levenberg–Marquardt from `start`, at most `max_iterations`, with the outline offset as `offset`
+/// says.
+pub(crate) fn fit(
+    template: &Template,
+    views: &[ViewEvidence],
+    start: &Isometry3<f64>,
+    max_iterations: usize,
+    offset_mode: Offset,
+) -> Fit {
     let mut pose = *start;
+    let (mut offset, mut offset_free) = match offset_mode {
+        Offset::From(o) => (o.clamp(-MAX_OFFSET_PX, MAX_OFFSET_PX), true),
+        Offset::Fixed | Offset::Refine => (0.0, false),
+    };
     let mut r = Vec::new();
-    let mut tally = residuals(template, views, &pose, &mut r, None);
+    let mut tally = residuals(template, views, &pose, offset, &mut r, None);
     let mut cost: f64 = r.iter().map(|x| x * x).sum();
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let mut rp = Vec::new();
-    let mut jac: Vec<[f64; 6]> = Vec::new();
+    let mut jac: Vec<Row> = Vec::new();
     while iterations < max_iterations && !r.is_empty() {
         iterations += 1;
         let pivot = pose * template.blade_centre;
-        residuals(template, views, &pose, &mut rp, Some(&mut jac));
-        let mut a = Matrix6::<f64>::zeros();
-        let mut g = Vector6::<f64>::zeros();
+        residuals(template, views, &pose, offset, &mut rp, Some(&mut jac));
+        let mut a = SMatrix::<f64, PARAMS, PARAMS>::zeros();
+        let mut g = SVector::<f64, PARAMS>::zeros();
         for (row, res) in jac.iter().zip(&r) {
-            let row = Vector6::from_row_slice(row);
+            let row = SVector::<f64, PARAMS>::from_row_slice(row);
             g += row * *res;
             a += row * row.transpose();
+        }
+        if !offset_free {
+            a.row_mut(PARAMS - 1).fill(0.0);
+            a.column_mut(PARAMS - 1).fill(0.0);
+            a[(PARAMS - 1, PARAMS - 1)] = 1.0;
+            g[PARAMS - 1] = 0.0;
         }
         let mut improved = false;
         for _ in 0..6 {
             let mut damped = a;
-            for i in 0..6 {
+            for i in 0..PARAMS {
                 damped[(i, i)] += lambda * a[(i, i)].max(1e-9);
             }
             let Some(step) = damped.cholesky().map(|c| c.solve(&-g)) else {
@@ -289,11 +359,15 @@ pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3
             let w = Vector3::new(step[0], step[1], step[2]);
             let v = Vector3::new(step[3], step[4], step[5]);
             let candidate = moved(&pose, &pivot, &w, &v);
-            let t = residuals(template, views, &candidate, &mut rp, None);
+            let shifted = (offset + step[6]).clamp(-MAX_OFFSET_PX, MAX_OFFSET_PX);
+            let t = residuals(template, views, &candidate, shifted, &mut rp, None);
             let c: f64 = rp.iter().map(|x| x * x).sum();
             if c < cost {
-                let small = w.norm() < MIN_STEP_ROTATION && v.norm() < MIN_STEP_TRANSLATION;
+                let small = w.norm() < MIN_STEP_ROTATION
+                    && v.norm() < MIN_STEP_TRANSLATION
+                    && (shifted - offset).abs() < MIN_STEP_OFFSET_PX;
                 pose = candidate;
+                offset = shifted;
                 std::mem::swap(&mut r, &mut rp);
                 tally = t;
                 let gain = cost - c;
@@ -305,7 +379,10 @@ pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3
             lambda *= 4.0;
         }
         if !improved {
-            break;
+            if offset_free || offset_mode == Offset::Fixed {
+                break;
+            }
+            offset_free = true;
         }
     }
     let n = tally.samples + tally.points;
@@ -316,5 +393,6 @@ pub(crate) fn fit(template: &Template, views: &[ViewEvidence], start: &Isometry3
         explained: fraction(tally.explained, tally.samples),
         covered: fraction(tally.covered, tally.points),
         rms_px: if n == 0 { 0.0 } else { (tally.sum_sq / n as f64).sqrt() },
+        offset_px: offset,
     }
 }

@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 
 use crate::evidence::ViewEvidence;
 use crate::filter::{OneEuro, OneEuroParams};
-use crate::fit::{Fit, cost, fit, moved};
+use crate::fit::{Fit, Offset, cost, fit, moved};
 use crate::init::{HullSummary, candidates, summarize};
 use crate::template::Template;
 
@@ -61,6 +61,13 @@ pub struct TrackerParams {
     /// reaches the second is kept without fitting again from the hull). The geometric labeller's
     /// evidence holds some of the hand's outline beside the tool, so it uses lower bounds.
     pub agreement: (f64, f64),
+    /// Whether the fit may take the silhouettes as uniformly fatter or thinner than the tool (up
+    /// to 1.5 px all around, fitted with the pose once the pose alone has converged): masks from
+    /// elsewhere (a lab's own segmentation) take in or lose a blade's blended edge pixels. Off
+    /// for the geometric labeller, whose evidence is drawn around the track's own prediction: there
+    /// the offset lets a wrong start explain its own evidence (a never-seen pointed-blade recording
+    /// fell from 99 to 5 trusted frame sets of 150 with it).
+    pub outline_offset: bool,
     /// The pose filter.
     pub filter: OneEuroParams,
 }
@@ -78,6 +85,7 @@ impl Default for TrackerParams {
             full_leaves: 12,
             max_iterations: 12,
             agreement: (0.94, 0.98),
+            outline_offset: true,
             filter: OneEuroParams::default(),
         }
     }
@@ -151,6 +159,9 @@ pub struct Diagnostics {
     pub covered: f64,
     /// RMS of the fit's residuals, pixels.
     pub fit_rms_px: f64,
+    /// The fit's outline offset, pixels: how much fatter (positive) or thinner than the projected
+    /// tool the scalpel silhouettes are all around (at most 1.5 either way).
+    pub fit_offset_px: f64,
     /// Levenberg–Marquardt iterations.
     pub iterations: usize,
     /// Started from the hull (no track, or the track's prediction fitted worse).
@@ -196,6 +207,9 @@ pub struct Tracker {
     filter: OneEuro,
     /// Time (s) and filtered pose of the last trusted frame.
     trusted: Option<(f64, Isometry3<f64>)>,
+    /// The outline offset of the last trusted fit, pixels (how much fatter than the tool the
+    /// masks are: a property of the masks' source, so kept when the track is lost).
+    offset_px: f64,
     /// Lens radii per view index (a root search, done once).
     radii: Vec<Option<f64>>,
 }
@@ -208,7 +222,7 @@ impl Tracker {
     /// A tracker for a tool.
     pub fn new(template: Template, params: TrackerParams) -> Self {
         let filter = OneEuro::new(params.filter);
-        Tracker { template, params, filter, trusted: None, radii: Vec::new() }
+        Tracker { template, params, filter, trusted: None, offset_px: 0.0, radii: Vec::new() }
     }
 
     /// The template.
@@ -257,6 +271,7 @@ impl Tracker {
         let (p, r) = self.filter.update(time_s, centre, fitted.pose.rotation);
         let filtered = Isometry3::from_parts(Translation3::from(p.coords - r * self.template.blade_centre.coords), r);
         self.trusted = Some((time_s, filtered));
+        self.offset_px = fitted.offset_px;
         PoseEstimate {
             frame,
             timestamp_ns,
@@ -334,7 +349,14 @@ impl Tracker {
         diag.evidence_ms = clock.elapsed().as_secs_f64() * 1e3;
         let clock = std::time::Instant::now();
         let it = self.params.max_iterations;
-        let tracked = prediction.map(|p| fit(&self.template, &evidence, &p, it));
+        // A tracked fit starts from the last trusted offset, free at once; a fit from afar fits
+        // the pose first.
+        let (from_track, from_afar) = if self.params.outline_offset {
+            (Offset::From(self.offset_px), Offset::Refine)
+        } else {
+            (Offset::Fixed, Offset::Fixed)
+        };
+        let tracked = prediction.map(|p| fit(&self.template, &evidence, &p, it, from_track));
         // A tracked fit in full agreement with the silhouettes is kept; anything less is fitted
         // again from the hull's candidates too (the better of all is kept).
         let full = self.params.agreement.1;
@@ -351,12 +373,12 @@ impl Tracker {
                 let best = starts
                     .iter()
                     .take(STARTS_FITTED)
-                    .map(|(_, s)| fit(&self.template, &evidence, s, 3 * it))
+                    .map(|(_, s)| fit(&self.template, &evidence, s, 3 * it, from_afar))
                     .chain(tracked)
                     .min_by(|a, b| a.cost.total_cmp(&b.cost))?;
                 // The blade's silhouette nearly repeats itself turned over about its long axis
                 // (spine and edge swapped): fit that twin too and keep the better.
-                let twin = fit(&self.template, &evidence, &self.template.turned_over(&best.pose), 3 * it);
+                let twin = fit(&self.template, &evidence, &self.template.turned_over(&best.pose), 3 * it, from_afar);
                 if twin.cost < best.cost { twin } else { best }
             }
         };
@@ -364,6 +386,7 @@ impl Tracker {
         diag.explained = best.explained;
         diag.covered = best.covered;
         diag.fit_rms_px = best.rms_px;
+        diag.fit_offset_px = best.offset_px;
         diag.iterations = best.iterations;
         self.look(&best.pose, &evidence, diag);
         let (confidence, reason) = self.confidence(time_s, &best, hull, diag);
@@ -590,8 +613,15 @@ mod tests {
         let scene = Scene::new(SceneConfig::new(SceneKind::Cut, 2, 2)).expect("scene");
         let tracker =
             Tracker::new(Template::new(&scene.scalpel().geometry).expect("template"), TrackerParams::default());
-        let fit =
-            Fit { pose: Isometry3::identity(), cost: 0.0, iterations: 3, explained: 1.0, covered: 1.0, rms_px: 0.1 };
+        let fit = Fit {
+            pose: Isometry3::identity(),
+            cost: 0.0,
+            iterations: 3,
+            explained: 1.0,
+            covered: 1.0,
+            rms_px: 0.1,
+            offset_px: 0.0,
+        };
         let hull = HullSummary {
             leaves: 200,
             components: 1,

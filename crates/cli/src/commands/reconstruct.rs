@@ -57,7 +57,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// The blade's pose: the dataset's tool.json (the instrument's known shape) is fitted to the
 /// scalpel silhouettes (with segmented masks: the segmentation's own fit of the tool into the
 /// foreground's hull, whose agreement bounds are looser), starting from the scalpel hull or from
-/// the track, tracked with a One Euro filter; a frame whose confidence is too low (fit disagrees with the silhouettes, blade seen by
+/// the track, tracked with a One Euro filter. Fitted to mask files, the fit allows the scalpel's
+/// silhouettes to be uniformly fatter or thinner than the tool by up to 1.5 px (a segmentation that
+/// takes in or loses the blade's blended edge; `fit_offset_px` per frame in the report); a frame
+/// whose confidence is too low (fit disagrees with the silhouettes, blade seen by
 /// too few views, too few scalpel leaves, implausible jump) is refused with a reason and the last
 /// trusted pose is held for up to 0.5 s. Without a tool.json every frame is refused. Where the
 /// dataset has true poses, the report gives normal, edge and tip errors per frame and aggregated.
