@@ -131,6 +131,9 @@ pub struct Setup {
     pub carver: Carver,
     /// The blade's template, when the dataset has a tool.json.
     pub template: Option<Template>,
+    /// With mask files, let the pose's fit take the scalpel's silhouettes as uniformly fatter or
+    /// thinner than the tool ([`TrackerParams::outline_offset`]; off in [`Setup::new`]).
+    pub outline_offset: bool,
     /// The organ.
     pub tissue: Tissue,
     /// Frame sets in the stages at once (at least 1): each queue's bound, and the latency's.
@@ -179,6 +182,7 @@ impl Setup {
             hull,
             carver,
             template,
+            outline_offset: false,
             tissue,
             in_flight: DEFAULT_IN_FLIGHT,
             realtime: false,
@@ -483,6 +487,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         hull,
         carver,
         template,
+        outline_offset,
         tissue,
         in_flight,
         realtime,
@@ -531,7 +536,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
     let pose = {
         let template = template.clone();
         let depth = Arc::clone(&depth);
-        stage("pose", &abort, move || ((), pose_stage(&ds, template, &hull_rx, (&pose_tx, &depth))))?
+        stage("pose", &abort, move || ((), pose_stage(&ds, template, outline_offset, &hull_rx, (&pose_tx, &depth))))?
     };
     let tissue = {
         let depth = Arc::clone(&depth);
@@ -868,10 +873,12 @@ fn hull_stage(
 fn pose_stage(
     ds: &Dataset,
     template: Option<Template>,
+    outline_offset: bool,
     rx: &Receiver<Work>,
     (tx, depth): (&Sender<Work>, &QueueDepth),
 ) -> Result<(), Error> {
-    let mut tracker = template.map(|t| Tracker::new(t, TrackerParams::default()));
+    let params = TrackerParams { outline_offset, ..TrackerParams::default() };
+    let mut tracker = template.map(|t| Tracker::new(t, params));
     for mut work in rx.iter() {
         let clock = Instant::now();
         let set = &work.set;

@@ -62,11 +62,15 @@ pub struct TrackerParams {
     /// evidence holds some of the hand's outline beside the tool, so it uses lower bounds.
     pub agreement: (f64, f64),
     /// Whether the fit may take the silhouettes as uniformly fatter or thinner than the tool (up
-    /// to 1.5 px all around, fitted with the pose once the pose alone has converged): masks from
-    /// elsewhere (a lab's own segmentation) take in or lose a blade's blended edge pixels. Off
-    /// for the geometric labeller, whose evidence is drawn around the track's own prediction: there
-    /// the offset lets a wrong start explain its own evidence (a never-seen pointed-blade recording
-    /// fell from 99 to 5 trusted frame sets of 150 with it).
+    /// to 1.5 px all around, fitted with the pose once the pose alone has converged; a tracked
+    /// fit starts from the last trusted offset): masks from elsewhere (a lab's own segmentation)
+    /// take in or lose a blade's blended edge pixels, and a thin blade seen at a slant turns 5-10°
+    /// about its long axis for a pixel of width. Off by default (`--outline-offset` turns it on for
+    /// mask files): with it on, the built-in scene's poses moved enough to leave sliver copies
+    /// ringing after a third replay of its strokes (docs/benchmarks.md, "Masks fatter or thinner
+    /// than the tool"). Never on for the geometric labeller, whose evidence is drawn around the
+    /// track's own prediction: there the offset lets a wrong start explain its own evidence (a
+    /// never-seen pointed-blade recording fell from 99 to 5 trusted frame sets of 150 with it).
     pub outline_offset: bool,
     /// The pose filter.
     pub filter: OneEuroParams,
@@ -85,7 +89,7 @@ impl Default for TrackerParams {
             full_leaves: 12,
             max_iterations: 12,
             agreement: (0.94, 0.98),
-            outline_offset: true,
+            outline_offset: false,
             filter: OneEuroParams::default(),
         }
     }

@@ -197,10 +197,11 @@ fn masks_a_pixel_fatter_or_thinner_than_the_tool_keep_the_blade_within_two_degre
     // 7.07 mm with 4 refused; random rig fatter 0.56° 0.44 mm / 1.64° 2.43 mm; random rig thinner
     // 0.82° 0.50 mm / 7.60° 2.37 mm. The offsets found: 0.91-0.95 px fatter, 0.72-0.77 px thinner.
     type Edit = fn(usize, u64, &mut GrayImage);
+    let with_offset = TrackerParams { outline_offset: true, ..TrackerParams::default() };
     for (name, setup) in [("lab8", LAB8), ("random rig", RANDOM)] {
         for (edit_name, edit, sign) in [("fatter", fatter as Edit, 1.0), ("thinner", thinner as Edit, -1.0)] {
             let name = format!("{name}, masks a pixel {edit_name}");
-            let steps = track(setup, SceneKind::Cut, 2, 30, 12, None, edit);
+            let steps = track_with(with_offset.clone(), setup, SceneKind::Cut, 2, 30, 12, None, edit);
             let (_, _, valid) = summary(&name, &steps);
             assert_eq!(valid, 1.0, "{name}: every frame should be trusted");
             for s in &steps {
@@ -211,9 +212,9 @@ fn masks_a_pixel_fatter_or_thinner_than_the_tool_keep_the_blade_within_two_degre
             }
         }
     }
-    // The scene exercises what the offset is for: without it the thinner masks turn the blade.
-    let params = TrackerParams { outline_offset: false, ..TrackerParams::default() };
-    let steps = track_with(params, RANDOM, SceneKind::Cut, 2, 30, 12, None, thinner);
+    // The scene exercises what the offset is for: without it (the default) the thinner masks turn
+    // the blade.
+    let steps = track(RANDOM, SceneKind::Cut, 2, 30, 12, None, thinner);
     let off = steps.iter().filter(|s| !s.estimate.valid || s.error.is_none_or(|e| e.exceeds(4.0, 5.0))).count();
     assert!(off >= 6, "without the offset only {off} of 12 frames were refused or off by 4°");
 }

@@ -57,10 +57,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// The blade's pose: the dataset's tool.json (the instrument's known shape) is fitted to the
 /// scalpel silhouettes (with segmented masks: the segmentation's own fit of the tool into the
 /// foreground's hull, whose agreement bounds are looser), starting from the scalpel hull or from
-/// the track, tracked with a One Euro filter. Fitted to mask files, the fit allows the scalpel's
-/// silhouettes to be uniformly fatter or thinner than the tool by up to 1.5 px (a segmentation that
-/// takes in or loses the blade's blended edge; `fit_offset_px` per frame in the report); a frame
-/// whose confidence is too low (fit disagrees with the silhouettes, blade seen by
+/// the track, tracked with a One Euro filter (with --outline-offset and mask files, the fit allows
+/// the scalpel's silhouettes to be uniformly fatter or thinner than the tool by up to 1.5 px: a
+/// lab's segmentation that takes in or loses the blade's blended edge); a frame whose confidence
+/// is too low (fit disagrees with the silhouettes, blade seen by
 /// too few views, too few scalpel leaves, implausible jump) is refused with a reason and the last
 /// trusted pose is held for up to 0.5 s. Without a tool.json every frame is refused. Where the
 /// dataset has true poses, the report gives normal, edge and tip errors per frame and aggregated.
@@ -97,6 +97,13 @@ pub struct Args {
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
     masks: checks::MaskSource,
+    /// With mask files: let the blade's fit take the scalpel's silhouettes as up to 1.5 px fatter
+    /// or thinner than the tool all around (a lab's own segmentation that takes in or loses the
+    /// blade's blended edge pixels; a thin blade seen at a slant turns 5-10° for a pixel of width).
+    /// The offset found is `fit_offset_px` per frame in the report. No effect when segmenting
+    /// (the segmentation's own fit holds the offset at 0).
+    #[arg(long)]
+    outline_offset: bool,
     /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
@@ -220,6 +227,9 @@ struct Report {
     frames: [u64; 2],
     backend: Backend,
     masks: String,
+    /// `--outline-offset`: the blade's fit to mask files took the silhouettes as uniformly fatter
+    /// or thinner than the tool.
+    outline_offset: bool,
     workspace: WorkingVolume,
     voxel_m: f64,
     resolution: usize,
@@ -294,7 +304,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .map(Template::new)
         .transpose()
         .with_context(|| ds.root().join("tool.json").display().to_string())?;
-    let mut tracker = template.clone().map(|t| Tracker::new(t, TrackerParams::default()));
+    let tracking = TrackerParams { outline_offset: args.outline_offset, ..TrackerParams::default() };
+    let mut tracker = template.clone().map(|t| Tracker::new(t, tracking));
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut pose_writer = PoseWriter::create(&args.out.join("poses.jsonl"))?;
     let mut pose_report = PoseReport::new(template.is_some());
@@ -489,6 +500,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 None => hullcut_viz::log_clear(rec, "world/tool/estimate")?,
             }
             hullcut_viz::log_scalar(rec, "metrics/pose/confidence", estimate.confidence)?;
+            hullcut_viz::log_scalar(rec, "metrics/pose/outline_offset_px", estimate.diagnostics.fit_offset_px)?;
             hullcut_viz::log_scalar(rec, "metrics/pose/valid", f64::from(u8::from(estimate.valid)))?;
             hullcut_viz::log_scalar(rec, "metrics/time/pose", t.pose.last().map_or(0.0, |d| d.as_secs_f64() * 1e3))?;
             // A recording that cannot be written (a full disk) shows only when flushed.
@@ -579,6 +591,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             frames: [range.start, range.end],
             backend: args.backend,
             masks: if use_files { "files" } else { "segment" }.to_owned(),
+            outline_offset: args.outline_offset && use_files,
             workspace: volume.clone(),
             voxel_m: params.leaf_size,
             resolution,

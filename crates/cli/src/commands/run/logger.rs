@@ -202,6 +202,7 @@ impl Logger {
                 None => hullcut_viz::log_clear(rec, "world/tool/estimate")?,
             }
             hullcut_viz::log_scalar(rec, "metrics/pose/confidence", e.confidence)?;
+            hullcut_viz::log_scalar(rec, "metrics/pose/outline_offset_px", e.diagnostics.fit_offset_px)?;
             if let Some(err) = error {
                 hullcut_viz::log_scalar(rec, "metrics/accuracy/blade_normal_deg", err.normal_deg)?;
                 hullcut_viz::log_scalar(rec, "metrics/accuracy/blade_tip_mm", err.tip_mm)?;
