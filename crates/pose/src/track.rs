@@ -153,6 +153,9 @@ pub struct Diagnostics {
     pub views_edge_on: usize,
     /// Views where the hand hides the blade.
     pub views_hidden: usize,
+    /// Views that do not see the blade's face and have most of it on background (the masks lost
+    /// the blade there, a dark blade taken for a shadow say, or the fit is off).
+    pub views_on_background: usize,
     /// Scalpel leaves in the hull's largest scalpel component.
     pub scalpel_leaves: usize,
     /// Connected components of scalpel leaves.
@@ -417,7 +420,9 @@ impl Tracker {
         Some(moved(&pose, &centre, &(w * dt), &(v * dt)))
     }
 
-    /// Per-view look at the fitted blade: edge-on, hidden by the hand, or seen.
+    /// Per-view look at the fitted blade: edge-on, hidden by the hand, on background, or seen. A
+    /// view that does not see the blade's face has it on background where most of its interior
+    /// lands on background (the masks lost it there, or the fit is off), else behind the hand.
     fn look(&self, pose: &Isometry3<f64>, views: &[ViewEvidence], diag: &mut Diagnostics) {
         let centre = pose * self.template.blade_centre;
         let normal = pose * self.template.normal;
@@ -428,15 +433,20 @@ impl Tracker {
                 diag.views_edge_on += 1;
                 continue;
             }
-            let (mut inside, mut scalpel) = (0usize, 0usize);
+            let (mut inside, mut scalpel, mut background) = (0usize, 0usize, 0usize);
             for p in &self.template.interior[..self.template.blade_interior] {
                 if let Some(l) = v.project(&(pose * p)).and_then(|uv| v.label_at(&uv)) {
                     inside += 1;
                     scalpel += usize::from(l == label::SCALPEL);
+                    background += usize::from(l == label::BACKGROUND);
                 }
             }
             if inside == 0 || (scalpel as f64) < self.params.min_visible_fraction * inside as f64 {
-                diag.views_hidden += 1;
+                if 2 * background > inside {
+                    diag.views_on_background += 1;
+                } else {
+                    diag.views_hidden += 1;
+                }
             } else {
                 diag.views_seen += 1;
             }
@@ -462,8 +472,8 @@ impl Tracker {
                     ramp(diag.views_seen as f64, 1.0, 2.5)
                 },
                 format!(
-                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, of {}",
-                    diag.views_seen, diag.views_edge_on, diag.views_hidden, diag.views_used
+                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, {} on background, of {}",
+                    diag.views_seen, diag.views_edge_on, diag.views_hidden, diag.views_on_background, diag.views_used
                 ),
             ),
             (

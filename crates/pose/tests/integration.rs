@@ -235,6 +235,33 @@ fn hard_scene_never_trusts_a_pose_off_by_5_degrees_or_5_mm() {
 }
 
 #[test]
+fn a_blade_the_masks_lost_in_one_view_is_on_background_there_not_behind_the_hand() {
+    // The blade's pixels of camera 0 turned to background (a dark blade taken for a shadow) or to
+    // the hand, in frames 30..36 of the cut scene: the view that does not see the blade's face is
+    // counted on background in the first case, hidden by the hand in the second.
+    for (to, name) in [(label::BACKGROUND, "background"), (label::HAND, "hand")] {
+        let lose = move |c: usize, _: u64, m: &mut GrayImage| {
+            if c == 0 {
+                m.pixels_mut().filter(|p| p.0[0] == label::SCALPEL).for_each(|p| p.0[0] = to);
+            }
+        };
+        let steps = track(BUILTIN, SceneKind::Cut, 2, 30, 6, None, lose);
+        let counts: Vec<(usize, usize, usize, usize)> = steps
+            .iter()
+            .map(|s| {
+                let d = &s.estimate.diagnostics;
+                (d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background)
+            })
+            .collect();
+        println!("camera 0's blade as {name}: (seen, edge-on, hidden, on background) {counts:?}");
+        let expected = if to == label::BACKGROUND { (0, 1) } else { (1, 0) };
+        for (s, c) in steps.iter().zip(&counts) {
+            assert_eq!((c.2, c.3), expected, "{name}: frame {} counted {c:?}", s.estimate.frame);
+        }
+    }
+}
+
+#[test]
 fn a_frame_without_the_scalpel_is_refused_and_the_last_pose_held_for_a_bounded_time() {
     // Frames 30..36 of the cut scene; the scalpel vanishes from every mask from frame 33 on (as
     // if the segmentation lost it). 30 frames per second: 0.5 s of hold covers the rest.
