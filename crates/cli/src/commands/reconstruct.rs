@@ -304,7 +304,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .map(Template::new)
         .transpose()
         .with_context(|| ds.root().join("tool.json").display().to_string())?;
-    let tracking = TrackerParams { outline_offset: args.outline_offset, ..TrackerParams::default() };
+    // Mask files only: a colour-labelled segmentation fitted here keeps the offset at 0 as the
+    // geometric labeller's fit does.
+    let tracking = TrackerParams { outline_offset: args.outline_offset && use_files, ..TrackerParams::default() };
     let mut tracker = template.clone().map(|t| Tracker::new(t, tracking));
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut pose_writer = PoseWriter::create(&args.out.join("poses.jsonl"))?;

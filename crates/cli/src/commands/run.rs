@@ -666,7 +666,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hull,
         carver,
         template: template.clone(),
-        outline_offset: args.outline_offset,
+        outline_offset: args.outline_offset && use_files,
         tissue,
         in_flight: args.queue,
         realtime: args.realtime,
