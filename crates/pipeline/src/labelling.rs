@@ -283,8 +283,7 @@ pub struct Labelling {
     /// [`Labelling::learn`] for why apart).
     sharpening: AppearanceModel,
     colours: Option<ColourLut>,
-    /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]) and explained
-    /// ([`SURE_MAHALANOBIS2`]): the fit's hints.
+    /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]): the fit's hints.
     sure: Option<ColourLut>,
     /// The sharpening colours where sure and their class also explains them
     /// ([`SURE_MAHALANOBIS2`]): they sharpen the labels near the drawn tool.
@@ -969,14 +968,10 @@ fn to_background(masks: &mut [Option<GrayImage>], given_back: &[Vec<usize>], kee
 }
 
 /// The learned classes compiled two ways: every colour labelled; labelled only where sure
-/// ([`SHARPEN_LOG_RATIO`]) and explained by the label's class ([`SURE_MAHALANOBIS2`]). A colour
-/// neither class explains is no hint: a grey steel blade beside a blue handle, held by a purple
-/// glove, is likelier the glove's than the handle's, and as the hand's hint it took the blade from
-/// the fit, which was refused as hidden by the hand in frame sets it had right (random:359 in
-/// random:367).
+/// ([`SHARPEN_LOG_RATIO`]).
 fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>) {
     let Some(classes) = classes else { return (None, None) };
-    (Some(ColourLut::new(&classes)), compile_explained(Some(classes)))
+    (Some(ColourLut::new(&classes)), Some(ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)))
 }
 
 /// The learned classes compiled to label only where sure ([`SHARPEN_LOG_RATIO`]) and explained by
@@ -1108,14 +1103,13 @@ mod tests {
         let image = RgbImage::from_fn(3, 1, |x, _| Rgb([steel, skin, green_shadow][x as usize]));
         let region = ToolRegion { x0: 1, y0: 0, width: 1, height: 1, covered: vec![true] };
         let mut mask = GrayImage::from_raw(3, 1, vec![label::HAND, label::SCALPEL, label::HAND]).expect("mask");
-        let (likelier, explained) =
-            (ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO), compile_explained(Some(classes)));
+        let (likelier, explained) = (compile(Some(classes.clone())).1, compile_explained(Some(classes)));
         sharpen(&explained.expect("compiled"), &image, &mut mask, &region);
         // The steel beside the drawn tool is the tool's, the skin on it the hand's; the green
         // shadow kept beside the blade is neither: the geometry's label stays.
         assert_eq!(mask.as_raw(), &vec![label::SCALPEL, label::HAND, label::HAND]);
         // Without the test of explanation the broader class would take the shadow.
-        assert_eq!(likelier.get(green_shadow), label::SCALPEL);
+        assert_eq!(likelier.expect("compiled").get(green_shadow), label::SCALPEL);
     }
 
     /// A skin-toned hand and a dark blue handle, learned (the thin steel blade was not).
@@ -1161,32 +1155,6 @@ mod tests {
         // An outline beyond the image counts the part inside it.
         let wide = [(-5.0, -5.0), (40.0, -5.0), (40.0, 40.0), (-5.0, 40.0)].map(|(x, y)| nalgebra::Point2::new(x, y));
         assert_eq!(counted(&wide), (47, 23));
-    }
-
-    #[test]
-    fn a_colour_neither_class_explains_is_no_hint() {
-        // A purple glove and a blue handle, as random:359 in random:367 learned them: its grey
-        // steel blade is likelier the glove's than the handle's, and far from both.
-        let classes = ColourClasses {
-            classes: vec![
-                ColourClass::from_albedo(label::HAND, [126.0, 101.0, 157.0], (0.3, 1.0), 0.015),
-                ColourClass::from_albedo(label::SCALPEL, [52.0, 109.0, 223.0], (0.3, 1.0), 0.04),
-            ],
-            reject_mahalanobis2: None,
-        };
-        let (colours, sure) = compile(Some(classes));
-        let (colours, sure) = (colours.expect("the colours"), sure.expect("the sure colours"));
-        let (grey, purple, blue) = ([75, 76, 82], [110, 88, 137], [45, 95, 195]);
-        assert_eq!(colours.get(grey), label::HAND, "the likelier class labels it");
-        assert_eq!(sure.get(grey), label::UNKNOWN, "but it is no hint");
-        assert_eq!(sure.get(purple), label::HAND);
-        assert_eq!(sure.get(blue), label::SCALPEL);
-        // A possible shadow of that grey (the blade over a grey table) stays a possible shadow for
-        // the fit; one of the glove's colour is the hand.
-        let image = RgbImage::from_fn(2, 1, |x, _| Rgb([grey, purple][x as usize]));
-        let mask = GrayImage::from_raw(2, 1, vec![SHADOW_LIKE, SHADOW_LIKE]).expect("mask");
-        let hints = fit_hints(Some(&sure), true, &image, &mask);
-        assert_eq!(hints.as_raw(), &vec![POSSIBLE_SHADOW, label::HAND]);
     }
 
     #[test]

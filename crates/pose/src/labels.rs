@@ -355,22 +355,6 @@ impl ToolLabeller {
                 consider(probe, e, &mut best);
             }
         }
-        // The evidence is drawn around the pose a fit starts from: where the start was millimetres
-        // off (the thin parts' first fit), the blade's pixels fell outside the band, were the
-        // hand's, and the fit that then found the blade was refused as hidden by the hand. Once
-        // more, the evidence drawn around that fit.
-        if let Some(pose) = best
-            .as_ref()
-            .filter(|(_, e)| {
-                !e.valid && e.diagnostics.explained.min(e.diagnostics.covered) >= self.tracker.params().agreement.1
-            })
-            .and_then(|(_, e)| e.fitted.as_ref())
-            .map(|p| p.tool_to_world)
-        {
-            let evidence = timed_evidence(&|| provisional_for(&pose));
-            let (probe, e) = fit_with(&self.tracker, &evidence);
-            consider(probe, e, &mut best);
-        }
         stats.evidence_ms = evidence_ms;
         stats.fit_ms = clock.elapsed().as_secs_f64() * 1e3 - evidence_ms;
         let estimate = match best {
@@ -694,8 +678,8 @@ struct HandInFront<'a> {
     hand: &'a HandCells,
     /// The tool drawn into the view.
     tool: Option<&'a ToolDepth>,
-    /// A cell is behind the tool at a pixel where its centre lies this much farther from the
-    /// camera than the tool drawn there, metres.
+    /// A cell is behind the tool at a pixel where its nearest point lies this much farther from
+    /// the camera than the tool drawn there, metres.
     margin: f64,
 }
 
@@ -778,13 +762,11 @@ fn row_within(polygon: &Convex, band: f64, y: f64, i0: usize, i1: usize) -> Opti
 /// cell is a disc around its centre's projection whose radius is its half-diagonal's (enough to
 /// cover its footprint, which is what matters along the tool's outline), except pixels whose colour
 /// is surely the tool's (`hints`, the view's mask) and pixels where the tool is drawn in front of
-/// the cell (its centre farther than the drawn depth plus the margin): the view sees the tool
-/// there (the hand's hull, fatter than the hand, would otherwise hide the blade from every view
-/// that sees the hand behind it; judged by the cell's nearest corner, a finger the blade lies on
-/// hid it wherever the finger's cells reached within half a cell and the margin of it, random:359
-/// in random:367). A cell the view sees only over the drawn tool (no foreground pixel off the
-/// drawn tool in its disc) is the hull's fat in front of the tool, and takes nothing. A band pixel beside the drawn tool that a cell covers is the hand's, wherever the cell
-/// lies; a doubtful cell ([`HandCells::doubtful`]) takes only those.
+/// the cell (its nearest point farther than the drawn depth plus the margin): the view sees the
+/// tool there (the hand's hull, fatter than the hand, would otherwise hide the blade from every
+/// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
+/// the hand's, wherever the cell lies; a doubtful cell ([`HandCells::doubtful`]) takes only
+/// those.
 fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8], scalpel: &PixelBox) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     // Cells projecting outside the scalpel pixels' box are skipped after one projection.
@@ -830,21 +812,7 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
         if i0 > i1 || j0 > j1 {
             continue;
         }
-        if !doubtful && let Some(tool) = hand.tool {
-            // A cell this view sees only over the drawn tool is the hull's fat in front of it (the
-            // other views' cones over the hand), not the hand: it hides nothing, as in the final
-            // labels' occluders.
-            let (a0, b0) = ((uv.x - r).ceil().max(0.0) as usize, (uv.y - r).ceil().max(0.0) as usize);
-            let (a1, b1) = ((uv.x + r).floor().min(w as f64 - 1.0), (uv.y + r).floor().min(h as f64 - 1.0));
-            let sees_hand = a1 >= 0.0
-                && b1 >= 0.0
-                && (b0..=b1 as usize).any(|j| {
-                    (a0..=a1 as usize).any(|i| hints[j * w + i] != label::BACKGROUND && tool.at(i, j).is_none())
-                });
-            if !sees_hand {
-                continue;
-            }
-        }
+        let nearest = z - 0.87 * c.size;
         for j in j0 as usize..=(j1 as usize).min(h - 1) {
             for i in i0 as usize..=(i1 as usize).min(w - 1) {
                 let k = j * w + i;
@@ -854,7 +822,7 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
                 // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
                 // pixel unless it lies behind the tool there.
                 let takes = match hand.tool.and_then(|t| t.at(i, j)) {
-                    Some(d) => !doubtful && z <= d + hand.margin,
+                    Some(d) => !doubtful && nearest <= d + hand.margin,
                     None => true,
                 };
                 if takes {
@@ -1466,13 +1434,9 @@ mod tests {
     #[test]
     fn the_hand_takes_band_pixels_from_the_tool_only_where_it_is_not_behind_it() {
         let at_centre = |l: &GrayImage| l.get_pixel(50, 50).0[0];
-        // The view sees foreground everywhere (the hand beside the drawn tool).
-        let foreground = || GrayImage::from_pixel(100, 100, image::Luma([label::UNKNOWN]));
-        // A cell whose centre lies 4 mm behind the tool, though its nearest corner is nearer than
-        // the tool's surface plus the margin, hides nothing.
-        for (z, expected) in [(0.7, label::SCALPEL), (0.4, label::HAND), (0.5, label::HAND), (0.504, label::SCALPEL)] {
+        for (z, expected) in [(0.7, label::SCALPEL), (0.4, label::HAND), (0.5, label::HAND)] {
             let (camera, mut labels, tool, cell) = band_scene(z);
-            let hints = foreground();
+            let hints = GrayImage::new(100, 100);
             let cells = HandCells::new(vec![cell], Vec::new());
             let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
             let scalpel = PixelBox::of(&labels, label::SCALPEL);
@@ -1484,7 +1448,7 @@ mod tests {
         // A doubtful cell (maybe a shadow) in front of the tool hides nothing of it, and takes the
         // band beside it.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
-        let hints = foreground();
+        let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(Vec::new(), vec![cell]);
         let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
@@ -1493,7 +1457,7 @@ mod tests {
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND, "beside the drawn tool");
         // Without the tool's depth every cell may be in front.
         let (camera, mut labels, _, cell) = band_scene(0.7);
-        let hints = foreground();
+        let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(vec![cell], Vec::new());
         let hand = HandInFront { hand: &cells, tool: None, margin: 0.003 };
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
@@ -1501,7 +1465,7 @@ mod tests {
         assert_eq!(at_centre(&labels), label::HAND);
         // A pixel whose colour is surely the tool's stays the tool's in front of any hull.
         let (camera, mut labels, tool, cell) = band_scene(0.4);
-        let mut hints = foreground();
+        let mut hints = GrayImage::new(100, 100);
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
         let cells = HandCells::new(vec![cell], Vec::new());
         let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
@@ -1509,25 +1473,6 @@ mod tests {
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
-        // A cell the view sees only over the drawn tool (foreground nowhere else in its disc) is
-        // the hull's fat in front of the tool, not the hand: it takes nothing.
-        let (camera, mut labels, tool, cell) = band_scene(0.4);
-        let mut hints = GrayImage::new(100, 100);
-        for j in 40..60 {
-            for i in 45..51 {
-                hints.put_pixel(i, j, image::Luma([label::UNKNOWN]));
-            }
-        }
-        let cells = HandCells::new(vec![cell], Vec::new());
-        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
-        let scalpel = PixelBox::of(&labels, label::SCALPEL);
-        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
-        assert_eq!(at_centre(&labels), label::SCALPEL, "the hull's fat hides nothing");
-        // With one pixel of the hand in its disc beside the tool, the same cell is the hand's.
-        hints.put_pixel(51, 50, image::Luma([label::UNKNOWN]));
-        let (_, mut labels, _, _) = band_scene(0.4);
-        clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
-        assert_eq!(at_centre(&labels), label::HAND, "a cell the view sees as the hand hides the tool");
     }
 
     #[test]
@@ -1679,14 +1624,7 @@ mod tests {
         let judged = |cells: &HandCells| {
             let mut out = labels.clone();
             let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003 };
-            clear_hand(
-                &mut out,
-                &camera,
-                camera.distortion.monotonic_radius(),
-                &in_front,
-                &[label::UNKNOWN; 200 * 160],
-                &scalpel,
-            );
+            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160], &scalpel);
             out
         };
         let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];

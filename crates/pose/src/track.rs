@@ -237,11 +237,6 @@ impl Tracker {
         &self.template
     }
 
-    /// The settings.
-    pub fn params(&self) -> &TrackerParams {
-        &self.params
-    }
-
     /// Estimates the blade's pose in one frame set from its hull and its views (one entry per
     /// rig camera, `None` where the view is missing).
     pub fn update(
