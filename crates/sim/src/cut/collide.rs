@@ -25,6 +25,15 @@ const PRIMES: [i64; 3] = [73_856_093, 19_349_663, 83_492_791];
 /// hits at least one, and a node lying on the surface is found from both its edges.
 const BARY_EPS: f64 = 1e-12;
 
+/// Slack around a swept surface's boxes before they are tested against the cells' boxes, as a
+/// fraction of the box's size and distance from the origin: a node lying on the surface to within
+/// rounding, which [`segment_triangle`] and [`separates`] take as on it, must find the cells on
+/// both sides of it. Without it a blade swept exactly in a plane of nodes skipped the cells beyond
+/// the plane wherever a node's position rounded a hair past it (1e-17 m), so that the edges from
+/// such a node to that side were never cut: the built-in resection's true poses left its lobe
+/// joined by the nodes on the table.
+const BOX_SLACK: f64 = 1e-9;
+
 pub use crate::model::lattice::CELL_EDGES;
 
 /// A hash table of the lattice's cells by the grid cells their current bounding boxes overlap.
@@ -166,6 +175,14 @@ impl CellIndex for CellTree {
     }
 }
 
+/// The box `lo`..`hi` grown by [`BOX_SLACK`]: what a swept surface's box (or one of its
+/// triangles') is tested against the cells with.
+pub fn padded(lo: &Point3<f64>, hi: &Point3<f64>) -> (Point3<f64>, Point3<f64>) {
+    let size = (hi - lo).norm() + lo.coords.amax().max(hi.coords.amax());
+    let pad = Vector3::repeat(BOX_SLACK * size);
+    (lo - pad, hi + pad)
+}
+
 fn bounds(points: impl Iterator<Item = Point3<f64>>) -> (Point3<f64>, Point3<f64>) {
     let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
     let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
@@ -254,6 +271,7 @@ pub fn cut_edges(lattice: &Lattice, positions: &[Point3<f64>], hash: &impl CellI
     for t in 0..surface.triangles.len() {
         let tri = surface.triangle(t);
         let (lo, hi) = bounds(tri.iter().copied());
+        let (lo, hi) = padded(&lo, &hi);
         hash.candidates(&lo, &hi, &mut candidates);
         for &c in &candidates {
             let cell = &lattice.cells[c as usize];
@@ -406,6 +424,45 @@ mod tests {
         // The nodes on the plane count as lying on the side its normal points to: one layer of
         // y-edges is cut, 49, at one end.
         assert_eq!(c.edges.len(), 49);
+    }
+
+    #[test]
+    fn a_stroke_along_a_plane_of_nodes_cuts_one_layer_whichever_way_they_round() {
+        // The nodes of the plane y = 2 cm a few units in the last place to either side of it, as
+        // rest positions plus f32 displacements round: each node is still on the surface, and
+        // one of its two y-edges is cut, whichever way it rounded (the cells beyond the plane
+        // are tested too), through the spatial hash and the cell tree alike.
+        let l = block();
+        for ulps in [-3i32, -1, 1, 3] {
+            let moved: Vec<Point3<f64>> = l
+                .rest
+                .iter()
+                .map(|p| {
+                    let mut y = p.y;
+                    if (y - 0.02).abs() < 1e-12 {
+                        for _ in 0..ulps.unsigned_abs() {
+                            y = if ulps > 0 { y.next_up() } else { y.next_down() };
+                        }
+                    }
+                    Point3::new(p.x, y, p.z)
+                })
+                .collect();
+            let (from, to) = (Isometry3::translation(0.0, 0.02, 0.08), Isometry3::translation(0.0, 0.02, -0.01));
+            let s = SweptSurface::between(&edge(), &from, &to, 0.005, 0.1).expect("surface");
+            for (index, c) in
+                [("hash", cut(&l, &moved, from, to)), ("tree", cut_edges(&l, &moved, &CellTree::new(&l, &moved), &s))]
+            {
+                assert_eq!(c.edges.len(), 49, "{ulps} ulps, {index}");
+                let mut nodes: Vec<u32> = c
+                    .edges
+                    .iter()
+                    .map(|e| if (l.rest[e.a as usize].y - 0.02).abs() < 1e-12 { e.a } else { e.b })
+                    .collect();
+                nodes.sort_unstable();
+                nodes.dedup();
+                assert_eq!(nodes.len(), 49, "every node of the plane cut once: {ulps} ulps, {index}");
+            }
+        }
     }
 
     #[test]

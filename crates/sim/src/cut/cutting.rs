@@ -24,7 +24,7 @@ use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
 
-use crate::collide::{CellTree, EdgeCut, cut_edges};
+use crate::collide::{CellTree, EdgeCut, cut_edges, padded};
 use crate::cut_surface::{BodySamples, PieceSurface, piece_surfaces};
 use crate::dynamics::{Divergence, Integrator, Prescribed};
 use crate::flsm::FlsmParams;
@@ -544,6 +544,7 @@ impl CutSim {
             lo = lo.inf(v);
             hi = hi.sup(v);
         }
+        let (lo, hi) = padded(&lo, &hi);
         let tree = CellTree::within(&self.lattice, &positions, &lo, &hi);
         let cuts = cut_edges(&self.lattice, &positions, &tree, surface);
         let new_edges =

@@ -71,6 +71,8 @@ pub struct Torn {
     pub merged: usize,
     /// Edges cut across a bridge between neighbours cut from opposite sides.
     pub bridged: usize,
+    /// Edges cut to close a hole of one node in a cut along a node plane.
+    pub holes: usize,
 }
 
 /// Tears the slivers and bridges between nearly coincident cuts in `cut` (crossed edges of
@@ -103,6 +105,7 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
     for k in drop {
         torn.merged += usize::from(cut.remove(&k).is_some());
     }
+    torn.holes = close_holes(lattice, cut, &near);
     // Bridges: an uncut edge between neighbours cut from opposite sides along another axis.
     let mut bridges = Vec::new();
     for &n in &near {
@@ -128,9 +131,61 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
     torn
 }
 
+/// Cuts each node that is uncut along an axis while every neighbour it has in the plane across
+/// that axis (at least two) is cut from the same side along it, near the plane (within half of
+/// [`TEAR_CELLS`]): from that side, at their crossings' mean distance. The holes are found first
+/// and then closed, so a closed hole never closes another. Returns how many edges were cut.
+fn close_holes(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>, near: &[u32]) -> usize {
+    // A hole's node is not next to a crossing along the axis, but its neighbours in the plane
+    // are: look at the neighbours of the nodes next to a crossing.
+    let mut candidates: Vec<u32> = near
+        .iter()
+        .flat_map(|&n| (0..3).flat_map(move |axis| [-1, 1].map(move |step| (n, axis, step))))
+        .filter_map(|(n, axis, step)| neighbour(lattice, n, axis, step))
+        .collect();
+    candidates.sort_unstable();
+    candidates.dedup();
+    let mut closes = Vec::new();
+    for &n in &candidates {
+        for axis in 0..3 {
+            let (low, high) = (neighbour(lattice, n, axis, -1), neighbour(lattice, n, axis, 1));
+            let cut_here = |m: Option<u32>| m.is_some_and(|m| cut.contains_key(&key(n, m)));
+            if cut_here(low) || cut_here(high) {
+                continue;
+            }
+            let mut side = None;
+            let mut distances = Vec::with_capacity(4);
+            let mut whole = true;
+            for other in (0..3).filter(|&a| a != axis) {
+                for step in [-1, 1] {
+                    let Some(m) = neighbour(lattice, n, other, step) else { continue };
+                    match cut_side(lattice, cut, m, axis) {
+                        Some((s, d)) if d < 0.5 * TEAR_CELLS && side.is_none_or(|x| x == s) => {
+                            side = Some(s);
+                            distances.push(d);
+                        }
+                        _ => whole = false,
+                    }
+                }
+            }
+            let (Some(s), true) = (side, whole && distances.len() >= 2) else { continue };
+            let Some(m) = (if s < 0 { low } else { high }) else { continue };
+            let d = distances.iter().sum::<f64>() / distances.len() as f64;
+            closes.push((n, m, d));
+        }
+    }
+    let mut closed = 0;
+    for (n, m, d) in closes {
+        let t = if n < m { d } else { 1.0 - d };
+        closed += usize::from(cut.insert(key(n, m), t).is_none());
+    }
+    closed
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::collide::EdgeCut;
     use crate::vna::CutTopology;
     use crate::vna::tests::{block, stroke};
 
@@ -149,6 +204,37 @@ mod tests {
                 assert_eq!(pieces(&l, &[(y1, 0.08, 0.025), (y2, z2, -0.01)]), 2, "y {y1} / {y2}, second from z {z2}");
             }
         }
+    }
+
+    #[test]
+    fn a_node_left_uncut_inside_a_cut_along_a_node_plane_is_cut_from_its_neighbours_side() {
+        let l = block();
+        // A cut 0.1 mm above the node plane y = 3 cm: every node of the plane is cut from its high
+        // side. Leave out the crossings of an inner node, of a node on the block's face and of
+        // a corner node (two neighbours in the plane): each joins the pieces alone.
+        let full: Vec<EdgeCut> = stroke(&l, 0.0301, 0.08, -0.01);
+        for ijk in [[3, 3, 3], [0, 3, 2], [6, 3, 6]] {
+            let hole = l.node_at(ijk).expect("a node");
+            let edges: Vec<EdgeCut> = full.iter().copied().filter(|e| e.a != hole && e.b != hole).collect();
+            assert_eq!(edges.len(), full.len() - 1);
+            let mut cut: BTreeMap<(u32, u32), f64> = edges.iter().map(|e| ((e.a, e.b), e.t)).collect();
+            let torn = tear(&l, &mut cut);
+            assert_eq!(torn, Torn { holes: 1, ..Torn::default() }, "{ijk:?}");
+            let above = l.node_at([ijk[0], 4, ijk[2]]).expect("a node");
+            let t = cut.get(&(hole.min(above), hole.max(above))).expect("the hole's edge cut");
+            let d = if hole < above { *t } else { 1.0 - t };
+            assert!((d - 0.01).abs() < 1e-6, "{ijk:?}: at {d}");
+            assert_eq!(CutTopology::rebuild(&l, edges).pieces, 2, "{ijk:?}");
+        }
+        // Two neighbouring nodes left out: each has an uncut neighbour, nothing is closed (a cut's
+        // end is never extended).
+        let (a, b) = (l.node_at([3, 3, 3]).expect("a node"), l.node_at([4, 3, 3]).expect("a node"));
+        let mut cut: BTreeMap<(u32, u32), f64> = full
+            .iter()
+            .filter(|e| ![a, b].contains(&e.a) && ![a, b].contains(&e.b))
+            .map(|e| ((e.a, e.b), e.t))
+            .collect();
+        assert_eq!(tear(&l, &mut cut).holes, 0);
     }
 
     #[test]

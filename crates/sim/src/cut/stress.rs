@@ -111,10 +111,13 @@ pub struct CaseResult {
     pub copies: usize,
     /// See `edges_cut`.
     pub virtual_nodes: usize,
-    /// Crossings merged and edges bridged by tearing slivers ([`crate::sliver`]).
+    /// Crossings merged, edges bridged and holes of one node closed by tearing slivers
+    /// ([`crate::sliver`]).
     pub torn_merged: usize,
     /// See `torn_merged`.
     pub torn_bridged: usize,
+    /// See `torn_merged`.
+    pub torn_holes: usize,
     /// Wall time of a frame (cut and advance), mean and largest, milliseconds.
     pub frame_ms_mean: f64,
     /// See `frame_ms_mean`.
@@ -244,6 +247,7 @@ pub fn run(case: &Case) -> CaseResult {
         virtual_nodes: 0,
         torn_merged: 0,
         torn_bridged: 0,
+        torn_holes: 0,
         frame_ms_mean: 0.0,
         frame_ms_max: 0.0,
         cut_ms_mean: 0.0,
@@ -307,6 +311,7 @@ pub fn run(case: &Case) -> CaseResult {
     result.virtual_nodes = topology.virtual_of.len();
     result.torn_merged = topology.torn.merged;
     result.torn_bridged = topology.torn.bridged;
+    result.torn_holes = topology.torn.holes;
     let mean = |v: &[f64]| if v.is_empty() { 0.0 } else { v.iter().sum::<f64>() / v.len() as f64 };
     result.frame_ms_mean = mean(&frame_ms);
     result.frame_ms_max = frame_ms.iter().copied().fold(0.0, f64::max);
