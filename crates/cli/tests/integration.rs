@@ -435,7 +435,13 @@ fn bench_tissue_quick_compares_the_far_fields_with_all_tled() {
     assert_eq!(rows.iter().filter(|r| r[col("blade_m_s")] == "0.11").count(), 8);
     for r in &rows {
         assert_eq!(r[pieces], "2", "every model cuts the lobe's tip off: {r:?}");
-        assert!(r[col("failure")].is_empty(), "{r:?}");
+        // The seed paper's hybrid (its FLSM settings, off by 20-30 mm everywhere: the baseline of
+        // what not to do, not a model `hullcut run` offers) may diverge at a copy of a few
+        // percent of a cell: on the paper-size organ it does since holes of one node in a cut are
+        // closed. Any other failure, or any failure of another model, fails the test.
+        let failure = &r[col("failure")];
+        let seed_diverged = r[model] == "seed" && failure.contains("diverged");
+        assert!(failure.is_empty() || seed_diverged, "{r:?}");
         match r[model].as_str() {
             "tled" => assert_eq!((num(r, near), num(r, all)), (0.0, 0.0), "the reference"),
             // The bounds for the far field that sleeps, on these small organs.

@@ -137,12 +137,23 @@ fn shared_face(axis: usize) -> ([usize; 4], [usize; 4]) {
 impl CutTopology {
     /// The topology of `lattice` with the crossed edges of all strokes so far (`edges` may repeat
     /// an edge: the first crossing recorded is kept).
+    ///
+    /// The crossings go through [`crate::sliver::tear`] first; then the holes of one node in a
+    /// cut are closed ([`crate::sliver::holes`]).
     pub fn rebuild(lattice: &Lattice, edges: impl IntoIterator<Item = EdgeCut>) -> Self {
         let mut cut = BTreeMap::new();
         for e in edges {
             cut.entry((e.a.min(e.b), e.a.max(e.b))).or_insert(if e.a <= e.b { e.t } else { 1.0 - e.t });
         }
         let torn = crate::sliver::tear(lattice, &mut cut);
+        let holes = crate::sliver::holes(lattice, &cut);
+        let torn = Torn { holes: holes.len(), ..torn };
+        cut.extend(holes);
+        Self::from_cut(lattice, cut, torn)
+    }
+
+    /// The topology of `lattice` cut along exactly the edges of `cut`.
+    fn from_cut(lattice: &Lattice, cut: BTreeMap<(u32, u32), f64>, torn: Torn) -> Self {
         let base = lattice.node_count();
         // Copies and their corner masks.
         let mut copies = Vec::with_capacity(lattice.cells.len());
