@@ -27,12 +27,12 @@ const BARY_EPS: f64 = 1e-12;
 
 /// Slack around a swept surface's boxes before they are tested against the cells' boxes, as a
 /// fraction of the box's size and distance from the origin: a node lying on the surface to within
-/// rounding, which [`segment_triangle`] and [`separates`] take as on it, must find the cells on
+/// rounding, which [`segment_triangle`] and the crossing test take as on it, must find the cells on
 /// both sides of it. Without it a blade swept exactly in a plane of nodes skipped the cells beyond
 /// the plane wherever a node's position rounded a hair past it (1e-17 m), so that the edges from
 /// such a node to that side were never cut: the built-in resection's true poses left its lobe
 /// joined by the nodes on the table.
-const BOX_SLACK: f64 = 1e-9;
+pub const BOX_SLACK: f64 = 1e-9;
 
 pub use crate::model::lattice::CELL_EDGES;
 
