@@ -1,9 +1,10 @@
 //! Diagnostic: whether the built-in resection cuts the lobe off the organ's 5 mm lattice when its
 //! true poses are disturbed as a pose stage's are.
-//! `resection_jitter RIG TOOL MM DEG SEEDS [DX_MM DZ_MM DRIFT_MM]`: each seed adds to every
+//! `resection_jitter RIG TOOL MM DEG SEEDS [DX_MM DZ_MM DRIFT_MM REFUSED_PCT]`: each seed adds to every
 //! frame's true pose a translation uniform in a ball of MM millimetres, a turn of up to DEG
 //! degrees about the tip, a fixed shift (DX_MM across the blade's plane, DZ_MM up) and a drift
-//! across the plane of DRIFT_MM amplitude over two seconds, and prints the pieces. With
+//! across the plane of DRIFT_MM amplitude over two seconds, refuses REFUSED_PCT percent of the
+//! frame sets at random (their poses do not cut), and prints the pieces. With
 //! `HC_PLANE=1` it also maps the node plane x = 55 mm the blade's plane lies on: per node, which
 //! of its x-edges is cut (`L` toward lower x, `H` higher, `B` both, `.` neither), `|` an in-plane
 //! edge cut toward the next node along y and `-` one toward the node below.
@@ -42,14 +43,14 @@ impl Rng {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 6 {
-        return Err("usage: resection_jitter RIG TOOL MM DEG SEEDS [DX_MM DZ_MM DRIFT_MM]".into());
+        return Err("usage: resection_jitter RIG TOOL MM DEG SEEDS [DX_MM DZ_MM DRIFT_MM REFUSED_PCT]".into());
     }
     let rig = RigPreset::parse(&args[1]).ok_or("rig")?;
     let tool = ToolKind::from_name(&args[2]).ok_or("tool")?;
     let (mm, deg): (f64, f64) = (args[3].parse()?, args[4].parse()?);
     let seeds: u64 = args[5].parse()?;
     let extra = |k: usize| args.get(k).map_or(Ok(0.0), |v| v.parse::<f64>());
-    let (dx, dz, drift) = (extra(6)?, extra(7)?, extra(8)?);
+    let (dx, dz, drift, refused) = (extra(6)?, extra(7)?, extra(8)?, extra(9)?);
     let mut config = SceneConfig::new(SceneKind::Resect, 1, 150);
     config.rig = rig.rig();
     config.tool = tool;
@@ -72,7 +73,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let about_tip = Translation3::from(tip.coords) * turn * Translation3::from(-tip.coords);
             let moved: Isometry3<f64> = Translation3::from(shift * 1e-3) * about_tip * pose;
             let mut estimate = no_tool_estimate(frame, truth.timestamp_ns);
-            estimate.valid = true;
+            estimate.valid = rng.next() * 100.0 >= refused;
             estimate.pose = Some(BladePose::new(&template, moved));
             let mut step = sweeper.next(Some(&estimate), Some(&template), organ.cell);
             organ.step(&mut step, seconds, None, &mut times)?;

@@ -45,8 +45,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// agreement bounds are looser), and tissue (the blade's swept surface between consecutive
 /// trusted poses cuts the organ by the virtual node algorithm; TLED moves it under gravity,
 /// resting on the table with friction, pieces kept out of each other; the hand's hull pushes it
-/// aside where it presses on it). Untrusted poses never cut, and a sweep never bridges a refused
-/// frame. At most --queue frame sets are in the stages at once, so no queue grows and the latency
+/// aside where it presses on it). Untrusted poses never cut; a sweep bridges refused frame sets
+/// only between trusted poses at most 0.134 s apart (three refused at 30 fps). At most --queue frame sets are in the stages at once, so no queue grows and the latency
 /// (from a frame set's capture to its cut surface) stays bounded. Without --realtime every frame
 /// set is processed, the next one taken when there is room; with --realtime the reader keeps to
 /// the capture timestamps and a frame set that finds no room is replaced by the next one, the
@@ -248,8 +248,10 @@ struct Counters {
     poses_refused: u64,
     poses_held: u64,
     sweeps: u64,
-    /// Trusted poses that did not sweep because the frame before was refused.
+    /// Trusted poses that did not sweep because the frames before were refused for too long.
     sweeps_skipped_after_refusal: u64,
+    /// Sweeps across refused frame sets from the last trusted pose (at most 0.134 s back).
+    sweeps_bridged: u64,
     /// Sweeps too large for the collision test's bounds (a step of metres), not cut.
     sweeps_refused: u64,
     edges_cut: u64,
@@ -720,6 +722,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some(step) = &work.tissue {
             counters.sweeps += u64::from(step.swept.is_some());
             counters.sweeps_skipped_after_refusal += u64::from(step.sweep_skipped);
+            counters.sweeps_bridged += u64::from(step.sweep_bridged);
             if let Some(reason) = &step.sweep_refused {
                 if counters.sweeps_refused == 0 {
                     tracing::warn!("frame {}: a sweep was not cut: {reason}", work.frame);
