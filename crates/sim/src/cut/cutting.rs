@@ -533,8 +533,13 @@ impl CutSim {
     }
 
     /// Cuts the body with a swept blade surface (world metres, in the deformed configuration).
+    ///
+    /// Where the edge plunges to within [`crate::table::TABLE_REACH_M`] of the table, it cuts
+    /// through to it ([`Table::pressed_through`]).
     pub fn cut(&mut self, surface: &SweptSurface) -> Result<CutOutcome, SimError> {
         let start = Instant::now();
+        let pressed = self.params.table.and_then(|t| t.pressed_through(surface));
+        let surface = pressed.as_ref().unwrap_or(surface);
         let positions: Vec<Point3<f64>> =
             self.lattice.rest.iter().zip(&self.integrator.u).map(|(p, u)| p + u.cast::<f64>()).collect();
         // Only the cells near the swept surface can be cut: the tree holds those.

@@ -182,6 +182,8 @@ pub fn cases() -> Vec<Case> {
         add(format!("two passes at {phase} cells, {offset:+} cells apart"), "two_passes", strokes, 2);
     }
     add("stops 4 mm short".to_owned(), "depth", vec![down(x0 + 0.3 * CELL, 0.0, 0.004, 0.2)], 1);
+    // Pressed down to a millimetre above the table: it cuts through what rests on it.
+    add("stops 1 mm short, pressed".to_owned(), "depth", vec![down(x0 + 0.3 * CELL, 0.0, 0.001, 0.2)], 2);
     add("1 mm past the bottom".to_owned(), "depth", vec![down(x0 + 0.3 * CELL, 0.0, -0.001, 0.2)], 2);
     // The blade moved flat: the edge (along y) travels along x through the block, slicing its
     // top 1.3 cm off.
