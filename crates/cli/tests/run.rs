@@ -524,7 +524,7 @@ fn grow_masks(dir: &Path) {
 }
 
 #[test]
-fn run_fits_masks_a_pixel_fatter_than_the_tool_unless_the_offset_is_turned_off() {
+fn run_with_outline_offset_fits_masks_a_pixel_fatter_than_the_tool() {
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("fat");
     copy_tree(Path::new(CUT_SMALL), &data);
@@ -549,9 +549,8 @@ fn run_fits_masks_a_pixel_fatter_than_the_tool_unless_the_offset_is_turned_off()
         let frames = r["pose"]["per_frame"].as_array().expect("per_frame");
         frames.iter().map(|f| f["fit_offset_px"].as_f64().expect("fit_offset_px")).collect()
     };
-    // On by default with mask files; the last of --outline-offset and --no-outline-offset wins.
-    let with = run(&[], "with");
-    let without = run(&["--outline-offset", "--no-outline-offset"], "without");
+    let with = run(&["--outline-offset"], "with");
+    let without = run(&[], "without");
     assert_eq!(with["outline_offset"], true, "the report says the offset was on");
     assert_eq!(without["outline_offset"], false);
     let mut found = offsets(&with);

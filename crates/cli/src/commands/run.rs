@@ -133,18 +133,13 @@ pub struct Args {
     /// Where masks come from: files (masks/), segment (from the images), auto (files if present).
     #[arg(long, value_enum, value_name = "SOURCE", default_value_t = checks::MaskSource::Auto)]
     masks: checks::MaskSource,
-    /// With mask files the blade's fit takes the scalpel's silhouettes as up to 1.5 px fatter or
-    /// thinner than the tool all around (a lab's own segmentation that takes in or loses the
-    /// blade's blended edge pixels; a thin blade seen at a slant turns 5-10° for a pixel of width),
-    /// unless --no-outline-offset. The offset found is `fit_offset_px` per frame in the report.
-    /// No effect when segmenting (the segmentation's own fit holds the offset at 0). On by
-    /// default; the flag is kept for scripts that ask for it.
-    #[arg(long, overrides_with = "no_outline_offset")]
+    /// With mask files: let the blade's fit take the scalpel's silhouettes as up to 1.5 px fatter
+    /// or thinner than the tool all around (a lab's own segmentation that takes in or loses the
+    /// blade's blended edge pixels; a thin blade seen at a slant turns 5-10° for a pixel of width).
+    /// The offset found is `fit_offset_px` per frame in the report. No effect when segmenting
+    /// (the segmentation's own fit holds the offset at 0).
+    #[arg(long)]
     outline_offset: bool,
-    /// With mask files: fit the scalpel's silhouettes as exactly the tool's outline (no offset;
-    /// the default before 2026-11-28).
-    #[arg(long, overrides_with = "outline_offset")]
-    no_outline_offset: bool,
     /// With segmented masks: frames whose masks/ seed the learned colours (comma-separated; see
     /// `segment --help`).
     #[arg(long, value_name = "F,F,...", value_delimiter = ',')]
@@ -355,8 +350,8 @@ struct Report {
     repeat: u64,
     backend: Backend,
     masks: String,
-    /// The blade's fit to mask files took the silhouettes as uniformly fatter or thinner than the
-    /// tool (mask files without `--no-outline-offset`).
+    /// `--outline-offset`: the blade's fit to mask files took the silhouettes as uniformly fatter
+    /// or thinner than the tool.
     outline_offset: bool,
     workspace: hullcut_hull::WorkingVolume,
     voxel_m: f64,
@@ -673,7 +668,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hull,
         carver,
         template: template.clone(),
-        outline_offset: (args.outline_offset || !args.no_outline_offset) && use_files,
+        outline_offset: args.outline_offset && use_files,
         tissue,
         in_flight: args.queue,
         realtime: args.realtime,
@@ -845,7 +840,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             repeat: args.repeat,
             backend: args.backend,
             masks: if use_files { "files" } else { "segment" }.to_owned(),
-            outline_offset: (args.outline_offset || !args.no_outline_offset) && use_files,
+            outline_offset: args.outline_offset && use_files,
             workspace: volume,
             voxel_m: args.voxel,
             blade_levels: args.blade_levels,
