@@ -28,9 +28,8 @@
 //! the blade passed it, or one the blade's edge missed by a hair where it barely reached the
 //! body's boundary, may be left uncut though every neighbour it has in the plane is cut from one
 //! side: that node alone joins the two sides (the built-in resection's lobe stayed on by one node
-//! at its top, on a recording whose blade was trusted in all 150 frame sets; such holes at the
-//! body's boundary in the built-in scene's re-cut groove left its sliver copies ringing). Such a
-//! node is cut from that side too. A surface that ends (a partial cut) leaves its frontier's
+//! at its top, on a recording whose blade was trusted in all 150 frame sets). Such a node is cut
+//! from that side too. A surface that ends (a partial cut) leaves its frontier's
 //! nodes uncut beside uncut neighbours, so it is not extended.
 
 use std::collections::BTreeMap;
