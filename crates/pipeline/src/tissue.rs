@@ -98,7 +98,6 @@ pub struct Sweeper {
     last_trusted_ns: Option<i64>,
     /// Frame sets refused since the last trusted pose.
     refused: usize,
-    refused_since: bool,
 }
 
 /// The longest stretch of capture time between two trusted poses a sweep bridges across refused
@@ -131,12 +130,14 @@ impl Sweeper {
         let now_ns = estimate.map(|e| e.timestamp_ns);
         match (trusted, template) {
             (Some(now), Some(template)) => {
+                let mut skipped = false;
                 if self.refused > 0 {
                     let gap_s = match (self.last_trusted_ns, now_ns) {
                         (Some(a), Some(b)) => b.saturating_sub(a) as f64 * 1e-9,
                         _ => f64::INFINITY,
                     };
                     if !(0.0..=MAX_BRIDGE_S).contains(&gap_s) {
+                        skipped = !self.previous.is_empty();
                         self.previous.clear();
                     } else if !self.previous.is_empty() {
                         step.sweep_bridged = true;
@@ -152,8 +153,8 @@ impl Sweeper {
                         Ok(swept) => step.swept = swept,
                         Err(reason) => step.sweep_refused = Some(reason),
                     }
-                } else if self.refused_since {
-                    step.sweep_skipped = true;
+                } else {
+                    step.sweep_skipped = skipped;
                 }
                 if self.previous.len() == SWEEP_LEGS {
                     self.previous.remove(0);
@@ -161,10 +162,8 @@ impl Sweeper {
                 self.previous.push(now);
                 self.last_trusted_ns = now_ns;
                 self.refused = 0;
-                self.refused_since = false;
             }
             _ => {
-                self.refused_since |= !self.previous.is_empty();
                 self.refused += 1;
             }
         }

@@ -74,6 +74,14 @@ fn cut_side(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>, n: u32, axis: us
     }
 }
 
+/// The nodes that end a crossed edge of `cut`, sorted, each once.
+fn ends(cut: &BTreeMap<(u32, u32), f64>) -> Vec<u32> {
+    let mut nodes: Vec<u32> = cut.keys().flat_map(|&(a, b)| [a, b]).collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
+}
+
 /// What [`tear`] changed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Torn {
@@ -94,9 +102,7 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
         return torn;
     }
     // Nodes next to a crossing: the only ones either rule can apply to.
-    let mut near: Vec<u32> = cut.keys().flat_map(|&(a, b)| [a, b]).collect();
-    near.sort_unstable();
-    near.dedup();
+    let near = ends(cut);
     // Slivers: both crossings of a node along an axis within TEAR_CELLS of each other; the high
     // one goes. Each is within TEAR_CELLS of this node, so nearer to it than to the edge's other
     // end, and no other node's decision involves the same edge: the drops are decided first and
@@ -148,9 +154,7 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
 /// edge toward that side, at their crossings' mean distance. Found on `cut` as it is, so a hole
 /// closed never closes another. [`crate::vna::CutTopology::rebuild`] closes them.
 pub fn holes(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>) -> Vec<((u32, u32), f64)> {
-    let mut near: Vec<u32> = cut.keys().flat_map(|&(a, b)| [a, b]).collect();
-    near.sort_unstable();
-    near.dedup();
+    let near = ends(cut);
     // A hole's node is not next to a crossing along the axis, but its neighbours in the plane
     // are: look at the neighbours of the nodes next to a crossing.
     let mut candidates: Vec<u32> = near
