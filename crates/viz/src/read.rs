@@ -38,13 +38,30 @@ fn for_each_chunk(path: &Path, mut f: impl FnMut(&Chunk)) -> Result<(), VizError
     file.seek(SeekFrom::Start(0)).map_err(|e| read(e.to_string()))?;
     let messages =
         DecoderApp::decode_eager(std::io::BufReader::new(file.take(whole))).map_err(|e| read(e.to_string()))?;
-    let mut any = false;
-    for message in messages {
-        any = true;
-        if let LogMsg::ArrowMsg(_, arrow) = message.map_err(|e| read(e.to_string()))? {
-            f(&Chunk::from_arrow_msg(&arrow).map_err(|e| read(e.to_string()))?);
+    // Arrow asserts on some damaged buffers instead of returning an error (a slice offset of
+    // 6 GB into a 576-byte buffer, found by `damaged_recordings_never_panic_the_readers`): such
+    // a panic is the file's fault and is reported as its error.
+    let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let mut any = false;
+        for message in messages {
+            any = true;
+            if let LogMsg::ArrowMsg(_, arrow) = message.map_err(|e| read(e.to_string()))? {
+                f(&Chunk::from_arrow_msg(&arrow).map_err(|e| read(e.to_string()))?);
+            }
         }
-    }
+        Ok(any)
+    }));
+    let any = match decoded {
+        Ok(any) => any?,
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("no message");
+            return Err(read(format!("damaged: the decoder gave up on it ({why})")));
+        }
+    };
     // A recording holds its store's description at least: nothing at all is not one.
     if any { Ok(()) } else { Err(read("no rerun message in it (empty, or not a recording)".to_owned())) }
 }
