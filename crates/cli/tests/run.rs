@@ -632,6 +632,12 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 14, "{c}");
     assert!(c["edges_cut"].as_u64().expect("edges") > 0, "{c}");
     assert!(r["tissue"]["virtual_nodes"].as_u64().expect("virtual nodes") > 0, "{}", r["tissue"]);
+    // The labelling's fit of the tool is the pose stage's time, once per frame set, and not the
+    // segmentation's (it was reported as 0 ms of pose before).
+    let t = &r["timings"];
+    assert_eq!(t["pose"]["count"].as_u64(), Some(24), "{t}");
+    assert_eq!(t["segment"]["count"].as_u64(), Some(24), "{t}");
+    assert!(t["pose"]["mean_ms"].as_f64().expect("pose time") > 0.0, "{t}");
     // Every frame set logs where its labels came from; the colours learned from the trusted ones
     // are logged from then on.
     let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");

@@ -279,13 +279,14 @@ impl std::fmt::Debug for Work {
 pub struct StageTimes {
     /// Reading (decoding, or copying a preloaded frame set).
     pub read: Vec<Duration>,
-    /// Segmentation and labelling, its carving left out.
+    /// Segmentation and labelling, its carving and the tool's fit left out.
     pub segment: Vec<Duration>,
     /// Carving the hull.
     pub carve: Vec<Duration>,
     /// The labels' grids and surfaces.
     pub surface: Vec<Duration>,
-    /// The blade's pose.
+    /// The blade's pose: the tracker's fit (when segmenting, the labelling's fit of the tool,
+    /// the fit's evidence, i.e. the provisional labels, left to `segment`).
     pub pose: Vec<Duration>,
     /// The sweep's collision test.
     pub collide: Vec<Duration>,
@@ -815,8 +816,11 @@ fn hull_stage(
                 region.update(&boxed, occ);
             }
             let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
-            work.times.segment.push(clock.elapsed().saturating_sub(carve));
+            // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
+            let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));
+            work.times.segment.push(clock.elapsed().saturating_sub(carve + fit.unwrap_or_default()));
             work.times.carve.push(carve);
+            work.times.pose.extend(fit);
             for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
                 if let Some(view) = view {
                     view.mask = mask;
@@ -882,6 +886,8 @@ fn pose_stage(
     for mut work in rx.iter() {
         let clock = Instant::now();
         let set = &work.set;
+        // The labelling's fit was timed as this stage's by the hull stage.
+        let fitted = work.estimate.is_some();
         let estimate = match (&mut tracker, &work.occ) {
             // Segmented with the tool's geometry: its fit into the foreground's hull, tracked, is
             // the pose (fitting again to the masks drawn from it adds nothing but time).
@@ -900,7 +906,9 @@ fn pose_stage(
             }
             _ => no_tool_estimate(work.frame, set.timestamp_ns),
         };
-        work.times.pose.push(clock.elapsed());
+        if !fitted {
+            work.times.pose.push(clock.elapsed());
+        }
         work.estimate = Some(estimate);
         if tx.send(work).is_err() {
             break;
