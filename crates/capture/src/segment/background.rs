@@ -8,9 +8,11 @@
 //!   pixels whose chromaticity matches the model, so a global exposure change is no foreground)
 //!   and a larger β_shadow lets cast shadows, darker but of unchanged chromaticity, stay
 //!   background;
-//! - chromaticity distortion: Σ_c |c − ê_c·s| > κ·s + 3τ with ê = E/Eₛ, the L1 colour
+//! - chromaticity distortion: Σ_c |c − ê_c·s| > κ·s + ν·3τ with ê = E/Eₛ, the L1 colour
 //!   difference after matching brightness, which does not change when shading or exposure scale
-//!   the colour.
+//!   the colour. ν (`chroma_noise`, ½ by default) takes part of the noise allowance only: κ·s
+//!   already allows for the scene's own chromaticity drift, and stacking the whole worst-case
+//!   noise on top of it hid a pale hand over light wood (see [`SegmentParams::chroma_noise`]).
 //!
 //! τ is the pixel's noise allowance in grey levels (from the spread over the empty-scene images,
 //! never below the noise floor). The model is stored in planes (ê_r, ê_g in Q16, 2·Eₛ, τ) and the
@@ -71,6 +73,8 @@ pub(crate) struct Thresholds {
     deep: u16,
     /// κ, Q16.
     kappa: u16,
+    /// ν, Q16 (1 rounds to 65535/65536: at most one grey level less).
+    chroma_noise: u16,
 }
 
 impl Thresholds {
@@ -82,6 +86,7 @@ impl Thresholds {
             shadow: q16(params.shadow_tolerance),
             deep: q16(params.shadow_depth.max(params.shadow_tolerance)),
             kappa: q16(params.chroma_tolerance),
+            chroma_noise: q16(params.chroma_noise),
         }
     }
 }
@@ -259,7 +264,7 @@ impl BackgroundModel {
     /// encoded class of the pixel's colour. Returns whether the row has any foreground.
     ///
     /// Bounds (all u16): s ≤ 765; 2Eₛ ≤ 1530; γ·Eₛ = hi(γ·2Eₛ) ≤ 1.99·765 < 1530; β·γEₛ + 3τ ≤
-    /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + 3τ ≤ 765 + 765.
+    /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + ν·3τ ≤ 765 + 765.
     /// Differences that could go negative saturate at 0.
     pub(crate) fn foreground_row(
         &self,
@@ -325,7 +330,7 @@ fn test_pixel([r, g, b]: [u16; 3], m: [u16; 5], t: Thresholds) -> u8 {
     let darker = dark > mulhi(t.shadow, ges) + tol3;
     let deeper = dark > mulhi(t.deep, ges) + tol3;
     let dc = r.abs_diff(mulhi(hr, s)) + g.abs_diff(mulhi(hg, s)) + b.abs_diff(mulhi(hb, s));
-    let tc = mulhi(t.kappa, s) + tol3;
+    let tc = mulhi(t.kappa, s) + mulhi(t.chroma_noise, tol3);
     let sure = brighter | deeper | (dc > tc);
     SURE * u8::from(sure) + ENC_SHADOW * u8::from(darker & !sure)
 }

@@ -223,7 +223,12 @@ fn colour_classes_are_learnt_from_truth_masks() -> Result<()> {
     assert_eq!(palette().classify([30, 55, 100]), label::HAND, "a shaded glove");
     assert_eq!(palette().classify([62, 62, 64]), label::SCALPEL, "a shaded handle");
 
-    // Segmenting with the learnt classes is as good as with the palette (within 1 %).
+    // Segmenting with the learnt classes is as good as with the palette (within 2 %). The
+    // blade's edge pixels, mixed with the drape, decide the scalpel's difference: with the whole
+    // noise allowance in the chromaticity test (`chroma_noise` 1) the palette scored 0.929 and the
+    // learnt classes 0.919; with the default half, more of those pixels are foreground, and the
+    // learnt classes take more of them for the scalpel (false positives 477 -> 592 with the
+    // palette, 550 -> 705 learnt; 0.913 and 0.898).
     let mut seg = segmenter(with_palette())?;
     let mut with_defaults = IouAccumulator::new();
     let mut with_learnt = IouAccumulator::new();
@@ -237,7 +242,7 @@ fn colour_classes_are_learnt_from_truth_masks() -> Result<()> {
     }
     for k in 0..2 {
         let (d, l) = (with_defaults.report().labels[k].iou_pooled, with_learnt.report().labels[k].iou_pooled);
-        assert!(l.unwrap_or(0.0) > d.unwrap_or(1.0) - 0.01, "label {k}: learnt {l:?} defaults {d:?}");
+        assert!(l.unwrap_or(0.0) > d.unwrap_or(1.0) - 0.02, "label {k}: learnt {l:?} defaults {d:?}");
     }
 
     // Too few pixels of a label is an error naming it.
@@ -296,5 +301,61 @@ fn mog2_fallback_finds_objects_entering_a_learnt_scene() -> Result<()> {
     let [hand, scalpel] = [&r.labels[0], &r.labels[1]];
     assert!(hand.iou_pooled.is_some_and(|v| v > 0.95) && hand.iou_min.is_some_and(|v| v > 0.93), "{hand:?}");
     assert!(scalpel.iou_pooled.is_some_and(|v| v > 0.75) && scalpel.recall.is_some_and(|v| v > 0.98), "{scalpel:?}");
+    Ok(())
+}
+
+/// Wood (133, 99, 67) with sensor noise of σ ≈ 2.3 levels per channel (the spread that makes
+/// τ = 7), and inside a disc a pale hand of about the wood's brightness (127, 96, 86): its
+/// chromaticity differs from the wood's by 0.108 of its channel sum, the median of the pale hand
+/// over wood that the whole noise allowance hid (a never-seen recording, rig random:409 in look
+/// random:421: Σ|c − ê·s| ≈ 33 levels against κ·s + 3τ ≈ 39.5).
+fn pale_hand_over_wood(seed: u64, hand: bool) -> RgbImage {
+    let mut state = seed;
+    let mut noise = move || {
+        // The sum of four uniform deviates on ±2: σ = sqrt(4 · 16/12) ≈ 2.3 levels.
+        (0..4)
+            .map(|_| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (state >> 40) as f64 / f64::from(1u32 << 24) * 4.0 - 2.0
+            })
+            .sum::<f64>()
+    };
+    RgbImage::from_fn(160, 120, |x, y| {
+        let inside = hand && (f64::from(x) - 80.0).hypot(f64::from(y) - 60.0) < 30.0;
+        let base = if inside { [127.0, 96.0, 86.0] } else { [133.0, 99.0, 67.0] };
+        image::Rgb(base.map(|c: f64| (c + noise()).round().clamp(0.0, 255.0) as u8))
+    })
+}
+
+#[test]
+fn a_pale_hand_over_wood_is_foreground_with_half_the_noise_allowance_and_the_wood_is_not() -> Result<()> {
+    let backgrounds = vec![(0..3).map(|k| pale_hand_over_wood(11 + k, false)).collect::<Vec<_>>()];
+    let frame = pale_hand_over_wood(99, true);
+    let disc = |x: u32, y: u32| (f64::from(x) - 80.0).hypot(f64::from(y) - 60.0) < 30.0;
+    let shares = |params: SegmentParams| -> Result<(f64, f64)> {
+        let mask = Segmenter::new(params, &backgrounds)?.segment(0, &frame)?;
+        let (mut hand, mut inside, mut wood, mut outside) = (0u32, 0u32, 0u32, 0u32);
+        for (x, y, p) in mask.enumerate_pixels() {
+            let fg = u32::from(p.0[0] != label::BACKGROUND);
+            if disc(x, y) {
+                (hand, inside) = (hand + fg, inside + 1);
+            } else if !disc(x.saturating_sub(3), y) && !disc(x + 3, y) {
+                // Away from the disc's edge (the closing may grow it by a pixel).
+                (wood, outside) = (wood + fg, outside + 1);
+            }
+        }
+        Ok((f64::from(hand) / f64::from(inside), f64::from(wood) / f64::from(outside)))
+    };
+    let (half, half_wood) = shares(SegmentParams::default())?;
+    let (whole, whole_wood) = shares(SegmentParams { chroma_noise: 1.0, ..SegmentParams::default() })?;
+    println!(
+        "pale hand found: {half:.3} with half the allowance, {whole:.3} with all of it; wood: {half_wood:.5}, {whole_wood:.5}"
+    );
+    assert!(half > 0.95, "{half}");
+    assert!(whole < 0.2, "{whole}");
+    assert!(half_wood < 1e-3, "{half_wood}");
+    // Outside 0..1 is refused, naming the setting.
+    let bad = Segmenter::new(SegmentParams { chroma_noise: 1.5, ..SegmentParams::default() }, &backgrounds);
+    assert!(bad.is_err_and(|e| e.to_string().contains("chroma_noise")));
     Ok(())
 }
