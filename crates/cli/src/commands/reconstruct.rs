@@ -113,6 +113,12 @@ pub struct Args {
     /// alone).
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
     labels: LabelMethod,
+    /// With segmented masks: a pixel the foreground test calls background but that differs from
+    /// it by half its tolerances becomes foreground where the other views' hull covers it (a hand
+    /// or glove of the table's colour). Costs one carving per view with such pixels, every frame
+    /// set: for offline work (docs/benchmarks.md, "Weak foreground the other views confirm").
+    #[arg(long)]
+    confirm_weak_foreground: bool,
     /// Views that must see a cell as background to carve it (k of N).
     #[arg(long, value_name = "K", default_value_t = 1,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
@@ -276,7 +282,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut labelling = if use_files {
         None
     } else {
-        Some(Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames, args.labels)?)
+        let mut labelling = Labelling::new(&ds, tool.as_ref(), params.clone(), &args.label_frames, args.labels)?;
+        if args.confirm_weak_foreground {
+            labelling.confirm_weak_foreground(&ds)?;
+        }
+        Some(labelling)
     };
     let mut counters = Counters::default();
     // True poses, each checked: a matrix that is not a rigid pose (a NaN, a rotation entry of

@@ -149,6 +149,12 @@ pub struct Args {
     /// alone).
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
     labels: LabelMethod,
+    /// With segmented masks: a pixel the foreground test calls background but that differs from
+    /// it by half its tolerances becomes foreground where the other views' hull covers it (a hand
+    /// or glove of the table's colour). Costs one carving per view with such pixels, every frame
+    /// set: for offline work (docs/benchmarks.md, "Weak foreground the other views confirm").
+    #[arg(long)]
+    confirm_weak_foreground: bool,
     /// Leaf (voxel) size of the hull, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
@@ -642,7 +648,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let labelling = if use_files {
         None
     } else {
-        Some(Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?)
+        let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?;
+        if args.confirm_weak_foreground {
+            labelling.confirm_weak_foreground(&ds)?;
+        }
+        Some(labelling)
     };
     let mut log = logger::LogThread::start(
         logger::Logger {

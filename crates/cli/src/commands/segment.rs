@@ -68,6 +68,12 @@ pub struct Args {
     /// colour (the colours of --label-frames alone; tool.json ignored).
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
     labels: LabelMethod,
+    /// A pixel the foreground test calls background but that differs from
+    /// it by half its tolerances becomes foreground where the other views' hull covers it (a hand
+    /// or glove of the table's colour). Costs one carving per view with such pixels, every frame
+    /// set: for offline work (docs/benchmarks.md, "Weak foreground the other views confirm").
+    #[arg(long)]
+    confirm_weak_foreground: bool,
     /// Leaf of the foreground's hull that the tool is fitted into, metres.
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
@@ -132,6 +138,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hullcut_hull::HullParams { min_views: MIN_VIEWS, ..hullcut_hull::HullParams::new(volume.aabb, args.voxel) };
     let tool = ds.tool()?;
     let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?;
+    if args.confirm_weak_foreground {
+        labelling.confirm_weak_foreground(&ds)?;
+    }
     let mut carver = Carver::Cpu;
     let score = ds.has_masks();
     let rec = match &args.rrd {
