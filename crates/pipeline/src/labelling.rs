@@ -444,7 +444,7 @@ impl Labelling {
     }
 
     /// Turns on the other views' confirmation of weak foreground: a pixel that the foreground
-    /// test calls background but that differs from the background by [`WEAK_SCALE`] of its
+    /// test calls background but that differs from the background by half of its
     /// tolerances becomes foreground where the hull of the other views' foreground covers it.
     /// One more foreground test per view and one carving per view with weak pixels, every frame
     /// set: for offline segmentation of a recording whose hand or glove is of the table's or the
