@@ -469,10 +469,16 @@ impl Labelling {
         let mut loose = Vec::new();
         weak.segment_frame_set_into(set, &mut loose).context("the weak foreground test")?;
         let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
-        let views = silhouettes(&self.rig, &refs).context("the views' silhouettes")?;
+        // Each view in turn is taken out of the set to carve the others' hull (no copy of the set).
+        let mut views = silhouettes(&self.rig, &refs).context("the views' silhouettes")?;
         let mut confirmed: Vec<Option<GrayImage>> = Vec::with_capacity(views.len());
-        for (k, view) in views.iter().enumerate() {
-            let (Some(view), Some(Some(loose)), Some(Some(mask))) = (view, loose.get(k), fg.get(k)) else {
+        for k in 0..views.len() {
+            let (Some(Some(loose)), Some(Some(mask))) = (loose.get(k), fg.get(k)) else {
+                confirmed.push(None);
+                continue;
+            };
+            // Out of the set while the others carve, put back after.
+            let Some(view) = views[k].take() else {
                 confirmed.push(None);
                 continue;
             };
@@ -485,15 +491,12 @@ impl Labelling {
                     any = true;
                 }
             }
-            if !any {
-                confirmed.push(None);
-                continue;
+            if any {
+                let hull = carver.carve(&views, &self.hull).with_context(|| format!("the hull without camera {k}"))?;
+                cover(&hull, &view, &mut candidates, WEAK, label::UNKNOWN, self.hull.margin_px);
             }
-            let mut others = views.clone();
-            others[k] = None;
-            let hull = carver.carve(&others, &self.hull).with_context(|| format!("the hull without camera {k}"))?;
-            cover(&hull, view, &mut candidates, WEAK, label::UNKNOWN, self.hull.margin_px);
-            confirmed.push(Some(candidates));
+            views[k] = Some(view);
+            confirmed.push(any.then_some(candidates));
         }
         for (mask, confirmed) in fg.iter_mut().zip(&confirmed) {
             if let (Some(mask), Some(confirmed)) = (mask, confirmed) {
