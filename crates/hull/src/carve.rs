@@ -166,6 +166,12 @@ pub struct Cell {
     pub scalpel: bool,
     /// Its centre lies inside the hull (larger uniform cells always).
     pub solid: bool,
+    /// The view (by index in the views passed to the carver) that saw only background in this
+    /// kept cell's footprint: with [`HullParams::carve_votes`] 2 a cell survives one refuting
+    /// view, and which one it was tells the hull of every other view's silhouette apart (the cells
+    /// with no refuter or with that view as refuter). The last of them when several refuted it
+    /// (`carve_votes` over 2); None when no view refuted it.
+    pub refuted_by: Option<u16>,
 }
 
 impl Cell {
@@ -759,7 +765,9 @@ impl Carver<'_> {
             };
             has_scalpel = !has_hand;
         }
-        out.cells.push(Cell { min, size, hand: has_hand, scalpel: has_scalpel, solid });
+        // `refuter` is the present view's index; `gather` turns it into the rig's.
+        let refuted_by = (refutes > 0).then_some(refuter as u16);
+        out.cells.push(Cell { min, size, hand: has_hand, scalpel: has_scalpel, solid, refuted_by });
     }
 }
 
@@ -798,7 +806,10 @@ fn gather(views: &[Option<Silhouette>], carver: &Carver, locals: Vec<Local>, sid
         for (&k, n) in rig_index.iter().zip(&local.stats.lone_refutations) {
             stats.lone_refutations[k] += n;
         }
-        cells.extend(local.cells);
+        cells.extend(local.cells.into_iter().map(|c| Cell {
+            refuted_by: c.refuted_by.and_then(|v| rig_index.get(usize::from(v)).map(|&k| k as u16)),
+            ..c
+        }));
         stats.footprint_tests += local.stats.footprint_tests;
         stats.cells_visited += local.stats.cells_visited;
         stats.kept_against_refutation += local.stats.kept_against_refutation;

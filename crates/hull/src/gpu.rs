@@ -329,7 +329,7 @@ fn judge(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let out = atomicAdd(&counters[1], 1u);
     kept[out] = vec4<u32>(cell.xyz, c.level | select(0u, 256u, has_hand) | select(0u, 512u, has_scalpel)
-        | select(0u, 1024u, solid));
+        | select(0u, 1024u, solid) | select(0u, (refuter + 1u) << 11u, refutes > 0u));
 }
 ";
 
@@ -493,6 +493,8 @@ impl GpuCarver {
             ..CarveStats::default()
         };
         let mut last = GpuCarveStats::default();
+        // Present view n is entry rig_index[n] of `views`.
+        let rig_index: Vec<usize> = views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(k, _)| k).collect();
         let mut counters = [0u32; COUNTERS];
         let mut cells = Vec::new();
         let mut current = 0;
@@ -523,6 +525,8 @@ impl GpuCarver {
                     hand: k[3] & 256 != 0,
                     scalpel: k[3] & 512 != 0,
                     solid: k[3] & 1024 != 0,
+                    // Bits 11 and up: the refuting present view + 1, or 0.
+                    refuted_by: (k[3] >> 11).checked_sub(1).and_then(|v| rig_index.get(v as usize)).map(|&r| r as u16),
                 });
             }
             stats.cells_visited += count;
@@ -531,8 +535,7 @@ impl GpuCarver {
             stats.unseen_cells += u64::from(counters[5]);
             last.near_threshold += u64::from(counters[4]);
             last.levels += 1;
-            let rig_index = views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(k, _)| k);
-            for (k, n) in rig_index.zip(&counters[6..]) {
+            for (&k, n) in rig_index.iter().zip(&counters[6..]) {
                 stats.lone_refutations[k] += u64::from(*n);
             }
             p.count = counters[0];

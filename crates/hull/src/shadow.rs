@@ -351,7 +351,14 @@ mod tests {
         let camera = Camera::new("top", 200, 200, 200.0, 200.0, 100.0, 100.0)
             .looking_at(Point3::new(0.0, 0.0, 1.0), Point3::origin(), Vector3::y())
             .expect("a camera looking down");
-        let cell = Cell { min: Point3::new(-0.005, -0.005, 0.0), size: 0.01, hand: true, scalpel: false, solid: true };
+        let cell = Cell {
+            min: Point3::new(-0.005, -0.005, 0.0),
+            size: 0.01,
+            hand: true,
+            scalpel: false,
+            solid: true,
+            refuted_by: None,
+        };
         let occ = Occupancy {
             cells: vec![cell],
             leaf_size: 0.01,
@@ -433,7 +440,14 @@ mod tests {
         );
         // A 2 cm object 10 cm above it (above the shadow hull's height: an object) hides it from
         // both views above: what they see there is the object, so the cell below is its shadow.
-        let object = Cell { min: Point3::new(-0.01, -0.01, 0.1), size: 0.02, hand: true, scalpel: false, solid: true };
+        let object = Cell {
+            min: Point3::new(-0.01, -0.01, 0.1),
+            size: 0.02,
+            hand: true,
+            scalpel: false,
+            solid: true,
+            refuted_by: None,
+        };
         let mut both = table_cell.clone();
         both.cells.push(object);
         let kept = keep_supported(&both, &all, &sure, 0.5, true, &[]);
@@ -474,7 +488,7 @@ mod tests {
             .map(|_| {
                 let size = 0.002 + 0.008 * next();
                 let min = Point3::new(next() * 0.8 - 0.4, next() * 0.6 - 0.3, next() * 0.62 - 0.02);
-                Cell { min, size, hand: true, scalpel: false, solid: true }
+                Cell { min, size, hand: true, scalpel: false, solid: true, refuted_by: None }
             })
             .collect();
         let occ =

@@ -446,7 +446,7 @@ impl Labelling {
     /// Turns on the other views' confirmation of weak foreground: a pixel that the foreground
     /// test calls background but that differs from the background by half of its
     /// tolerances becomes foreground where the hull of the other views' foreground covers it.
-    /// One more foreground test per view and one carving per view with weak pixels, every frame
+    /// One more foreground test per view and one more carving, every frame
     /// set: for offline segmentation of a recording whose hand or glove is of the table's or the
     /// backdrop's colour (docs/benchmarks.md, "Weak foreground the other views confirm").
     pub fn confirm_weak_foreground(&mut self, ds: &Dataset) -> Result<(), Error> {
@@ -464,40 +464,55 @@ impl Labelling {
 
     /// Where the other views confirm it, makes weak foreground of `fg` foreground (see
     /// [`Labelling::confirm_weak_foreground`]); counts the pixels.
+    ///
+    /// One carving with `carve_votes` 2 holds the hull of every view's silhouette but one's: a
+    /// cell that view `k` alone refuted (or that no view refuted) lies in the hull of the views
+    /// other than `k` ([`hullcut_hull::Cell::refuted_by`]), so each view's weak pixels are
+    /// confirmed by the cells with no refuter or with that view as refuter.
     fn fill_weak(&mut self, set: &FrameSet, carver: &mut Carver, fg: &mut [Option<GrayImage>]) -> Result<(), Error> {
         let Some(weak) = &mut self.weak else { return Ok(()) };
         let mut loose = Vec::new();
         weak.segment_frame_set_into(set, &mut loose).context("the weak foreground test")?;
-        let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
-        // Each view in turn is taken out of the set to carve the others' hull (no copy of the set).
-        let mut views = silhouettes(&self.rig, &refs).context("the views' silhouettes")?;
-        let mut confirmed: Vec<Option<GrayImage>> = Vec::with_capacity(views.len());
-        for k in 0..views.len() {
-            let (Some(Some(loose)), Some(Some(mask))) = (loose.get(k), fg.get(k)) else {
-                confirmed.push(None);
-                continue;
-            };
-            // Out of the set while the others carve, put back after.
-            let Some(view) = views[k].take() else {
-                confirmed.push(None);
-                continue;
-            };
-            // Weak: foreground to the loose test, background to the foreground test.
-            let mut candidates = GrayImage::new(mask.width(), mask.height());
-            let mut any = false;
-            for ((c, &l), &m) in candidates.iter_mut().zip(loose.iter()).zip(mask.iter()) {
-                if l != label::BACKGROUND && m == label::BACKGROUND {
-                    *c = WEAK;
-                    any = true;
+        // Weak: foreground to the loose test, background to the foreground test.
+        let candidates: Vec<Option<GrayImage>> = fg
+            .par_iter()
+            .zip(loose.par_iter())
+            .map(|(mask, loose)| {
+                let (mask, loose) = (mask.as_ref()?, loose.as_ref()?);
+                let mut candidates = GrayImage::new(mask.width(), mask.height());
+                let mut any = false;
+                for ((c, &l), &m) in candidates.iter_mut().zip(loose.iter()).zip(mask.iter()) {
+                    if l != label::BACKGROUND && m == label::BACKGROUND {
+                        *c = WEAK;
+                        any = true;
+                    }
                 }
-            }
-            if any {
-                let hull = carver.carve(&views, &self.hull).with_context(|| format!("the hull without camera {k}"))?;
-                cover(&hull, &view, &mut candidates, WEAK, label::UNKNOWN, self.hull.margin_px);
-            }
-            views[k] = Some(view);
-            confirmed.push(any.then_some(candidates));
+                any.then_some(candidates)
+            })
+            .collect();
+        if candidates.iter().all(Option::is_none) {
+            return Ok(());
         }
+        let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
+        let views = silhouettes(&self.rig, &refs).context("the views' silhouettes")?;
+        if views.iter().flatten().count() < 2 {
+            // No other view to confirm anything.
+            return Ok(());
+        }
+        let but_one = HullParams { carve_votes: 2, blade_levels: 0, ..self.hull.clone() };
+        let hull = carver.carve(&views, &but_one).context("the hull of all views but one")?;
+        let margin = self.hull.margin_px;
+        let confirmed: Vec<Option<GrayImage>> = candidates
+            .into_par_iter()
+            .zip(views.par_iter())
+            .enumerate()
+            .map(|(k, (candidates, view))| {
+                let (mut candidates, view) = (candidates?, view.as_ref()?);
+                let others = |i: usize| hull.cells[i].refuted_by.is_none_or(|r| usize::from(r) == k);
+                cover_split(&hull, view, &mut candidates, WEAK, margin, others, [label::UNKNOWN, COVERED]);
+                Some(candidates)
+            })
+            .collect();
         for (mask, confirmed) in fg.iter_mut().zip(&confirmed) {
             if let (Some(mask), Some(confirmed)) = (mask, confirmed) {
                 for (p, _) in mask.iter_mut().zip(confirmed.iter()).filter(|(_, c)| **c == label::UNKNOWN) {

@@ -129,7 +129,7 @@ mod tests {
         Occupancy {
             cells: cells
                 .iter()
-                .map(|&(min, size)| Cell { min, size, hand: true, scalpel: false, solid: true })
+                .map(|&(min, size)| Cell { min, size, hand: true, scalpel: false, solid: true, refuted_by: None })
                 .collect(),
             leaf_size: 0.01,
             origin: Point3::origin(),

@@ -1427,6 +1427,7 @@ mod tests {
             hand: true,
             scalpel: false,
             solid: true,
+            refuted_by: None,
         };
         (camera, labels, tool, cell)
     }
@@ -1577,7 +1578,14 @@ mod tests {
             for k in 0..64 {
                 let (x, y, z) = (4 * bx + k % 4, 4 * by + (k / 4) % 4, 4 * bz + k / 16);
                 let min = Point3::new(-0.07 + leaf * x as f64, -0.06 + leaf * y as f64, 0.38 + leaf * z as f64);
-                cells.push(hullcut_hull::Cell { min, size: leaf, hand: true, scalpel: false, solid: true });
+                cells.push(hullcut_hull::Cell {
+                    min,
+                    size: leaf,
+                    hand: true,
+                    scalpel: false,
+                    solid: true,
+                    refuted_by: None,
+                });
             }
         }
         cells.push(hullcut_hull::Cell {
@@ -1586,6 +1594,7 @@ mod tests {
             hand: true,
             scalpel: false,
             solid: true,
+            refuted_by: None,
         });
         let margin = 0.006;
         let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9 }];
@@ -1637,7 +1646,7 @@ mod tests {
         for k in 0..3000 {
             let size = 0.002 + 0.01 * next();
             let min = Point3::new(next() * 0.6 - 0.3, next() * 0.5 - 0.25, next() * 0.7);
-            let cell = hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true };
+            let cell = hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true, refuted_by: None };
             let (cells, doubtful) = if k % 2 == 0 { (vec![cell], Vec::new()) } else { (Vec::new(), vec![cell]) };
             let by_run = judged(&HandCells::new(cells.clone(), doubtful.clone()));
             let (runs, doubtful_runs) =
@@ -1655,7 +1664,14 @@ mod tests {
                 .map(|_| {
                     let size = 0.002 + 0.003 * next();
                     let offset = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 0.04;
-                    hullcut_hull::Cell { min: centre + offset, size, hand: true, scalpel: false, solid: true }
+                    hullcut_hull::Cell {
+                        min: centre + offset,
+                        size,
+                        hand: true,
+                        scalpel: false,
+                        solid: true,
+                        refuted_by: None,
+                    }
                 })
                 .collect();
             let by_run = judged(&HandCells::new(cells.clone(), Vec::new()));
@@ -1680,7 +1696,7 @@ mod tests {
             .map(|_| {
                 let size = 0.002 + 0.01 * next();
                 let min = Point3::new(next() * 0.6 - 0.3, next() * 0.5 - 0.25, next() * 0.7);
-                hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true }
+                hullcut_hull::Cell { min, size, hand: true, scalpel: false, solid: true, refuted_by: None }
             })
             .collect();
         let margin = 0.006;

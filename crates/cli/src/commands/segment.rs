@@ -70,8 +70,9 @@ pub struct Args {
     labels: LabelMethod,
     /// A pixel the foreground test calls background but that differs from
     /// it by half its tolerances becomes foreground where the other views' hull covers it (a hand
-    /// or glove of the table's colour). Costs one carving per view with such pixels, every frame
-    /// set: for offline work (docs/benchmarks.md, "Weak foreground the other views confirm").
+    /// or glove of the table's colour). Costs a second foreground test and a carving that keeps
+    /// what one view alone refutes, every frame set: some 30 ms on six 640x480 views, for offline
+    /// work (docs/benchmarks.md, "Weak foreground the other views confirm").
     #[arg(long)]
     confirm_weak_foreground: bool,
     /// Leaf of the foreground's hull that the tool is fitted into, metres.

@@ -13,13 +13,15 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::{render, views};
 
-/// Every leaf a kept cell covers, with its labels (bit 0 kept, 1 hand, 2 scalpel).
-fn leaves(occ: &Occupancy) -> HashMap<[i64; 3], u8> {
+/// Every leaf a kept cell covers, with its labels (bit 0 kept, 1 hand, 2 scalpel) and the view
+/// that refuted it (bits 3 and up: the view + 1, or 0).
+fn leaves(occ: &Occupancy) -> HashMap<[i64; 3], u16> {
     let mut out = HashMap::new();
     for c in &occ.cells {
         let at = |a: usize| ((c.min[a] - occ.origin[a]) / occ.leaf_size).round() as i64;
         let n = (c.size / occ.leaf_size).round() as i64;
-        let bits = 1 | (u8::from(c.hand) << 1) | (u8::from(c.scalpel) << 2);
+        let refuter = c.refuted_by.map_or(0, |v| v + 1);
+        let bits = 1 | (u16::from(c.hand) << 1) | (u16::from(c.scalpel) << 2) | (refuter << 3);
         for k in 0..n {
             for j in 0..n {
                 for i in 0..n {

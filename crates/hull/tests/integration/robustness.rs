@@ -413,3 +413,44 @@ fn a_silhouette_counted_pixel_by_pixel_carves_and_counts_as_the_tabled_one() {
     let too_small = vec![Some(GrayImage::new(3, 3))];
     assert!(hullcut_hull::direct_silhouettes(rig, too_small).is_err(), "a mask of another size is refused");
 }
+
+/// Every leaf the cells that `keep` picks cover.
+fn leaves_of(occ: &Occupancy, keep: impl Fn(&hullcut_hull::Cell) -> bool) -> std::collections::HashSet<[i64; 3]> {
+    let mut out = std::collections::HashSet::new();
+    for c in occ.cells.iter().filter(|c| keep(c)) {
+        let at = |a: usize| ((c.min[a] - occ.origin[a]) / occ.leaf_size).round() as i64;
+        let n = (c.size / occ.leaf_size).round() as i64;
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    out.insert([at(0) + i, at(1) + j, at(2) + k]);
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn two_votes_hold_the_hull_of_every_view_but_one_in_the_cells_that_view_alone_refuted() {
+    let (rig, masks) = clean_masks();
+    // One view misses part of the sphere (eroded by 3 px), so that leaving it out matters.
+    let mut views = all(masks);
+    views[2] = Some(morph(&masks[2], 3, false));
+    let two = carve_masks(rig, &views, 2);
+    assert!(two.cells.iter().any(|c| c.refuted_by == Some(2)), "the eroded view refutes some kept cells");
+    assert!(two.cells.iter().any(|c| c.refuted_by.is_none()));
+    for k in 0..rig.len() {
+        let mut without = views.clone();
+        without[k] = None;
+        let alone = leaves_of(&carve_masks(rig, &without, 1), |_| true);
+        let picked = leaves_of(&two, |c| c.refuted_by.is_none_or(|r| usize::from(r) == k));
+        let differ = alone.symmetric_difference(&picked).count();
+        eprintln!("camera {k} left out: {} leaves, {} picked, {differ} differ", alone.len(), picked.len());
+        assert!(alone.len() > 1000);
+        assert_eq!(differ, 0, "camera {k} left out");
+    }
+    // The classic hull is the cells no view refuted.
+    let one = leaves_of(&carve_masks(rig, &views, 1), |_| true);
+    assert_eq!(one, leaves_of(&two, |c| c.refuted_by.is_none()));
+}
