@@ -31,6 +31,9 @@ pub const BLADE_AS_HAND_ENTITY: &str = "metrics/appearance/blade_as_hand";
 /// The possible shadows given back to the table in a frame set, pixels over its views (the
 /// report's `shadow_on_table`, frame set by frame set).
 pub const SHADOW_ON_TABLE_ENTITY: &str = "metrics/shadows/on_table";
+/// The weak foreground the other views' hull confirmed in a frame set, pixels over its views
+/// (`--confirm-weak-foreground`; the report's `weak_confirmed`, frame set by frame set).
+pub const WEAK_CONFIRMED_ENTITY: &str = "metrics/foreground/weak_confirmed";
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -57,7 +60,8 @@ pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
 /// Logs where a frame set's labels came from (a warning when the tool's fit was not trusted and
 /// no colour could label instead), the colours learned by then (a label with none learned yet
 /// logs nothing), the share of the drawn blade they call the hand's (once there is one) and the
-/// possible shadows given back to the table (where any were asked), at the current time.
+/// possible shadows given back to the table (where any were asked) and the weak foreground
+/// confirmed (with `--confirm-weak-foreground`), at the current time.
 pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Result<()> {
     let (text, warning) = match trace.source {
         LabelSource::Geometry => ("geometry: the tool's trusted fit drawn into the views", false),
@@ -73,6 +77,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     }
     if let Some(pixels) = trace.shadow_on_table {
         hullcut_viz::log_scalar(rec, SHADOW_ON_TABLE_ENTITY, pixels as f64)?;
+    }
+    if let Some(pixels) = trace.weak_confirmed {
+        hullcut_viz::log_scalar(rec, WEAK_CONFIRMED_ENTITY, pixels as f64)?;
     }
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;

@@ -347,8 +347,9 @@ fn a_camera_whose_background_changes_is_degraded_and_counted_not_lost() {
 fn weak_foreground_the_other_views_confirm_fills_a_glove_of_the_tables_colour() {
     let dir = tempfile::tempdir().expect("tempdir");
     let ds = resection(dir.path(), "random:71", "random:109", "standard", 4);
-    let plain = segment(&ds, &[]);
-    let confirmed = segment(&ds, &["--confirm-weak-foreground"]);
+    let (plain_rrd, rrd) = (dir.path().join("plain.rrd"), dir.path().join("weak.rrd"));
+    let plain = segment(&ds, &["--rrd", &path(&plain_rrd)]);
+    let confirmed = segment(&ds, &["--confirm-weak-foreground", "--rrd", &path(&rrd)]);
     let (before, after) = (iou(&plain, "foreground"), iou(&confirmed, "foreground"));
     println!("foreground IoU {before:.4} -> {after:.4}");
     assert!(after > before + 0.05, "{before} -> {after}");
@@ -359,4 +360,10 @@ fn weak_foreground_the_other_views_confirm_fills_a_glove_of_the_tables_colour() 
     );
     assert_eq!(l0["counters"]["weak_confirmed"].as_u64(), Some(0), "{l0}");
     assert!(l1["counters"]["weak_confirmed"].as_u64().expect("counted") > 1000, "{l1}");
+    // Logged frame set by frame set with the flag, not at all without it.
+    let rows = hullcut_viz::rrd_timeline_rows(&rrd).expect("the recording reads back");
+    let logged = rows.get("/labelling/source").copied().unwrap_or(0);
+    assert!(logged > 0 && rows.get("/metrics/foreground/weak_confirmed") == Some(&logged), "{rows:?}");
+    let rows = hullcut_viz::rrd_timeline_rows(&plain_rrd).expect("the recording reads back");
+    assert!(!rows.contains_key("/metrics/foreground/weak_confirmed"), "{rows:?}");
 }

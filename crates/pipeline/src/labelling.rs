@@ -158,6 +158,9 @@ pub struct LabelTrace {
     /// Possible shadows given back to the table in the frame set, over its views (`None` where
     /// none were asked: no shadows, no tool, or no table; [`Labelling::shadow_on_table`]).
     pub shadow_on_table: Option<u64>,
+    /// Pixels of weak foreground the other views' hull confirmed in the frame set, over its views
+    /// (`None` without [`Labelling::confirm_weak_foreground`]; [`Labelling::weak_confirmed`]).
+    pub weak_confirmed: Option<u64>,
 }
 
 impl LabelSource {
@@ -331,6 +334,8 @@ pub struct Labelling {
     tool_as_hand: (f64, f64),
     /// The last frame set's possible shadows given back to the table (`None`: none were asked).
     shadow_on_table: Option<u64>,
+    /// Weak foreground pixels confirmed in the last frame set (with the weak test only).
+    weak_confirmed: Option<u64>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -427,6 +432,7 @@ impl Labelling {
             explained,
             tool_as_hand: (0.0, 0.0),
             shadow_on_table: None,
+            weak_confirmed: None,
             hull,
             rig: ds.rig().clone(),
             label_frames: label_frames.to_vec(),
@@ -470,7 +476,9 @@ impl Labelling {
     /// other than `k` ([`hullcut_hull::Cell::refuted_by`]), so each view's weak pixels are
     /// confirmed by the cells with no refuter or with that view as refuter.
     fn fill_weak(&mut self, set: &FrameSet, carver: &mut Carver, fg: &mut [Option<GrayImage>]) -> Result<(), Error> {
+        self.weak_confirmed = None;
         let Some(weak) = &mut self.weak else { return Ok(()) };
+        self.weak_confirmed = Some(0);
         let mut loose = Vec::new();
         weak.segment_frame_set_into(set, &mut loose).context("the weak foreground test")?;
         // Weak: foreground to the loose test, background to the foreground test.
@@ -515,10 +523,13 @@ impl Labelling {
             .collect();
         for (mask, confirmed) in fg.iter_mut().zip(&confirmed) {
             if let (Some(mask), Some(confirmed)) = (mask, confirmed) {
+                let mut n = 0;
                 for (p, _) in mask.iter_mut().zip(confirmed.iter()).filter(|(_, c)| **c == label::UNKNOWN) {
                     *p = label::UNKNOWN;
-                    self.counters.weak_confirmed += 1;
+                    n += 1;
                 }
+                self.counters.weak_confirmed += n;
+                self.weak_confirmed = self.weak_confirmed.map(|w| w + n);
             }
         }
         Ok(())
@@ -948,6 +959,12 @@ impl Labelling {
         self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + pixels as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
+    }
+
+    /// The last labelled frame set's weak foreground pixels that the other views' hull confirmed,
+    /// over its views (`None` without [`Labelling::confirm_weak_foreground`]).
+    pub fn weak_confirmed(&self) -> Option<u64> {
+        self.weak_confirmed
     }
 
     /// The last labelled frame set's possible shadows given back to the table as the other views

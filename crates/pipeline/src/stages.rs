@@ -834,6 +834,7 @@ fn hull_stage(
                 learned: labelling.learned(),
                 blade_as_hand: labelling.blade_as_hand(),
                 shadow_on_table: labelling.shadow_on_table(),
+                weak_confirmed: labelling.weak_confirmed(),
             });
         }
         let occ = match labelled_hull {

@@ -465,6 +465,9 @@ pub const ENTITIES: [&str; 13] = [
     "world/workspace",
 ];
 
+/// With `--confirm-weak-foreground`, also the weak foreground confirmed in each frame set.
+pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
+
 /// The rerun entities a run logs when it segments (without mask files): where each frame set's
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
 /// hand's, and the possible shadows given back to the table.
@@ -927,6 +930,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             entities: ENTITIES
                 .iter()
                 .chain(if use_files { &[][..] } else { &SEGMENTING_ENTITIES[..] })
+                .chain(if !use_files && args.confirm_weak_foreground { &[WEAK_ENTITY][..] } else { &[][..] })
                 .map(|s| (*s).to_owned())
                 .collect(),
             non_finite: Vec::new(),

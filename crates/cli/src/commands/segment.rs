@@ -219,6 +219,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             learned: labelling.learned(),
             blade_as_hand: labelling.blade_as_hand(),
             shadow_on_table: labelling.shadow_on_table(),
+            weak_confirmed: labelling.weak_confirmed(),
         };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
@@ -244,6 +245,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     blade_as_hand: labelling.blade_as_hand(),
                     // Relabelling by colour asks no shadows: the frame set's first pass did.
                     shadow_on_table: trace.shadow_on_table,
+                    weak_confirmed: trace.weak_confirmed,
                 },
             ),
             None => (masks, trace),
