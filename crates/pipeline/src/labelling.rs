@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
 use crate::error::{Context as _, Error, fail};
+use crate::region::CarveRegion;
 
 /// A trusted frame set's geometric labels teach the appearance model when its confidence is at
 /// least this.
@@ -316,6 +317,9 @@ pub struct Labelling {
     segmenter: Segmenter,
     /// The weak foreground test ([`Labelling::confirm_weak_foreground`]).
     weak: Option<Segmenter>,
+    /// Where the weak foreground's hull is carved: around the last frame set's hull, as the main
+    /// job's loop carves ([`CarveRegion`]).
+    weak_region: Option<CarveRegion>,
     tool: Option<ToolLabeller>,
     /// The colours of the labels sharpened wherever a colour is surely the likelier: they label
     /// by colour and give the fit its hints.
@@ -424,6 +428,7 @@ impl Labelling {
             method,
             segmenter,
             weak: None,
+            weak_region: None,
             tool,
             appearance,
             sharpening,
@@ -465,6 +470,7 @@ impl Labelling {
             ..p.clone()
         };
         self.weak = Some(Segmenter::from_dataset(ds, weak).context("setting up the weak foreground test")?);
+        self.weak_region = Some(CarveRegion::new(self.hull.workspace, self.hull.leaf_size));
         Ok(())
     }
 
@@ -507,7 +513,10 @@ impl Labelling {
             // No other view to confirm anything.
             return Ok(());
         }
-        let but_one = HullParams { carve_votes: 2, blade_levels: 0, ..self.hull.clone() };
+        // Within the box around the last hull (and within the box the main job's loop carves in).
+        let region = self.weak_region.as_mut().map_or(self.hull.workspace, CarveRegion::next_box);
+        let Some(workspace) = intersection(&region, &self.hull.workspace) else { return Ok(()) };
+        let but_one = HullParams { workspace, carve_votes: 2, blade_levels: 0, ..self.hull.clone() };
         let hull = carver.carve(&views, &but_one).context("the hull of all views but one")?;
         let margin = self.hull.margin_px;
         let confirmed: Vec<Option<GrayImage>> = candidates
@@ -600,6 +609,9 @@ impl Labelling {
                 .with_context(|| format!("frame {frame}"))?;
             (occ, marked_only, given_back) = (resolved.occupancy, resolved.marked_only, resolved.given_back);
             self.shadow_on_table = table_shadows.then(|| given_back.iter().map(|b| b.len() as u64).sum());
+        }
+        if let Some(region) = &mut self.weak_region {
+            region.update(&self.hull.workspace, &occ);
         }
         for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
             if let (Some(view), Some(mask)) = (view, mask) {
@@ -1015,6 +1027,13 @@ impl Labelling {
     }
 }
 
+/// The box two boxes share (`None` when they share no volume).
+fn intersection(a: &hullcut_hull::Aabb, b: &hullcut_hull::Aabb) -> Option<hullcut_hull::Aabb> {
+    let min = a.min.sup(&b.min);
+    let max = a.max.inf(&b.max);
+    (0..3).all(|k| max[k] > min[k]).then_some(hullcut_hull::Aabb { min, max })
+}
+
 /// Copies `from` into `to`, reusing the images already there where their sizes match.
 fn copy_masks(from: &[Option<GrayImage>], to: &mut Vec<Option<GrayImage>>) {
     to.resize(from.len(), None);
@@ -1204,6 +1223,15 @@ mod tests {
     use image::{Rgb, RgbImage};
 
     use super::*;
+
+    #[test]
+    fn two_boxes_share_their_overlap_and_nothing_when_they_only_touch() {
+        let b = |min: [f64; 3], max: [f64; 3]| hullcut_hull::Aabb { min: min.into(), max: max.into() };
+        let shared = intersection(&b([0.0, 0.0, 0.0], [2.0, 2.0, 2.0]), &b([1.0, -1.0, 0.5], [3.0, 1.0, 1.5]));
+        assert_eq!(shared, Some(b([1.0, 0.0, 0.5], [2.0, 1.0, 1.5])));
+        assert_eq!(intersection(&b([0.0; 3], [1.0; 3]), &b([1.0, 0.0, 0.0], [2.0, 1.0, 1.0])), None);
+        assert_eq!(intersection(&b([0.0; 3], [1.0; 3]), &b([5.0; 3], [6.0; 3])), None);
+    }
 
     #[test]
     fn mask_counts_equal_counting_pixel_by_pixel_at_any_size() {

@@ -1,6 +1,6 @@
-//! `hullcut bench segment`: the labelling methods (colour only, geometry only, both) side by side on
-//! recordings of several rigs and looks, one of each seeded random: pooled IoU per label against
-//! milliseconds per frame set.
+//! `hullcut bench segment`: the labelling methods (colour only, geometry only, both, and both with
+//! the weak foreground the other views confirm) side by side on recordings of several rigs and
+//! looks, one of each seeded random: pooled IoU per label against milliseconds per frame set.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -42,7 +42,26 @@ const SETUPS: [Setup; 4] = [
     Setup { rig: RigPreset::Random(13), look: "random:23", tool: ToolKind::Standard },
 ];
 
-const METHODS: [LabelMethod; 3] = [LabelMethod::Colour, LabelMethod::Geometry, LabelMethod::Both];
+/// A labelling method, with or without the weak foreground the other views confirm
+/// (`--confirm-weak-foreground`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Variant {
+    method: LabelMethod,
+    weak: bool,
+}
+
+impl Variant {
+    fn name(self) -> String {
+        if self.weak { format!("{}+weak", self.method.name()) } else { self.method.name().to_owned() }
+    }
+}
+
+const VARIANTS: [Variant; 4] = [
+    Variant { method: LabelMethod::Colour, weak: false },
+    Variant { method: LabelMethod::Geometry, weak: false },
+    Variant { method: LabelMethod::Both, weak: false },
+    Variant { method: LabelMethod::Both, weak: true },
+];
 
 /// Frames whose truth masks teach the colour-only method; no method is scored on them.
 const LABEL_FRAMES: [u64; 2] = [0, 1];
@@ -53,7 +72,7 @@ struct Row {
     cameras: usize,
     width: u32,
     height: u32,
-    method: LabelMethod,
+    variant: Variant,
     scored: usize,
     timing: StageTiming,
     foreground_ms: f64,
@@ -86,9 +105,13 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         let hull = HullParams { min_views: MIN_VIEWS, ..HullParams::new(volume.aabb, 0.4 / 128.0) };
         let tool = ds.tool()?;
         let (width, height) = ds.rig().cameras.first().map_or((0, 0), |c| (c.width, c.height));
-        for method in METHODS {
+        for variant in VARIANTS {
+            let method = variant.method;
             let label_frames: &[u64] = if method == LabelMethod::Colour { &LABEL_FRAMES } else { &[] };
             let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), label_frames, method)?;
+            if variant.weak {
+                labelling.confirm_weak_foreground(&ds)?;
+            }
             let mut carver = Carver::Cpu;
             let mut acc = IouAccumulator::new();
             let (mut times, mut fg) = (Vec::new(), Vec::new());
@@ -119,7 +142,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 cameras: ds.rig().len(),
                 width,
                 height,
-                method,
+                variant,
                 scored: sets.iter().filter(|s| !LABEL_FRAMES.contains(&s.frame)).count(),
                 timing: StageTiming::from_durations(&times),
                 foreground_ms: StageTiming::from_durations(&fg).mean_ms,
@@ -128,7 +151,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             };
             println!(
                 "{name}, {}: hand IoU {:.3}, scalpel {:.3}, foreground {:.3}; {:.1} ms per frame set (foreground {:.1})",
-                method.name(),
+                variant.name(),
                 row.scores[0].iou_pooled.unwrap_or(f64::NAN),
                 row.scores[1].iou_pooled.unwrap_or(f64::NAN),
                 row.scores[2].iou_pooled.unwrap_or(f64::NAN),
@@ -148,6 +171,7 @@ fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
         "width",
         "height",
         "method",
+        "weak_foreground",
         "frame_sets_scored",
         "ms_mean",
         "ms_p50",
@@ -171,7 +195,8 @@ fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
             r.cameras.to_string(),
             r.width.to_string(),
             r.height.to_string(),
-            r.method.name().to_owned(),
+            r.variant.method.name().to_owned(),
+            r.variant.weak.to_string(),
             r.scored.to_string(),
             format!("{:.3}", r.timing.mean_ms),
             format!("{:.3}", r.timing.p50_ms),
@@ -190,13 +215,13 @@ fn write_outputs(out: &Path, rows: &[Row]) -> anyhow::Result<()> {
     }
     table.write(&out.join("segment.csv"))?;
     for (k, label) in ["hand", "scalpel"].iter().enumerate() {
-        let series: Vec<Series> = METHODS
+        let series: Vec<Series> = VARIANTS
             .iter()
-            .map(|&m| Series {
-                label: m.name().to_owned(),
+            .map(|&v| Series {
+                label: v.name(),
                 points: rows
                     .iter()
-                    .filter(|r| r.method == m)
+                    .filter(|r| r.variant == v)
                     .filter_map(|r| Some((r.timing.mean_ms, r.scores[k].iou_pooled?)))
                     .collect(),
             })
