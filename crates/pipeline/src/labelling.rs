@@ -320,6 +320,8 @@ pub struct Labelling {
     /// Where the weak foreground's hull is carved: around the last frame set's hull, as the main
     /// job's loop carves ([`CarveRegion`]).
     weak_region: Option<CarveRegion>,
+    /// The pixels of each view that the other views confirmed as foreground in this frame set.
+    weak_pixels: Vec<Vec<usize>>,
     tool: Option<ToolLabeller>,
     /// The colours of the labels sharpened wherever a colour is surely the likelier: they label
     /// by colour and give the fit its hints.
@@ -429,6 +431,7 @@ impl Labelling {
             segmenter,
             weak: None,
             weak_region: None,
+            weak_pixels: Vec::new(),
             tool,
             appearance,
             sharpening,
@@ -456,7 +459,8 @@ impl Labelling {
 
     /// Turns on the other views' confirmation of weak foreground: a pixel that the foreground
     /// test calls background but that differs from the background by half of its
-    /// tolerances becomes foreground where the hull of the other views' foreground covers it.
+    /// tolerances becomes foreground where the hull of the other views' foreground covers it;
+    /// foreground to the tool's fit too, but never evidence of its outline.
     /// One more foreground test per view and one more carving, every frame
     /// set: for offline segmentation of a recording whose hand or glove is of the table's or the
     /// backdrop's colour (docs/benchmarks.md, "Weak foreground the other views confirm").
@@ -483,6 +487,7 @@ impl Labelling {
     /// confirmed by the cells with no refuter or with that view as refuter.
     fn fill_weak(&mut self, set: &FrameSet, carver: &mut Carver, fg: &mut [Option<GrayImage>]) -> Result<(), Error> {
         self.weak_confirmed = None;
+        self.weak_pixels.iter_mut().for_each(Vec::clear);
         let Some(weak) = &mut self.weak else { return Ok(()) };
         self.weak_confirmed = Some(0);
         let mut loose = Vec::new();
@@ -530,11 +535,15 @@ impl Labelling {
                 Some(candidates)
             })
             .collect();
-        for (mask, confirmed) in fg.iter_mut().zip(&confirmed) {
+        self.weak_pixels.resize_with(fg.len(), Vec::new);
+        for ((mask, confirmed), pixels) in fg.iter_mut().zip(&confirmed).zip(&mut self.weak_pixels) {
             if let (Some(mask), Some(confirmed)) = (mask, confirmed) {
                 let mut n = 0;
-                for (p, _) in mask.iter_mut().zip(confirmed.iter()).filter(|(_, c)| **c == label::UNKNOWN) {
+                for (i, (p, _)) in
+                    mask.iter_mut().zip(confirmed.iter()).enumerate().filter(|(_, (_, c))| **c == label::UNKNOWN)
+                {
                     *p = label::UNKNOWN;
+                    pixels.push(i);
                     n += 1;
                 }
                 self.counters.weak_confirmed += n;
@@ -583,8 +592,12 @@ impl Labelling {
         // shadows become foreground or background.
         let sure = self.sure.as_ref().filter(|_| self.method == LabelMethod::Both);
         let hand_hints = self.hand_hints();
-        let hints: Option<Vec<Option<GrayImage>>> = (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0))
-            .then(|| {
+        // The weak foreground the other views confirmed is foreground to the fit, never evidence of
+        // the tool's outline (as a shadow on the table, [`TABLE_SHADOW`]): the fat hull near the
+        // blade confirms the blade's blended edge and the soft rim of its shadow beside it.
+        let weak_hints = self.weak_pixels.iter().any(|p| !p.is_empty());
+        let hints: Option<Vec<Option<GrayImage>>> =
+            (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0 || weak_hints)).then(|| {
                 fg.par_iter()
                     .zip(set.views.par_iter())
                     .map(|(m, view)| Some(fit_hints(sure, hand_hints, &view.as_ref()?.image, m.as_ref()?)))
@@ -660,6 +673,13 @@ impl Labelling {
                         for (p, &h) in m.iter_mut().zip(hint.iter()) {
                             if *p != label::BACKGROUND && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW) {
                                 *p = h;
+                            }
+                        }
+                    }
+                    if weak_hints {
+                        for &i in self.weak_pixels.get(k).into_iter().flatten() {
+                            if m.as_raw()[i] != label::BACKGROUND {
+                                m.as_mut()[i] = TABLE_SHADOW;
                             }
                         }
                     }
