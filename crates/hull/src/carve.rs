@@ -779,6 +779,10 @@ pub(crate) fn check(views: &[Option<Silhouette>], params: &HullParams) -> Result
             params.leaf_size, params.carve_votes, params.min_views
         )));
     }
+    if views.len() > usize::from(u16::MAX) {
+        // A kept cell names its refuting view in a u16 (`Cell::refuted_by`).
+        return Err(HullError::Params(format!("{} views; carving takes at most {}", views.len(), u16::MAX)));
+    }
     if !(params.margin_px.is_finite() && params.margin_px >= 0.0) {
         return Err(HullError::Params(format!("margin_px must be 0 or more, got {}", params.margin_px)));
     }

@@ -331,6 +331,8 @@ pub struct Labelling {
     weak_region: Option<CarveRegion>,
     /// The pixels of each view that the other views confirmed as foreground in this frame set.
     weak_pixels: Vec<Vec<usize>>,
+    /// The weak test's masks, reused from frame set to frame set.
+    loose: Vec<Option<GrayImage>>,
     tool: Option<ToolLabeller>,
     /// The colours of the labels sharpened wherever a colour is surely the likelier: they label
     /// by colour and give the fit its hints.
@@ -441,6 +443,7 @@ impl Labelling {
             weak: None,
             weak_region: None,
             weak_pixels: Vec::new(),
+            loose: Vec::new(),
             tool,
             appearance,
             sharpening,
@@ -499,8 +502,21 @@ impl Labelling {
         self.weak_pixels.iter_mut().for_each(Vec::clear);
         let Some(weak) = &mut self.weak else { return Ok(()) };
         self.weak_confirmed = Some(0);
-        let mut loose = Vec::new();
-        weak.segment_frame_set_into(set, &mut loose).context("the weak foreground test")?;
+        let mut loose = std::mem::take(&mut self.loose);
+        let tested = weak.segment_frame_set_into(set, &mut loose).context("the weak foreground test");
+        let confirmed = tested.and_then(|()| self.confirm(set, carver, fg, &loose));
+        self.loose = loose;
+        confirmed
+    }
+
+    /// [`Labelling::fill_weak`] with the weak test's masks `loose`.
+    fn confirm(
+        &mut self,
+        set: &FrameSet,
+        carver: &mut Carver,
+        fg: &mut [Option<GrayImage>],
+        loose: &[Option<GrayImage>],
+    ) -> Result<(), Error> {
         // Weak: foreground to the loose test, background to the foreground test.
         let candidates: Vec<Option<GrayImage>> = fg
             .par_iter()

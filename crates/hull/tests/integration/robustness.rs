@@ -454,3 +454,10 @@ fn two_votes_hold_the_hull_of_every_view_but_one_in_the_cells_that_view_alone_re
     let one = leaves_of(&carve_masks(rig, &views, 1), |_| true);
     assert_eq!(one, leaves_of(&two, |c| c.refuted_by.is_none()));
 }
+
+#[test]
+fn more_views_than_a_cell_can_name_are_refused() {
+    let views: Vec<Option<Silhouette>> = vec![None; usize::from(u16::MAX) + 1];
+    let err = carve(&views, &params(1)).expect_err("65,536 views refused");
+    assert!(err.to_string().contains("65536 views"), "{err}");
+}
