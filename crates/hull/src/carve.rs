@@ -1047,28 +1047,30 @@ pub fn carve_within(views: &[Option<Silhouette>], params: &HullParams, seeds: &[
 /// not test the footprints again.
 pub fn relabel(occ: &Occupancy, views: &[Option<Silhouette>], params: &HullParams) -> (Occupancy, Vec<bool>) {
     /// Cells per parallel task.
-    const CHUNK: usize = 64;
+    const CHUNK: usize = 256;
     let n = views.len();
     let parts: Vec<(Vec<Cell>, Vec<bool>)> = occ
         .cells
         .par_chunks(CHUNK)
-        .map(|chunk| {
+        .map_init(SharedCorners::default, |corners, chunk| {
+            corners.gather(chunk, occ.origin, occ.leaf_size);
             let mut cells = Vec::with_capacity(chunk.len());
             let mut seen = vec![false; chunk.len() * n];
-            for (k, c) in chunk.iter().enumerate() {
-                let (mut hand, mut scalpel, mut hand_share, mut scalpel_share) = (0, 0, 0.0, 0.0);
-                for (v, view) in views.iter().enumerate() {
-                    let Some(view) = view else { continue };
-                    let corners: [Projected; 8] =
-                        std::array::from_fn(|m| project(view, &(c.min + corner_offset(m) * c.size)));
-                    if let Verdict::Sees { counts, .. } = judge(view, |m| corners[m], params.margin_px) {
-                        hand += usize::from(counts.hand > 0);
-                        scalpel += usize::from(counts.scalpel > 0);
-                        hand_share += f64::from(counts.hand) / f64::from(counts.total);
-                        scalpel_share += f64::from(counts.scalpel) / f64::from(counts.total);
+            let mut shares = vec![(0usize, 0usize, 0.0f64, 0.0f64); chunk.len()];
+            for (v, view) in views.iter().enumerate() {
+                let Some(view) = view else { continue };
+                corners.project(view);
+                for (k, share) in shares.iter_mut().enumerate() {
+                    if let Verdict::Sees { counts, .. } = judge(view, |m| corners.corner(k, m), params.margin_px) {
+                        share.0 += usize::from(counts.hand > 0);
+                        share.1 += usize::from(counts.scalpel > 0);
+                        share.2 += f64::from(counts.hand) / f64::from(counts.total);
+                        share.3 += f64::from(counts.scalpel) / f64::from(counts.total);
                         seen[k * n + v] = counts.hand > 0;
                     }
                 }
+            }
+            for (c, &(hand, scalpel, hand_share, scalpel_share)) in chunk.iter().zip(&shares) {
                 let (mut has_hand, mut has_scalpel) = (hand >= params.min_support, scalpel >= params.min_support);
                 if params.exclusive_labels && has_hand && has_scalpel {
                     has_hand = hand_share >= scalpel_share;
@@ -1088,6 +1090,87 @@ pub fn relabel(occ: &Occupancy, views: &[Option<Silhouette>], params: &HullParam
     let mut stats = occ.stats.clone();
     stats.unlabelled_cells = cells.iter().filter(|c| !c.hand && !c.scalpel).count() as u64;
     (Occupancy { cells, stats, ..*occ }, seen)
+}
+
+/// The corners of a run of cells with each lattice point projected once per view: neighbouring
+/// cells of a hull share corners (a block of 4x4x4 leaves has 125 distinct corners among its
+/// 512), and projecting them was most of [`relabel`]'s time.
+#[derive(Default)]
+#[allow(missing_debug_implementations)] // scratch, never printed
+struct SharedCorners {
+    /// Per cell, its eight corners' indices into `points`.
+    ids: Vec<[u32; 8]>,
+    /// The distinct corners.
+    points: Vec<Point3<f64>>,
+    /// `points` projected into the current view.
+    projected: Vec<Projected>,
+    /// Lattice slot -> index into `points` (`u32::MAX`: none yet), over the run's box.
+    slots: Vec<u32>,
+    /// Lattice coordinates of each cell's lower corner and its side in leaves.
+    keys: Vec<([i64; 3], i64)>,
+}
+
+impl SharedCorners {
+    /// Largest lattice box (in points) indexed densely; a run spread wider projects every
+    /// corner of its own.
+    const MAX_SLOTS: i64 = 1 << 15;
+
+    /// Collects the distinct corners of `cells`, on the lattice of `leaf`-sized steps from
+    /// `origin`.
+    fn gather(&mut self, cells: &[Cell], origin: Point3<f64>, leaf: f64) {
+        self.ids.clear();
+        self.points.clear();
+        self.keys.clear();
+        self.keys.extend(cells.iter().map(|c| {
+            let q = |a: usize| ((c.min[a] - origin[a]) / leaf).round() as i64;
+            ([q(0), q(1), q(2)], (c.size / leaf).round() as i64)
+        }));
+        let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+        for (k, s) in &self.keys {
+            for a in 0..3 {
+                lo[a] = lo[a].min(k[a]);
+                hi[a] = hi[a].max(k[a] + s);
+            }
+        }
+        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1).max(0));
+        let dense = !cells.is_empty()
+            && dims.iter().all(|&d| d <= Self::MAX_SLOTS)
+            && dims[0] * dims[1] * dims[2] <= Self::MAX_SLOTS;
+        if dense {
+            self.slots.clear();
+            self.slots.resize((dims[0] * dims[1] * dims[2]) as usize, u32::MAX);
+        }
+        for (c, &(k, s)) in cells.iter().zip(&self.keys) {
+            let ids = std::array::from_fn(|m| {
+                let point = || c.min + corner_offset(m) * c.size;
+                if !dense {
+                    self.points.push(point());
+                    return (self.points.len() - 1) as u32;
+                }
+                let d = corner_offset(m);
+                let at = |a: usize| k[a] - lo[a] + d[a] as i64 * s;
+                let slot = &mut self.slots[((at(2) * dims[1] + at(1)) * dims[0] + at(0)) as usize];
+                if *slot == u32::MAX {
+                    *slot = self.points.len() as u32;
+                    self.points.push(point());
+                }
+                *slot
+            });
+            self.ids.push(ids);
+        }
+    }
+
+    /// Projects the gathered corners into `view`.
+    fn project(&mut self, view: &Silhouette) {
+        self.projected.clear();
+        self.projected.extend(self.points.iter().map(|p| project(view, p)));
+    }
+
+    /// Corner `m` of cell `k` in the last view projected.
+    #[inline(always)]
+    fn corner(&self, k: usize, m: usize) -> Projected {
+        self.projected[self.ids[k][m] as usize]
+    }
 }
 
 /// The label counts in a cell's footprint in one view, as carving sees them (`None` where the view

@@ -234,6 +234,16 @@ fn relabelling_keeps_carvings_labels_and_records_the_views_that_see_the_hand() {
             }
         }
         assert!(hand_seen > occ.cells.len(), "{name}: {hand_seen} cell views see the hand");
+        // A scattered subset (as a caller relabels only the cells near the tool) gets the same
+        // labels and records, cell by cell: corners shared within a run of cells or not.
+        let some = Occupancy { cells: occ.cells.iter().step_by(3).copied().collect(), ..occ.clone() };
+        let (part, part_seen) = relabel(&some, &views, &params);
+        let n = views.len();
+        for (r, (c, k)) in part.cells.iter().zip((0..occ.cells.len()).step_by(3)).enumerate() {
+            let whole = &relabelled.cells[k];
+            assert_eq!((c.hand, c.scalpel), (whole.hand, whole.scalpel), "{name}: cell {k}");
+            assert_eq!(part_seen[r * n..(r + 1) * n], seen[k * n..(k + 1) * n], "{name}: cell {k}");
+        }
     }
 }
 
