@@ -9,7 +9,9 @@
 //! the whole volume is carved, so that something entering the view away from the hand is found
 //! within a fraction of a second.
 
+use hullcut_capture::segment::Window;
 use hullcut_hull::{Aabb, Occupancy};
+use hullcut_rig::Camera;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -119,6 +121,67 @@ fn bounds(occ: &Occupancy) -> Option<Aabb> {
     Some(Aabb { min: lo, max: hi })
 }
 
+/// Points per edge where a box is projected into a view ([`window`]).
+const EDGE_SAMPLES: usize = 32;
+
+/// Pixels of slack around the sampled edges' rectangle in [`window`]: between two samples 1/32
+/// of an edge apart a lens bows the edge's image by far less.
+const SAMPLE_SLACK_PX: f64 = 2.0;
+
+/// The rectangle of `camera`'s pixels where the box `b` can be seen, grown by `pad` pixels and
+/// clipped to the image (empty where the box lies off it): the box's projection lies within the
+/// rectangle around the projections of its twelve edges (the pinhole image of a box is the convex
+/// polygon its edges bound, and a lens within its invertible radius maps that region's boundary
+/// onto the boundary of its image), each edge followed through the lens at [`EDGE_SAMPLES`]
+/// points. `None` where a point of an edge lies within a millimetre of the camera's plane or
+/// behind it, or beyond the lens' invertible radius: then the whole image.
+pub fn window(camera: &Camera, b: &Aabb, pad: f64) -> Option<Window> {
+    let radius = camera.distortion.monotonic_radius();
+    let corner = |k: usize| {
+        Point3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        )
+    };
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    // The edges: corner pairs that differ in one axis.
+    for k in 0..8 {
+        for axis in [1, 2, 4].into_iter().filter(|a| k & a == 0) {
+            let (from, to) = (corner(k), corner(k | axis));
+            for n in 0..=EDGE_SAMPLES {
+                let p = from + (to - from) * (n as f64 / EDGE_SAMPLES as f64);
+                let pc = camera.world_to_camera(&p);
+                // NaN fails too: then the whole image.
+                if pc.z.is_nan() || pc.z <= 1e-3 {
+                    return None;
+                }
+                let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
+                let r = xn.norm();
+                if r.is_nan() || r >= radius {
+                    return None;
+                }
+                let uv = camera.normalized_to_pixel(camera.distortion.distort(xn));
+                lo = [lo[0].min(uv.x), lo[1].min(uv.y)];
+                hi = [hi[0].max(uv.x), hi[1].max(uv.y)];
+            }
+        }
+    }
+    let grow = pad.max(0.0) + SAMPLE_SLACK_PX;
+    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+    let clamp = |v: f64, n: f64| v.clamp(0.0, n) as u32;
+    if !(lo[0].is_finite() && lo[1].is_finite() && hi[0].is_finite() && hi[1].is_finite()) {
+        return None;
+    }
+    let window = Window {
+        x0: clamp((lo[0] - grow).floor(), w),
+        y0: clamp((lo[1] - grow).floor(), h),
+        x1: clamp((hi[0] + grow).ceil() + 1.0, w),
+        y1: clamp((hi[1] + grow).ceil() + 1.0, h),
+    };
+    Some(window.clipped(camera.width, camera.height))
+}
+
 #[cfg(test)]
 mod tests {
     use hullcut_hull::{Cell, HullParams, carve, silhouettes};
@@ -177,6 +240,68 @@ mod tests {
         assert_eq!(fulls, 1);
         region.update(&full, &occupancy(&[]));
         assert_eq!(region.next_box(), full);
+    }
+
+    #[test]
+    fn every_point_of_a_box_projects_into_its_window_through_any_lens() {
+        // Three rigs' lenses (lab8's and the random rig's distort), boxes small and large,
+        // near and off the image.
+        let rigs = [
+            hullcut_rig::RigPreset::Default.rig(),
+            hullcut_rig::RigPreset::Lab8.rig(),
+            hullcut_rig::RigPreset::Random(5).rig(),
+        ];
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut tested, mut inside_image) = (0, 0);
+        for rig in &rigs {
+            for _ in 0..60 {
+                let centre = Point3::new(next() * 0.6 - 0.3, next() * 0.6 - 0.3, next() * 0.3);
+                let half = Vector3::new(next(), next(), next()) * 0.15 + Vector3::repeat(0.005);
+                let b = Aabb { min: centre - half, max: centre + half };
+                for camera in &rig.cameras {
+                    let Some(win) = window(camera, &b, 0.0) else { continue };
+                    tested += 1;
+                    for _ in 0..400 {
+                        let p = b.min + (b.max - b.min).component_mul(&Vector3::new(next(), next(), next()));
+                        let pr = camera.project(&p);
+                        if !pr.visible {
+                            continue;
+                        }
+                        inside_image += 1;
+                        // The pixel whose centre is nearest.
+                        let (x, y) = (pr.pixel.x.round(), pr.pixel.y.round());
+                        assert!(
+                            x >= f64::from(win.x0)
+                                && x < f64::from(win.x1)
+                                && y >= f64::from(win.y0)
+                                && y < f64::from(win.y1),
+                            "{p:?} at ({x:.2}, {y:.2}) outside {win:?} of {b:?}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(tested > 300 && inside_image > 50_000, "{tested} windows, {inside_image} points seen");
+        // A box behind a camera, or one beyond the lens' invertible radius: the whole image.
+        let camera = &rigs[0].cameras[0];
+        let behind = camera.centre() - camera.viewing_direction().into_inner();
+        let b = Aabb { min: behind - Vector3::repeat(0.01), max: behind + Vector3::repeat(0.01) };
+        assert_eq!(window(camera, &b, 3.0), None);
+        // A box well inside the view: a window much smaller than the image, grown by the pad.
+        let ahead = camera.centre() + camera.viewing_direction().into_inner() * 0.5;
+        let b = Aabb { min: ahead - Vector3::repeat(0.01), max: ahead + Vector3::repeat(0.01) };
+        let (small, padded) = (window(camera, &b, 0.0).expect("seen"), window(camera, &b, 10.0).expect("seen"));
+        assert!(small.area() * 20 < u64::from(camera.width) * u64::from(camera.height), "{small:?}");
+        assert_eq!(
+            (padded.x0 + 10, padded.y0 + 10, padded.x1 - 10, padded.y1 - 10),
+            (small.x0, small.y0, small.x1, small.y1)
+        );
     }
 
     #[test]

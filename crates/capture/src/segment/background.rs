@@ -260,8 +260,10 @@ impl BackgroundModel {
         f64::from(*m).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
     }
 
-    /// Foreground test and colour classes for row `y`: `out[x]` = 0 for background, else the
-    /// encoded class of the pixel's colour. Returns whether the row has any foreground.
+    /// Foreground test and colour classes for the `out.len()` pixels from pixel index `start`
+    /// (`y · width + x`, within one row; `row_rgb` holds their colours): `out[i]` = 0 for
+    /// background, else the encoded class of the pixel's colour. Returns whether any is
+    /// foreground.
     ///
     /// Bounds (all u16): s ≤ 765; 2Eₛ ≤ 1530; γ·Eₛ = hi(γ·2Eₛ) ≤ 1.99·765 < 1530; β·γEₛ + 3τ ≤
     /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + ν·3τ ≤ 765 + 765.
@@ -269,13 +271,13 @@ impl BackgroundModel {
     pub(crate) fn foreground_row(
         &self,
         row_rgb: &[u8],
-        y: usize,
+        start: usize,
         t: Thresholds,
         lut: &ClassLut,
         out: &mut [u8],
     ) -> bool {
-        let w = self.width as usize;
-        let range = y * w..(y + 1) * w;
+        let w = out.len();
+        let range = start..start + w;
         let (hr, hg, hb) =
             (&self.chroma_r[range.clone()], &self.chroma_g[range.clone()], &self.chroma_b[range.clone()]);
         let (es2, tol3) = (&self.sum2[range.clone()], &self.tol3[range]);

@@ -361,7 +361,8 @@ impl Segmenter {
         if out.dimensions() != image.dimensions() {
             *out = GrayImage::new(image.width(), image.height());
         }
-        cam.run(image, &self.params, &self.lut, out)
+        let (w, h) = image.dimensions();
+        cam.run(image, &self.params, &self.lut, out, Window::whole(w, h))
     }
 
     /// Segments every view of a frame set, cameras in parallel; `None` where the view is missing.
@@ -378,13 +379,29 @@ impl Segmenter {
         set: &FrameSet,
         masks: &mut Vec<Option<GrayImage>>,
     ) -> Result<(), CaptureError> {
+        self.segment_frame_set_within(set, masks, &[])
+    }
+
+    /// Like [`Self::segment_frame_set_into`], testing only the pixels of each view's window
+    /// (`windows[k]` for view `k`; none, or a view beyond `windows`, tests the whole image): the
+    /// rest of its mask is background. A caller that knows where the objects can be (the
+    /// projection of the box it carves in) saves the work elsewhere. The clean-up sees pixels
+    /// outside the window as background; a window of the whole image gives the same masks as
+    /// [`Self::segment_frame_set_into`]. The MOG2 fallback, which must see every pixel to keep
+    /// its model, tests the whole image.
+    pub fn segment_frame_set_within(
+        &mut self,
+        set: &FrameSet,
+        masks: &mut Vec<Option<GrayImage>>,
+        windows: &[Option<Window>],
+    ) -> Result<(), CaptureError> {
         if set.views.len() > self.cameras.len() {
             return Err(CaptureError::UnknownCamera { camera: set.views.len() - 1, cameras: self.cameras.len() });
         }
         masks.resize(set.views.len(), None);
         let (params, lut) = (&self.params, &self.lut);
-        self.cameras.par_iter_mut().zip(set.views.par_iter()).zip(masks.par_iter_mut()).try_for_each(
-            |((cam, view), mask)| {
+        self.cameras.par_iter_mut().zip(set.views.par_iter()).zip(masks.par_iter_mut()).enumerate().try_for_each(
+            |(k, ((cam, view), mask))| {
                 let Some(view) = view else {
                     *mask = None;
                     return Ok(());
@@ -394,9 +411,42 @@ impl Segmenter {
                     Some(m) if m.dimensions() == (w, h) => m,
                     _ => mask.insert(GrayImage::new(w, h)),
                 };
-                cam.run(&view.image, params, lut, out)
+                let window = windows.get(k).copied().flatten().map_or(Window::whole(w, h), |win| win.clipped(w, h));
+                cam.run(&view.image, params, lut, out, window)
             },
         )
+    }
+}
+
+/// A rectangle of pixels (columns `x0..x1`, rows `y0..y1`, ends excluded) that segmentation tests
+/// ([`Segmenter::segment_frame_set_within`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Window {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// One past the last column.
+    pub x1: u32,
+    /// One past the last row.
+    pub y1: u32,
+}
+
+impl Window {
+    /// The whole of a `w`×`h` image.
+    pub fn whole(w: u32, h: u32) -> Self {
+        Window { x0: 0, y0: 0, x1: w, y1: h }
+    }
+
+    /// The window within a `w`×`h` image (empty where they do not meet).
+    pub fn clipped(self, w: u32, h: u32) -> Self {
+        let (x1, y1) = (self.x1.min(w), self.y1.min(h));
+        Window { x0: self.x0.min(x1), y0: self.y0.min(y1), x1, y1 }
+    }
+
+    /// Pixels in it.
+    pub fn area(&self) -> u64 {
+        u64::from(self.x1.saturating_sub(self.x0)) * u64::from(self.y1.saturating_sub(self.y0))
     }
 }
 
@@ -407,6 +457,7 @@ impl CameraSegmenter {
         params: &SegmentParams,
         lut: &ClassLut,
         out: &mut GrayImage,
+        window: Window,
     ) -> Result<(), CaptureError> {
         let (w, h) = image.dimensions();
         match self.size {
@@ -422,7 +473,12 @@ impl CameraSegmenter {
             }
             _ => self.size = Some((w, h)),
         }
-        let (w, h) = (w as usize, h as usize);
+        let full_w = w as usize;
+        // MOG2 keeps its model from every pixel.
+        let window = if matches!(self.model, Model::Mog2(_)) { Window::whole(w, h) } else { window };
+        let (x0, y0) = (window.x0 as usize, window.y0 as usize);
+        // The buffers hold the window; rows and columns below are the window's.
+        let (w, h) = (window.x1 as usize - x0, window.y1 as usize - y0);
         let s = &mut self.scratch;
         for buf in [&mut s.labels, &mut s.work1, &mut s.work2] {
             buf.resize(w * h, 0);
@@ -438,8 +494,12 @@ impl CameraSegmenter {
                     if params.exposure_compensation { model.exposure_gain(image, params, &mut s.ratios) } else { 1.0 };
                 self.last_gain = gain;
                 let t = Thresholds::new(params, gain);
-                for (y, (row, labels)) in raw.chunks_exact(3 * w).zip(s.labels.chunks_exact_mut(w)).enumerate() {
-                    s.act0[y] = model.foreground_row(row, y, t, lut, labels);
+                if w > 0 {
+                    for (j, labels) in s.labels.chunks_exact_mut(w).enumerate() {
+                        let start = (y0 + j) * full_w + x0;
+                        let row = &raw[3 * start..3 * (start + w)];
+                        s.act0[j] = model.foreground_row(row, start, t, lut, labels);
+                    }
                 }
             }
             Model::Mog2(m) => {
@@ -477,13 +537,23 @@ impl CameraSegmenter {
         }
         // 4. Closing: pixels the closing adds take the label of the dilation (scalpel first).
         // Rows inactive in a buffer count as zero there (their bytes are stale).
-        let out: &mut [u8] = out;
+        let full: &mut [u8] = out;
+        // Outside the window: background. `out` is the window's part of each row below.
+        for (y, row) in full.chunks_exact_mut(full_w).enumerate() {
+            if y < y0 || y >= y0 + h {
+                row.fill(0);
+            } else {
+                row[..x0].fill(0);
+                row[x0 + w..].fill(0);
+            }
+        }
+        let mut out = WindowRows { full, full_w, x0, y0, w };
         if params.close_radius > 0 {
             let r = params.close_radius as usize;
             morph::dilate_max(&s.work1, &mut s.work2, w, r, &s.act1, &mut s.act2, &mut s.tmp);
             morph::erode_min(&s.work2, &mut s.labels, w, r, &s.act2, &mut s.act0, &mut s.tmp);
             for y in 0..h {
-                let o = &mut out[y * w..(y + 1) * w];
+                let o = out.row(y);
                 let (a, d, c) =
                     (&s.work1[y * w..(y + 1) * w], &s.work2[y * w..(y + 1) * w], &s.labels[y * w..(y + 1) * w]);
                 match (s.act1[y], s.act0[y]) {
@@ -508,7 +578,8 @@ impl CameraSegmenter {
                 }
             }
         } else {
-            for (y, o) in out.chunks_exact_mut(w).enumerate() {
+            for y in 0..h {
+                let o = out.row(y);
                 if s.act1[y] {
                     o.iter_mut().zip(&s.work1[y * w..(y + 1) * w]).for_each(|(o, &a)| *o = decode(a));
                 } else {
@@ -517,6 +588,23 @@ impl CameraSegmenter {
             }
         }
         Ok(())
+    }
+}
+
+/// The rows of a window within a mask.
+struct WindowRows<'a> {
+    full: &'a mut [u8],
+    full_w: usize,
+    x0: usize,
+    y0: usize,
+    w: usize,
+}
+
+impl WindowRows<'_> {
+    /// Row `y` of the window.
+    fn row(&mut self, y: usize) -> &mut [u8] {
+        let start = (self.y0 + y) * self.full_w + self.x0;
+        &mut self.full[start..start + self.w]
     }
 }
 

@@ -1,7 +1,7 @@
 //! Segmentation on procedural images with known masks.
 
 use anyhow::Result;
-use hullcut_capture::{ColourClass, ColourClasses, IouAccumulator, Method, SegmentParams, Segmenter, iou};
+use hullcut_capture::{ColourClass, ColourClasses, IouAccumulator, Method, SegmentParams, Segmenter, Window, iou};
 use hullcut_dataset::{FrameSet, View, label};
 use image::{GrayImage, RgbImage};
 
@@ -184,6 +184,54 @@ fn opening_erases_the_thin_blade_which_is_why_it_is_off() -> Result<()> {
     );
     assert!(recall(&b) < recall(&a) - 0.02);
     assert!(b.labels[0].iou_pooled.is_some_and(|v| v > 0.97));
+    Ok(())
+}
+
+/// A window tests only its pixels: outside it the mask is background, inside it (away from its
+/// border by the clean-up's reach) the mask is the whole image's; a window of the whole image, or
+/// none, is the whole image's mask byte for byte; an empty window is all background; windows
+/// reaching past the image are clipped to it. The same masks reused from call to call.
+#[test]
+fn a_window_segments_its_pixels_as_the_whole_image_does_and_nothing_else() -> Result<()> {
+    let params = SegmentParams { open_radius: 1, close_radius: 2, ..with_palette() };
+    let reach = params.open_radius + params.close_radius + 1;
+    let mut whole = segmenter(params.clone())?;
+    let mut windowed = segmenter(params)?;
+    let windows = [
+        Some(Window { x0: 100, y0: 60, x1: 420, y1: 400 }),
+        Some(Window::whole(W, H)),
+        None,
+        Some(Window { x0: 500, y0: 300, x1: 900, y1: 700 }),
+        Some(Window { x0: 10, y0: 10, x1: 10, y1: 200 }),
+        Some(Window { x0: 0, y0: 0, x1: 17, y1: 480 }),
+    ];
+    let mut masks = Vec::new();
+    let mut compared = 0u64;
+    for frame in [2, 7] {
+        let (set, _) = frame_set(frame);
+        let reference = whole.segment_frame_set(&set)?;
+        windowed.segment_frame_set_within(&set, &mut masks, &windows)?;
+        for (camera, (m, r)) in masks.iter().zip(&reference).enumerate() {
+            let (m, r) = (m.as_ref().expect("present"), r.as_ref().expect("present"));
+            let win = windows[camera].map_or(Window::whole(W, H), |w| w.clipped(W, H));
+            if win == Window::whole(W, H) {
+                assert!(m == r, "camera {camera}: a window of the whole image changed the mask");
+                continue;
+            }
+            for (x, y, p) in m.enumerate_pixels() {
+                let inside = x >= win.x0 && x < win.x1 && y >= win.y0 && y < win.y1;
+                let deep = x >= win.x0 + reach && x + reach < win.x1 && y >= win.y0 + reach && y + reach < win.y1;
+                if !inside {
+                    assert_eq!(p.0[0], label::BACKGROUND, "camera {camera}, pixel ({x}, {y}) outside {win:?}");
+                } else if deep {
+                    assert_eq!(p.0[0], r.get_pixel(x, y).0[0], "camera {camera}, pixel ({x}, {y}) inside {win:?}");
+                    compared += u64::from(p.0[0] != label::BACKGROUND);
+                }
+            }
+        }
+    }
+    // The windows held foreground to compare (the procedural hand is in the middle).
+    assert!(compared > 10_000, "{compared} foreground pixels compared");
     Ok(())
 }
 
