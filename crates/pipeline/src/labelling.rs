@@ -304,20 +304,35 @@ struct MaskCounts {
 }
 
 impl MaskCounts {
-    /// One pass over `mask`: both counts kept in bytes over runs of 255 pixels, which vectorizes
-    /// 32 pixels wide (two passes with word-sized sums took about 1 ms per frame set of six
-    /// 640x480 views inside the loop).
-    fn of(mask: &GrayImage) -> MaskCounts {
+    /// One pass over the window `win` of `mask` (outside it the mask is background): both counts
+    /// kept in bytes over runs of 255 pixels, which vectorizes 32 pixels wide (two passes with
+    /// word-sized sums took about 1 ms per frame set of six 640x480 views inside the loop).
+    fn within(mask: &GrayImage, win: Window) -> MaskCounts {
         let (mut foreground, mut shadow) = (0, 0);
-        for run in mask.as_raw().chunks(usize::from(u8::MAX)) {
-            let (f, s) = run
-                .iter()
-                .fold((0u8, 0u8), |(f, s), &p| (f + u8::from(p != label::BACKGROUND), s + u8::from(p == SHADOW_LIKE)));
-            foreground += usize::from(f);
-            shadow += u64::from(s);
+        let raw = mask.as_raw();
+        for span in spans(win, mask.width(), mask.height()) {
+            for run in raw[span].chunks(usize::from(u8::MAX)) {
+                let (f, s) = run.iter().fold((0u8, 0u8), |(f, s), &p| {
+                    (f + u8::from(p != label::BACKGROUND), s + u8::from(p == SHADOW_LIKE))
+                });
+                foreground += usize::from(f);
+                shadow += u64::from(s);
+            }
         }
         MaskCounts { foreground, shadow, pixels: mask.width() as usize * mask.height() as usize }
     }
+}
+
+/// View `k`'s window in `windows` (the whole `w`×`h` image where it names none), clipped.
+fn window_of(windows: &[Option<Window>], k: usize, w: u32, h: u32) -> Window {
+    windows.get(k).copied().flatten().map_or(Window::whole(w, h), |win| win.clipped(w, h))
+}
+
+/// The pixel indices of `win` in a `w`×`h` image, row by row.
+fn spans(win: Window, w: u32, h: u32) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let win = win.clipped(w, h);
+    let (w, x0, x1) = (w as usize, win.x0 as usize, win.x1 as usize);
+    (win.y0 as usize..win.y1 as usize).map(move |y| y * w + x0..y * w + x1)
 }
 
 /// Labels frame sets (see the module docs).
@@ -633,7 +648,20 @@ impl Labelling {
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;
         let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
         // One pass over each mask: its foreground and possible shadow pixels.
-        let counts: Vec<Option<MaskCounts>> = fg.iter().map(|m| m.as_ref().map(MaskCounts::of)).collect();
+        // Outside its window a view's mask is background: the passes over masks below look inside.
+        let windows: Vec<Window> = set
+            .views
+            .iter()
+            .enumerate()
+            .map(|(k, v)| {
+                v.as_ref().map_or(Window::whole(0, 0), |v| {
+                    let (w, h) = v.image.dimensions();
+                    window_of(&self.windows, k, w, h)
+                })
+            })
+            .collect();
+        let counts: Vec<Option<MaskCounts>> =
+            fg.iter().zip(&windows).map(|(m, &win)| m.as_ref().map(|m| MaskCounts::within(m, win))).collect();
         let shadow_pixels: u64 = counts.iter().flatten().map(|c| c.shadow).sum();
         self.counters.shadow_pixels += shadow_pixels;
         let degraded = self.degraded_views(&counts);
@@ -666,7 +694,8 @@ impl Labelling {
             (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0 || weak_hints)).then(|| {
                 fg.par_iter()
                     .zip(set.views.par_iter())
-                    .map(|(m, view)| Some(fit_hints(sure, hand_hints, &view.as_ref()?.image, m.as_ref()?)))
+                    .zip(windows.par_iter())
+                    .map(|((m, view), &win)| Some(fit_hints(sure, hand_hints, &view.as_ref()?.image, m.as_ref()?, win)))
                     .collect()
             });
         let clock = Instant::now();
@@ -736,9 +765,14 @@ impl Labelling {
                 .map(|(k, (m, hint))| {
                     let mut m = m.clone()?;
                     if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
-                        for (p, &h) in m.iter_mut().zip(hint.iter()) {
-                            if *p != label::BACKGROUND && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW) {
-                                *p = h;
+                        let (w, h) = m.dimensions();
+                        for span in spans(windows[k], w, h) {
+                            for (p, &h) in m.as_mut()[span.clone()].iter_mut().zip(&hint.as_raw()[span]) {
+                                if *p != label::BACKGROUND
+                                    && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW)
+                                {
+                                    *p = h;
+                                }
                             }
                         }
                     }
@@ -1262,21 +1296,32 @@ fn blade_as_hand(sure: &ColourLut, image: &image::RgbImage, pixels: &[usize]) ->
 /// its colour is the background's darkened, so it may speak against the tool, never for it;
 /// background elsewhere. Without `hand_hints` ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of
 /// the hand's colour is [`label::UNKNOWN`] (a possible shadow of that colour stays the hand's: it
-/// is no shadow, and the hint only keeps it from the tool's shadows).
-fn fit_hints(sure: Option<&ColourLut>, hand_hints: bool, image: &image::RgbImage, mask: &GrayImage) -> GrayImage {
+/// is no shadow, and the hint only keeps it from the tool's shadows). Only the pixels in `win` are
+/// looked at: outside it the mask is background.
+fn fit_hints(
+    sure: Option<&ColourLut>,
+    hand_hints: bool,
+    image: &image::RgbImage,
+    mask: &GrayImage,
+    win: Window,
+) -> GrayImage {
     let mut out = GrayImage::new(mask.width(), mask.height());
     if image.dimensions() != mask.dimensions() {
         return out;
     }
     let colour = |p: &[u8]| sure.map_or(label::UNKNOWN, |s| s.get([p[0], p[1], p[2]]));
-    for ((o, &m), p) in out.iter_mut().zip(mask.iter()).zip(image.as_raw().chunks_exact(3)) {
-        if m == SHADOW_LIKE {
-            *o = if colour(p) == label::HAND { label::HAND } else { POSSIBLE_SHADOW };
-        } else if m != label::BACKGROUND {
-            *o = match colour(p) {
-                label::HAND if !hand_hints => label::UNKNOWN,
-                c => c,
-            };
+    let (w, h) = mask.dimensions();
+    for span in spans(win, w, h) {
+        let pixels = image.as_raw()[3 * span.start..3 * span.end].chunks_exact(3);
+        for ((o, &m), p) in out.as_mut()[span.clone()].iter_mut().zip(&mask.as_raw()[span]).zip(pixels) {
+            if m == SHADOW_LIKE {
+                *o = if colour(p) == label::HAND { label::HAND } else { POSSIBLE_SHADOW };
+            } else if m != label::BACKGROUND {
+                *o = match colour(p) {
+                    label::HAND if !hand_hints => label::UNKNOWN,
+                    c => c,
+                };
+            }
         }
     }
     out
@@ -1327,13 +1372,17 @@ mod tests {
                 rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 image::Luma([[label::BACKGROUND, label::HAND, SHADOW_LIKE, label::UNKNOWN][(rng >> 62) as usize]])
             });
-            let counts = MaskCounts::of(&mask);
+            let counts = MaskCounts::within(&mask, Window::whole(w, h));
             assert_eq!(counts.foreground, mask.iter().filter(|&&p| p != label::BACKGROUND).count(), "{w}x{h}");
             assert_eq!(counts.shadow, mask.iter().filter(|&&p| p == SHADOW_LIKE).count() as u64, "{w}x{h}");
             assert_eq!(counts.pixels, (w * h) as usize);
         }
         let all = GrayImage::from_pixel(640, 480, [SHADOW_LIKE].into());
-        assert_eq!((MaskCounts::of(&all).foreground, MaskCounts::of(&all).shadow), (640 * 480, 640 * 480));
+        let counts = MaskCounts::within(&all, Window::whole(640, 480));
+        assert_eq!((counts.foreground, counts.shadow), (640 * 480, 640 * 480));
+        // In a window, the pixels in it.
+        let win = Window { x0: 3, y0: 400, x1: 300, y1: 900 };
+        assert_eq!(MaskCounts::within(&all, win).foreground, 297 * 80);
     }
 
     #[test]
@@ -1424,9 +1473,10 @@ mod tests {
         let image = RgbImage::from_fn(4, 1, |x, _| Rgb([steel, blue, steel, grey][x as usize]));
         let mask = GrayImage::from_raw(4, 1, vec![label::UNKNOWN, label::UNKNOWN, SHADOW_LIKE, label::BACKGROUND])
             .expect("mask");
-        let with = fit_hints(Some(&sure), true, &image, &mask);
+        let whole = Window::whole(4, 1);
+        let with = fit_hints(Some(&sure), true, &image, &mask, whole);
         assert_eq!(with.as_raw(), &vec![label::HAND, label::SCALPEL, label::HAND, label::BACKGROUND]);
-        let without = fit_hints(Some(&sure), false, &image, &mask);
+        let without = fit_hints(Some(&sure), false, &image, &mask, whole);
         assert_eq!(without.as_raw(), &vec![label::UNKNOWN, label::SCALPEL, label::HAND, label::BACKGROUND]);
     }
 }
