@@ -1189,8 +1189,29 @@ impl ToolDepth {
             if i1 < i0 as f64 || j1 < j0 as f64 {
                 continue;
             }
+            // Per row, only the columns near the triangle: each barycentric weight is linear
+            // along the row, so its sign changes once; the test below still decides each pixel,
+            // a pixel of slack on either side keeps rounding from losing one.
+            let weights = [(b.0, c.0), (c.0, a.0), (a.0, b.0)];
             for j in j0..=j1 as usize {
-                for i in i0..=i1 as usize {
+                let y = j as f64;
+                let (mut lo_x, mut hi_x) = (i0 as f64, i1);
+                for (p, q) in weights {
+                    // (q - p).perp(x - p) = (q.x - p.x)(y - p.y) - (q.y - p.y)(x - p.x), signed as `area`.
+                    let slope = -(q.y - p.y) * area.signum();
+                    let at_zero = ((q.x - p.x) * (y - p.y) + (q.y - p.y) * p.x) * area.signum();
+                    if slope > 0.0 {
+                        lo_x = lo_x.max(-at_zero / slope - 1.0);
+                    } else if slope < 0.0 {
+                        hi_x = hi_x.min(-at_zero / slope + 1.0);
+                    } else if at_zero < -1e-9 * (1.0 + at_zero.abs()) {
+                        hi_x = f64::MIN;
+                    }
+                }
+                if lo_x.is_nan() || hi_x.is_nan() || lo_x > hi_x {
+                    continue;
+                }
+                for i in lo_x.ceil() as usize..=hi_x.floor() as usize {
                     let q = Point2::new(i as f64, j as f64);
                     let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
                     let wc = 1.0 - wa - wb;
@@ -1521,6 +1542,76 @@ mod tests {
         assert_eq!(kept, vec![(12, 22), (13, 22)], "the block's inner row");
         assert!(region.eroded(2).pixels().next().is_none(), "three rows erode away");
         assert_eq!(region.eroded(0), region);
+    }
+
+    /// [`ToolDepth::draw`] as it was before it skipped the columns far from each triangle: every
+    /// pixel of each triangle's box tested.
+    fn draw_every_pixel(cam: &Camera, mesh: &Mesh, pose: &Isometry3<f64>) -> Option<(usize, usize, usize, Vec<f32>)> {
+        let radius = cam.distortion.monotonic_radius();
+        let projected: Vec<Option<(Point2<f64>, f64)>> = mesh
+            .vertices
+            .iter()
+            .map(|p| project(cam, radius, &(pose * p)).map(|uv| (uv, cam.world_to_camera(&(pose * p)).z)))
+            .collect();
+        let drawn = ToolDepth::draw(cam, radius, mesh, pose)?;
+        let (x0, y0, w) = (drawn.x0, drawn.y0, drawn.w);
+        let h = drawn.depth.len() / w;
+        let mut depth = vec![f32::INFINITY; w * h];
+        for t in &mesh.triangles {
+            let [Some(a), Some(b), Some(c)] = t.map(|i| projected[i as usize]) else { continue };
+            let area = (b.0 - a.0).perp(&(c.0 - a.0));
+            if area.abs() < 1e-12 {
+                continue;
+            }
+            for j in y0..y0 + h {
+                for i in x0..x0 + w {
+                    let q = Point2::new(i as f64, j as f64);
+                    let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
+                    let wc = 1.0 - wa - wb;
+                    if wa < 0.0 || wb < 0.0 || wc < 0.0 {
+                        continue;
+                    }
+                    let z = (wa * a.1 + wb * b.1 + wc * c.1) as f32;
+                    let k = (j - y0) * w + (i - x0);
+                    depth[k] = depth[k].min(z);
+                }
+            }
+        }
+        Some((x0, y0, w, depth))
+    }
+
+    #[test]
+    fn the_tool_is_drawn_on_exactly_the_pixels_its_triangles_cover() {
+        let camera = Camera::new("cam", 160, 120, 300.0, 300.0, 80.0, 60.0)
+            .looking_at(Point3::new(0.05, -0.3, 0.25), Point3::new(0.0, 0.0, 0.02), Vector3::z())
+            .expect("a camera looking at the tool");
+        let scalpel = hullcut_synth::Scalpel::new().geometry.mesh;
+        // Slivers and large triangles crossing the box's edges too.
+        let mut rng = 11u64;
+        let mut next = move || {
+            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let vertices: Vec<Point3<f64>> =
+            (0..60).map(|_| Point3::new(next() * 0.3, next() * 0.3, next() * 0.1)).collect();
+        let triangles: Vec<[u32; 3]> = (0..20).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+        let soup = Mesh { vertices, triangles };
+        let mut drawn_pixels = 0;
+        for (mesh, poses) in [(&scalpel, 6), (&soup, 3)] {
+            for n in 0..poses {
+                let pose = Isometry3::new(
+                    Vector3::new(next() * 0.04, next() * 0.04, 0.03 + next() * 0.02),
+                    Vector3::new(next(), next(), next() * 6.0),
+                );
+                let radius = camera.distortion.monotonic_radius();
+                let drawn = ToolDepth::draw(&camera, radius, mesh, &pose).expect("in view");
+                let (x0, y0, w, depth) = draw_every_pixel(&camera, mesh, &pose).expect("in view");
+                assert_eq!((drawn.x0, drawn.y0, drawn.w), (x0, y0, w), "pose {n}");
+                assert!(drawn.depth == depth, "pose {n}: the drawn depths differ");
+                drawn_pixels += depth.iter().filter(|d| d.is_finite()).count();
+            }
+        }
+        assert!(drawn_pixels > 2000, "{drawn_pixels} pixels drawn");
     }
 
     #[test]
