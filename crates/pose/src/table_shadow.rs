@@ -74,6 +74,9 @@ impl Shading<'_> {
 #[derive(Debug, Clone)]
 pub struct TableShadows<'a> {
     views: Vec<Option<(&'a Camera, &'a GrayImage)>>,
+    /// Per view, its lens' invertible radius ([`hullcut_rig::Distortion::monotonic_radius`]),
+    /// found once rather than for every point projected.
+    radii: Vec<f64>,
     /// Per view, where given ([`TableShadows::with_shading`]).
     shading: Vec<Option<Shading<'a>>>,
 }
@@ -98,9 +101,10 @@ impl<'a> TableShadows<'a> {
     /// value is foreground). The world frame's z = 0 must be the table top. A mask whose size is
     /// not its camera's is left out.
     pub fn new(views: Vec<Option<(&'a Camera, &'a GrayImage)>>) -> Self {
-        let views =
+        let views: Vec<Option<(&Camera, &GrayImage)>> =
             views.into_iter().map(|v| v.filter(|(c, m)| m.width() == c.width && m.height() == c.height)).collect();
-        TableShadows { views, shading: Vec::new() }
+        let radii = views.iter().map(|v| v.map_or(0.0, |(c, _)| c.distortion.monotonic_radius())).collect();
+        TableShadows { views, radii, shading: Vec::new() }
     }
 
     /// Adds the views' shading, one entry per rig camera (see the module docs); an entry whose
@@ -145,12 +149,9 @@ impl<'a> TableShadows<'a> {
         let (mut darkened, mut plain) = (0usize, 0usize);
         for (k, other) in self.views.iter().enumerate() {
             let Some((camera, mask)) = other.filter(|_| k != view) else { continue };
-            let projection = camera.project(&point);
-            if !projection.visible {
-                continue;
-            }
+            let Some(pixel) = visible_pixel(camera, self.radii[k], &point) else { continue };
             let shade = self.shading(k).zip(kept);
-            match seen(mask, projection.pixel, shade) {
+            match seen(mask, pixel, shade) {
                 Seen::Darkened => darkened += 1,
                 Seen::Plain => plain += 1,
                 Seen::Undecided => {}
@@ -158,6 +159,18 @@ impl<'a> TableShadows<'a> {
         }
         darkened > plain
     }
+}
+
+/// The pixel of `p` in `camera`'s image where [`Camera::project`] calls it visible (`radius`: the
+/// lens' invertible radius).
+fn visible_pixel(camera: &Camera, radius: f64, p: &nalgebra::Point3<f64>) -> Option<Point2<f64>> {
+    let pc = camera.world_to_camera(p);
+    if pc.z <= 0.0 {
+        return None;
+    }
+    let xn = nalgebra::Vector2::new(pc.x / pc.z, pc.y / pc.z);
+    let pixel = camera.normalized_to_pixel(camera.distortion.distort(xn));
+    (xn.norm() < radius && camera.contains_pixel(pixel)).then_some(pixel)
 }
 
 /// How `mask` shows the table at `pixel` (within [`NEIGHBOURHOOD_PX`]); with `shade` (this

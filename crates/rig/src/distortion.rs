@@ -96,13 +96,22 @@ impl Distortion {
     pub fn monotonic_radius(&self) -> f64 {
         // d/dr [r + k1 r³ + k2 r⁵ + k3 r⁷] = 1 + 3 k1 s + 5 k2 s² + 7 k3 s³ with s = r².
         let g = |s: f64| 1.0 + s * (3.0 * self.k1 + s * (5.0 * self.k2 + s * 7.0 * self.k3));
-        // Scan s geometrically for the first sign change, then bisect.
+        // No negative coefficient: g ≥ 1 for every s ≥ 0 (no distortion, pincushion). Callers
+        // ask per projected point, so this is worth the test.
+        if self.k1 >= 0.0 && self.k2 >= 0.0 && self.k3 >= 0.0 {
+            return f64::INFINITY;
+        }
+        // Scan s geometrically for the first sign change, then bisect until the bounds are
+        // neighbouring numbers (about 50 halvings; at most 200).
         let mut lo = 0.0;
         let mut hi = 1e-4;
         while hi < 1e6 {
             if g(hi) <= 0.0 {
                 for _ in 0..200 {
                     let mid = 0.5 * (lo + hi);
+                    if mid == lo || mid == hi {
+                        break;
+                    }
                     if g(mid) > 0.0 {
                         lo = mid;
                     } else {
@@ -181,6 +190,12 @@ mod tests {
         let expected = (1.0f64 / 0.9).sqrt();
         assert!((d.monotonic_radius() - expected).abs() < 1e-9);
         assert!(Distortion { k1: 0.1, ..Distortion::NONE }.monotonic_radius().is_infinite());
+        assert!(Distortion { k1: 0.1, k2: 0.2, k3: 0.0, ..Distortion::NONE }.monotonic_radius().is_infinite());
+        // A positive k1 with a negative k2 still folds, farther out: the slope vanishes there.
+        let d = Distortion { k1: 0.1, k2: -0.05, ..Distortion::NONE };
+        let r = d.monotonic_radius();
+        let slope = |r: f64| 1.0 + 3.0 * d.k1 * r * r + 5.0 * d.k2 * r.powi(4);
+        assert!(r.is_finite() && slope(r) > 0.0 && slope(r) < 1e-9 && slope(r * (1.0 + 1e-9)) < 0.0, "{r}");
     }
 
     #[test]
