@@ -647,7 +647,6 @@ impl Labelling {
             .with_context(|| format!("segmenting frame {frame}"))?;
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;
         let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
-        // One pass over each mask: its foreground and possible shadow pixels.
         // Outside its window a view's mask is background: the passes over masks below look inside.
         let windows: Vec<Window> = set
             .views
@@ -660,6 +659,7 @@ impl Labelling {
                 })
             })
             .collect();
+        // One pass over each mask: its foreground and possible shadow pixels.
         let counts: Vec<Option<MaskCounts>> =
             fg.iter().zip(&windows).map(|(m, &win)| m.as_ref().map(|m| MaskCounts::within(m, win))).collect();
         let shadow_pixels: u64 = counts.iter().flatten().map(|c| c.shadow).sum();
