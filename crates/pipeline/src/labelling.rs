@@ -1052,11 +1052,14 @@ impl Labelling {
     /// (129 -> 104 of 150 frame sets trusted), and the frame sets labelled by colour alone lost
     /// (random:97 in random:137, where the fit is trusted in 34 of 150: scalpel 0.588 -> 0.458).
     fn learn(&mut self, set: &FrameSet, likelier: &[Option<GrayImage>], handed_out: &[Option<GrayImage>]) {
+        // The labels are background outside each view's window.
+        let windows = &self.windows;
         let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>]| {
             model.age();
-            for (view, mask) in set.views.iter().zip(masks) {
+            for (k, (view, mask)) in set.views.iter().zip(masks).enumerate() {
                 if let (Some(view), Some(mask)) = (view, mask) {
-                    model.learn(&view.image, mask, true);
+                    let window = window_of(windows, k, mask.width(), mask.height());
+                    model.learn_within(&view.image, mask, true, window);
                 }
             }
             model.sources.geometry_frames += 1;

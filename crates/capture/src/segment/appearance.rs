@@ -10,6 +10,7 @@ use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
 use serde::{Deserialize, Serialize};
 
+use super::Window;
 use super::classes::{ColourClass, ColourClasses, LazyLut};
 
 /// Pixels darker than this channel sum carry no usable chromaticity and are not learned from.
@@ -135,23 +136,34 @@ impl AppearanceModel {
     /// part of the tool drawn as seen): once both labels are learned, a pixel whose colour the
     /// other label explains far better (e³ times) is not learned.
     pub fn learn(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool) {
+        self.learn_within(image, labels, erode, Window::whole(labels.width(), labels.height()));
+    }
+
+    /// [`AppearanceModel::learn`] for labels that are background outside `window`: only its
+    /// pixels are scanned, and the model learns what it would from the whole image.
+    pub fn learn_within(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool, window: Window) {
         if image.dimensions() != labels.dimensions() {
             return;
         }
         let (w, h) = (labels.width() as usize, labels.height() as usize);
+        let win = window.clipped(labels.width(), labels.height());
+        let (x0, x1) = (win.x0 as usize, win.x1 as usize);
         let (raw, px) = (labels.as_raw(), image.as_raw());
         let stride = self.stride.max(1);
         let mut gate = self.gate.as_mut();
-        // Only the rows that hold foreground, and in them only the pixels that are not background
-        // (found by a scan that vectorizes), in the order of a plain scan: the sums come out the
-        // same.
-        let first = raw.iter().position(|&p| p != label::BACKGROUND).map_or(h, |k| k / w.max(1));
-        let last = raw.iter().rposition(|&p| p != label::BACKGROUND).map_or(0, |k| k / w.max(1));
+        // Only the window's rows that hold foreground, and in them only the pixels that are not
+        // background (found by a scan that vectorizes), in the order of a plain scan: the sums
+        // come out the same. Border pixels (no four neighbours) are never learned.
+        let any = |j: usize| raw[j * w + x0..j * w + x1].iter().any(|&p| p != label::BACKGROUND);
+        let rows = win.y0 as usize..win.y1 as usize;
+        let first = rows.clone().find(|&j| any(j)).unwrap_or(h);
+        let last = rows.rev().find(|&j| any(j)).unwrap_or(0);
+        let (lo, hi) = (x0.max(1), x1.min(w.saturating_sub(1)));
         for j in first.max(1)..(last + 1).min(h.saturating_sub(1)) {
             let row = &raw[j * w..(j + 1) * w];
-            let mut i = 1;
-            while i + 1 < w {
-                match row[i..w - 1].iter().position(|&p| p != label::BACKGROUND) {
+            let mut i = lo;
+            while i < hi {
+                match row[i..hi].iter().position(|&p| p != label::BACKGROUND) {
                     Some(skip) => i += skip,
                     None => break,
                 }
@@ -306,17 +318,28 @@ mod tests {
                     }
                 }
             }
+            // The box of the labelled pixels: a window outside which the labels are background.
+            let (mut lo, mut hi) = ((w, h), (0, 0));
+            for (i, j, p) in labels.enumerate_pixels() {
+                if p.0[0] != label::BACKGROUND {
+                    (lo, hi) = ((lo.0.min(i), lo.1.min(j)), (hi.0.max(i + 1), hi.1.max(j + 1)));
+                }
+            }
+            let window = Window { x0: lo.0, y0: lo.1, x1: hi.0, y1: hi.1 };
             for erode in [false, true] {
                 let mut a = AppearanceModel { min_pixels: 5.0, stride: 2, ..AppearanceModel::default() };
-                let mut b = a.clone();
+                let (mut b, mut c) = (a.clone(), a.clone());
                 for _ in 0..2 {
                     a.learn(&image, &labels, erode);
                     learn_every_pixel(&mut b, &image, &labels, erode);
+                    c.learn_within(&image, &labels, erode, window);
                     a.age();
                     b.age();
+                    c.age();
                 }
-                let (a, b) = (a.summary(), b.summary());
+                let (a, b, c) = (a.summary(), b.summary(), c.summary());
                 assert_eq!(format!("{a:?}"), format!("{b:?}"), "round {round}, erode {erode}");
+                assert_eq!(format!("{c:?}"), format!("{b:?}"), "round {round}, erode {erode}, {window:?}");
                 learned += a.iter().filter(|c| c.pixels > 0.0).count();
             }
         }
