@@ -141,30 +141,41 @@ impl ToolRegion {
         let x1 = (self.x0 + self.width + r).min(width);
         let y1 = (self.y0 + self.height + r).min(height);
         let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
-        // Separable max: along rows into `rows`, then along columns.
+        // Separable max: along rows into `rows`, then along columns, each a pass from either end
+        // that tracks the distance to the last covered pixel (no cost per pixel of `r`).
         let mut rows = vec![false; w * h];
         for j in 0..self.height {
-            for i in 0..self.width {
-                if !self.covered[j * self.width + i] {
-                    continue;
-                }
-                let (x, y) = (self.x0 + i - x0, self.y0 + j - y0);
-                if y >= h || x >= w {
-                    continue;
-                }
-                for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                    rows[y * w + xx] = true;
-                }
+            let y = self.y0 + j - y0;
+            if y >= h {
+                continue;
+            }
+            let src = &self.covered[j * self.width..(j + 1) * self.width];
+            let row = &mut rows[y * w..(y + 1) * w];
+            let at = |x: usize| x.checked_sub(self.x0 - x0).and_then(|i| src.get(i)).copied().unwrap_or(false);
+            let mut since = usize::MAX;
+            for (x, out) in row.iter_mut().enumerate() {
+                since = if at(x) { 0 } else { since.saturating_add(1) };
+                *out = since <= r;
+            }
+            let mut until = usize::MAX;
+            for (x, out) in row.iter_mut().enumerate().rev() {
+                until = if at(x) { 0 } else { until.saturating_add(1) };
+                *out |= until <= r;
             }
         }
         let mut covered = vec![false; w * h];
+        let mut since = vec![usize::MAX; w];
         for y in 0..h {
-            for x in 0..w {
-                if rows[y * w + x] {
-                    for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
-                        covered[yy * w + x] = true;
-                    }
-                }
+            for (x, (out, s)) in covered[y * w..(y + 1) * w].iter_mut().zip(&mut since).enumerate() {
+                *s = if rows[y * w + x] { 0 } else { s.saturating_add(1) };
+                *out = *s <= r;
+            }
+        }
+        let mut until = vec![usize::MAX; w];
+        for y in (0..h).rev() {
+            for (x, (out, u)) in covered[y * w..(y + 1) * w].iter_mut().zip(&mut until).enumerate() {
+                *u = if rows[y * w + x] { 0 } else { u.saturating_add(1) };
+                *out |= *u <= r;
             }
         }
         ToolRegion { x0, y0, width: w, height: h, covered }
@@ -1523,6 +1534,35 @@ mod tests {
         assert_eq!(label_with(label::UNKNOWN), label::SCALPEL, "foreground where the tool is drawn");
         assert_eq!(label_with(POSSIBLE_SHADOW), label::SCALPEL, "a possible shadow where the tool is drawn");
         assert_eq!(label_with(TABLE_SHADOW), label::HAND, "a shadow on the table, even where the tool is drawn");
+    }
+
+    #[test]
+    fn a_region_grows_by_the_square_of_its_radius_and_stops_at_the_image() {
+        let mut rng = 3u64;
+        let mut next = move |n: usize| {
+            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((rng >> 33) % n as u64) as usize
+        };
+        for round in 0..40 {
+            let (width, height) = (5 + next(30), 5 + next(30));
+            let (iw, ih) = (width + 40, height + 40);
+            let (x0, y0) = (next(iw - width + 1), next(ih - height + 1));
+            let density = 1 + next(20);
+            let covered: Vec<bool> = (0..width * height).map(|_| next(100) < density).collect();
+            let region = ToolRegion { x0, y0, width, height, covered };
+            for r in [0, 1, 2, 5, 12] {
+                let grown = region.dilated(r, iw, ih);
+                // Every pixel of the image: covered after growing exactly where a covered pixel
+                // lies within r along both axes.
+                for y in 0..ih {
+                    for x in 0..iw {
+                        let expect = (y.saturating_sub(r)..=y + r)
+                            .any(|yy| (x.saturating_sub(r)..=x + r).any(|xx| region.covers(xx, yy)));
+                        assert_eq!(grown.covers(x, y), expect, "round {round}, r {r}, ({x}, {y}) of {region:?}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
