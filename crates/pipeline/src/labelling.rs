@@ -483,8 +483,8 @@ impl Labelling {
 
     /// Carves the foreground's hull in `workspace` from now on (a box within the working volume
     /// it was made with, on its leaf grid: [`crate::region::CarveRegion`]), and segments each
-    /// view only where that box can be seen ([`crate::region::window`], grown by
-    /// [`Labelling::window_pad`]): the rest of its mask is background. In the main job's loop the
+    /// view only where that box can be seen ([`crate::region::window`], grown by carving's
+    /// footprint margin and the clean-up's reach): the rest of its mask is background. In the main job's loop the
     /// box around the last hull covers 8-23% of each view of the built-in scene.
     pub fn set_workspace(&mut self, workspace: hullcut_hull::Aabb) {
         self.hull.workspace = workspace;

@@ -132,7 +132,7 @@ const SAMPLE_SLACK_PX: f64 = 2.0;
 /// clipped to the image (empty where the box lies off it): the box's projection lies within the
 /// rectangle around the projections of its twelve edges (the pinhole image of a box is the convex
 /// polygon its edges bound, and a lens within its invertible radius maps that region's boundary
-/// onto the boundary of its image), each edge followed through the lens at [`EDGE_SAMPLES`]
+/// onto the boundary of its image), each edge followed through the lens at 32
 /// points. `None` where a point of an edge lies within a millimetre of the camera's plane or
 /// behind it, or beyond the lens' invertible radius: then the whole image.
 pub fn window(camera: &Camera, b: &Aabb, pad: f64) -> Option<Window> {

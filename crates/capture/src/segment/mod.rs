@@ -500,6 +500,9 @@ impl CameraSegmenter {
                         let row = &raw[3 * start..3 * (start + w)];
                         s.act0[j] = model.foreground_row(row, start, t, lut, labels);
                     }
+                } else {
+                    // An empty window: no row holds anything.
+                    s.act0.fill(false);
                 }
             }
             Model::Mog2(m) => {
@@ -539,7 +542,7 @@ impl CameraSegmenter {
         // Rows inactive in a buffer count as zero there (their bytes are stale).
         let full: &mut [u8] = out;
         // Outside the window: background. `out` is the window's part of each row below.
-        for (y, row) in full.chunks_exact_mut(full_w).enumerate() {
+        for (y, row) in full.chunks_exact_mut(full_w.max(1)).enumerate() {
             if y < y0 || y >= y0 + h {
                 row.fill(0);
             } else {
