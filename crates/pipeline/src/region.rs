@@ -293,6 +293,10 @@ mod tests {
         let behind = camera.centre() - camera.viewing_direction().into_inner();
         let b = Aabb { min: behind - Vector3::repeat(0.01), max: behind + Vector3::repeat(0.01) };
         assert_eq!(window(camera, &b, 3.0), None);
+        // A box that is not finite: the whole image, never a window that loses the hand.
+        let nan = Aabb { min: Point3::new(f64::NAN, 0.0, 0.0), max: Point3::new(0.1, 0.1, 0.1) };
+        let huge = Aabb { min: Point3::new(-f64::MAX, 0.0, 0.0), max: Point3::new(f64::MAX, 0.1, 0.1) };
+        assert_eq!((window(camera, &nan, 3.0), window(camera, &huge, 3.0)), (None, None));
         // A box well inside the view: a window much smaller than the image, grown by the pad.
         let ahead = camera.centre() + camera.viewing_direction().into_inner() * 0.5;
         let b = Aabb { min: ahead - Vector3::repeat(0.01), max: ahead + Vector3::repeat(0.01) };
