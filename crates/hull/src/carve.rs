@@ -1129,10 +1129,10 @@ impl SharedCorners {
         for (k, s) in &self.keys {
             for a in 0..3 {
                 lo[a] = lo[a].min(k[a]);
-                hi[a] = hi[a].max(k[a] + s);
+                hi[a] = hi[a].max(k[a].saturating_add(*s));
             }
         }
-        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1).max(0));
+        let dims = [0, 1, 2].map(|a| hi[a].saturating_sub(lo[a]).saturating_add(1).max(0));
         let dense = !cells.is_empty()
             && dims.iter().all(|&d| d <= Self::MAX_SLOTS)
             && dims[0] * dims[1] * dims[2] <= Self::MAX_SLOTS;
@@ -1148,13 +1148,21 @@ impl SharedCorners {
                     return (self.points.len() - 1) as u32;
                 }
                 let d = corner_offset(m);
-                let at = |a: usize| k[a] - lo[a] + d[a] as i64 * s;
-                let slot = &mut self.slots[((at(2) * dims[1] + at(1)) * dims[0] + at(0)) as usize];
-                if *slot == u32::MAX {
-                    *slot = self.points.len() as u32;
-                    self.points.push(point());
+                let at = |a: usize| k[a].wrapping_sub(lo[a]).wrapping_add(d[a] as i64 * s);
+                let index = at(2).wrapping_mul(dims[1]).wrapping_add(at(1)).wrapping_mul(dims[0]).wrapping_add(at(0));
+                // Off the box only for cells of absurd coordinates: they share nothing.
+                match usize::try_from(index).ok().and_then(|i| self.slots.get_mut(i)) {
+                    Some(slot) if *slot != u32::MAX => *slot,
+                    Some(slot) => {
+                        *slot = self.points.len() as u32;
+                        self.points.push(point());
+                        *slot
+                    }
+                    None => {
+                        self.points.push(point());
+                        (self.points.len() - 1) as u32
+                    }
                 }
-                *slot
             });
             self.ids.push(ids);
         }
