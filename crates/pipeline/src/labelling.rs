@@ -310,7 +310,7 @@ impl MaskCounts {
     fn within(mask: &GrayImage, win: Window) -> MaskCounts {
         let (mut foreground, mut shadow) = (0, 0);
         let raw = mask.as_raw();
-        for span in spans(win, mask.width(), mask.height()) {
+        for span in win.spans(mask.width(), mask.height()) {
             for run in raw[span].chunks(usize::from(u8::MAX)) {
                 let (f, s) = run.iter().fold((0u8, 0u8), |(f, s), &p| {
                     (f + u8::from(p != label::BACKGROUND), s + u8::from(p == SHADOW_LIKE))
@@ -321,18 +321,6 @@ impl MaskCounts {
         }
         MaskCounts { foreground, shadow, pixels: mask.width() as usize * mask.height() as usize }
     }
-}
-
-/// View `k`'s window in `windows` (the whole `w`×`h` image where it names none), clipped.
-fn window_of(windows: &[Option<Window>], k: usize, w: u32, h: u32) -> Window {
-    windows.get(k).copied().flatten().map_or(Window::whole(w, h), |win| win.clipped(w, h))
-}
-
-/// The pixel indices of `win` in a `w`×`h` image, row by row.
-fn spans(win: Window, w: u32, h: u32) -> impl Iterator<Item = std::ops::Range<usize>> {
-    let win = win.clipped(w, h);
-    let (w, x0, x1) = (w as usize, win.x0 as usize, win.x1 as usize);
-    (win.y0 as usize..win.y1 as usize).map(move |y| y * w + x0..y * w + x1)
 }
 
 /// Labels frame sets (see the module docs).
@@ -655,7 +643,7 @@ impl Labelling {
             .map(|(k, v)| {
                 v.as_ref().map_or(Window::whole(0, 0), |v| {
                     let (w, h) = v.image.dimensions();
-                    window_of(&self.windows, k, w, h)
+                    Window::of_view(&self.windows, k, w, h)
                 })
             })
             .collect();
@@ -766,7 +754,7 @@ impl Labelling {
                     let mut m = m.clone()?;
                     if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
                         let (w, h) = m.dimensions();
-                        for span in spans(windows[k], w, h) {
+                        for span in windows[k].spans(w, h) {
                             for (p, &h) in m.as_mut()[span.clone()].iter_mut().zip(&hint.as_raw()[span]) {
                                 if *p != label::BACKGROUND
                                     && matches!(h, label::HAND | label::SCALPEL | POSSIBLE_SHADOW)
@@ -1058,7 +1046,7 @@ impl Labelling {
             model.age();
             for (k, (view, mask)) in set.views.iter().zip(masks).enumerate() {
                 if let (Some(view), Some(mask)) = (view, mask) {
-                    let window = window_of(windows, k, mask.width(), mask.height());
+                    let window = Window::of_view(windows, k, mask.width(), mask.height());
                     model.learn_within(&view.image, mask, true, window);
                 }
             }
@@ -1314,7 +1302,7 @@ fn fit_hints(
     }
     let colour = |p: &[u8]| sure.map_or(label::UNKNOWN, |s| s.get([p[0], p[1], p[2]]));
     let (w, h) = mask.dimensions();
-    for span in spans(win, w, h) {
+    for span in win.spans(w, h) {
         let pixels = image.as_raw()[3 * span.start..3 * span.end].chunks_exact(3);
         for ((o, &m), p) in out.as_mut()[span.clone()].iter_mut().zip(&mask.as_raw()[span]).zip(pixels) {
             if m == SHADOW_LIKE {

@@ -1165,6 +1165,17 @@ struct ToolDepth {
     depth: Vec<f32>,
 }
 
+/// The depth of the projected triangle `[a, b, c]` (pixels with their depths; `area` its signed
+/// doubled area) at the centre of pixel (`i`, `j`), where its barycentric weights are all
+/// non-negative ([`ToolDepth::draw`]).
+#[inline(always)]
+fn triangle_depth([a, b, c]: [(Point2<f64>, f64); 3], area: f64, i: usize, j: usize) -> Option<f32> {
+    let q = Point2::new(i as f64, j as f64);
+    let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
+    let wc = 1.0 - wa - wb;
+    (wa >= 0.0 && wb >= 0.0 && wc >= 0.0).then_some((wa * a.1 + wb * b.1 + wc * c.1) as f32)
+}
+
 impl ToolDepth {
     fn draw(cam: &Camera, radius: f64, mesh: &Mesh, pose: &Isometry3<f64>) -> Option<Self> {
         let projected: Vec<Option<(Point2<f64>, f64)>> = mesh
@@ -1223,13 +1234,7 @@ impl ToolDepth {
                     continue;
                 }
                 for i in lo_x.ceil() as usize..=hi_x.floor() as usize {
-                    let q = Point2::new(i as f64, j as f64);
-                    let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
-                    let wc = 1.0 - wa - wb;
-                    if wa < 0.0 || wb < 0.0 || wc < 0.0 {
-                        continue;
-                    }
-                    let z = (wa * a.1 + wb * b.1 + wc * c.1) as f32;
+                    let Some(z) = triangle_depth([a, b, c], area, i, j) else { continue };
                     let k = (j - y0) * w + (i - x0);
                     if z < depth[k] {
                         depth[k] = z;
@@ -1585,7 +1590,7 @@ mod tests {
     }
 
     /// [`ToolDepth::draw`] as it was before it skipped the columns far from each triangle: every
-    /// pixel of each triangle's box tested.
+    /// pixel of the drawing's box tested against every triangle.
     fn draw_every_pixel(cam: &Camera, mesh: &Mesh, pose: &Isometry3<f64>) -> Option<(usize, usize, usize, Vec<f32>)> {
         let radius = cam.distortion.monotonic_radius();
         let projected: Vec<Option<(Point2<f64>, f64)>> = mesh
@@ -1605,15 +1610,10 @@ mod tests {
             }
             for j in y0..y0 + h {
                 for i in x0..x0 + w {
-                    let q = Point2::new(i as f64, j as f64);
-                    let (wa, wb) = ((c.0 - b.0).perp(&(q - b.0)) / area, (a.0 - c.0).perp(&(q - c.0)) / area);
-                    let wc = 1.0 - wa - wb;
-                    if wa < 0.0 || wb < 0.0 || wc < 0.0 {
-                        continue;
+                    if let Some(z) = triangle_depth([a, b, c], area, i, j) {
+                        let k = (j - y0) * w + (i - x0);
+                        depth[k] = depth[k].min(z);
                     }
-                    let z = (wa * a.1 + wb * b.1 + wc * c.1) as f32;
-                    let k = (j - y0) * w + (i - x0);
-                    depth[k] = depth[k].min(z);
                 }
             }
         }

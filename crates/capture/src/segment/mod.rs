@@ -411,8 +411,7 @@ impl Segmenter {
                     Some(m) if m.dimensions() == (w, h) => m,
                     _ => mask.insert(GrayImage::new(w, h)),
                 };
-                let window = windows.get(k).copied().flatten().map_or(Window::whole(w, h), |win| win.clipped(w, h));
-                cam.run(&view.image, params, lut, out, window)
+                cam.run(&view.image, params, lut, out, Window::of_view(windows, k, w, h))
             },
         )
     }
@@ -442,6 +441,19 @@ impl Window {
     pub fn clipped(self, w: u32, h: u32) -> Self {
         let (x1, y1) = (self.x1.min(w), self.y1.min(h));
         Window { x0: self.x0.min(x1), y0: self.y0.min(y1), x1, y1 }
+    }
+
+    /// View `k`'s window in `windows` within its `w`×`h` image: the whole image where `windows`
+    /// names none for it.
+    pub fn of_view(windows: &[Option<Window>], k: usize, w: u32, h: u32) -> Self {
+        windows.get(k).copied().flatten().map_or(Window::whole(w, h), |win| win.clipped(w, h))
+    }
+
+    /// Its pixels in a `w`×`h` image (clipped to it) as index ranges, row by row.
+    pub fn spans(self, w: u32, h: u32) -> impl Iterator<Item = std::ops::Range<usize>> {
+        let win = self.clipped(w, h);
+        let (w, x0, x1) = (w as usize, win.x0 as usize, win.x1 as usize);
+        (win.y0 as usize..win.y1 as usize).map(move |y| y * w + x0..y * w + x1)
     }
 
     /// Pixels in it.
