@@ -77,7 +77,9 @@ pub(crate) struct Convex {
 }
 
 impl Convex {
-    /// The polygon through `polygon`'s points in order (a repeated point makes no edge).
+    /// The polygon through `polygon`'s points in order (a repeated point makes no edge); the
+    /// library reuses one polygon's storage ([`Convex::set`]).
+    #[cfg(test)]
     pub(crate) fn new(polygon: &[Point2<f64>]) -> Self {
         let mut convex = Convex::default();
         convex.set(polygon);

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use crate::ToolError;
 use crate::evidence::project;
-use crate::geometry::{Convex, convex_hull};
+use crate::geometry::convex_hull;
 use crate::table_shadow::TableShadows;
 use crate::template::Template;
 use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
@@ -715,8 +715,8 @@ impl HandCells {
     }
 }
 
-/// The pixels of a `w`×`h` image within `band` of the convex `polygon`, as (row, first column,
-/// last column).
+/// The pixels of a `w`×`h` image within `band` of the convex `polygon` (counter-clockwise, as
+/// [`convex_hull`] gives it), as (row, first column, last column).
 fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usize, usize, usize)> {
     let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
     for q in polygon {
@@ -725,48 +725,86 @@ fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usi
     }
     let (i0, j0) = ((lo.x - band).floor().max(0.0) as usize, (lo.y - band).floor().max(0.0) as usize);
     let (i1, j1) = ((hi.x + band).ceil().min(w as f64 - 1.0), (hi.y + band).ceil().min(h as f64 - 1.0));
-    if i1 < i0 as f64 || j1 < j0 as f64 {
+    if i1 < i0 as f64 || j1 < j0 as f64 || polygon.len() < 2 {
         return Vec::new();
     }
-    let polygon = Convex::new(polygon);
+    let grown = GrownPolygon::new(polygon, band);
     (j0..=j1 as usize)
-        .filter_map(|j| row_within(&polygon, band, j as f64, i0, i1 as usize).map(|(a, b)| (j, a, b)))
+        .filter_map(|j| {
+            let (a, b) = grown.row(j as f64)?;
+            let (a, b) = (a.ceil().max(i0 as f64), b.floor().min(i1));
+            (a <= b).then_some((j, a as usize, b as usize))
+        })
         .collect()
 }
 
-/// The columns in `[i0, i1]` of row `y` whose pixel centres lie within `band` of the convex
-/// `polygon`: an interval, since the signed distance to a convex set is a convex function; found by
-/// a ternary search for its minimum and two binary searches for its ends (about thirty distance
-/// evaluations instead of one per column).
-fn row_within(polygon: &Convex, band: f64, y: f64, i0: usize, i1: usize) -> Option<(usize, usize)> {
-    let sd = |i: usize| polygon.nearest(&Point2::new(i as f64, y)).map_or(f64::INFINITY, |n| n.sd);
-    let (mut lo, mut hi) = (i0, i1);
-    while hi - lo > 2 {
-        let (m1, m2) = (lo + (hi - lo) / 3, hi - (hi - lo) / 3);
-        if sd(m1) < sd(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
+/// A convex polygon grown by a distance: the points within that distance of it (the polygon
+/// swept by a disc), cut row by row in closed form.
+struct GrownPolygon {
+    /// The polygon's vertices (at least two).
+    vertices: Vec<Point2<f64>>,
+    /// Each edge's sides pushed out by the distance either way: a parallelogram per edge, as
+    /// its four corners in order.
+    slabs: Vec<[Point2<f64>; 4]>,
+    /// The distance.
+    band: f64,
+}
+
+impl GrownPolygon {
+    fn new(polygon: &[Point2<f64>], band: f64) -> Self {
+        let n = polygon.len();
+        let slabs = (0..n)
+            .filter_map(|i| {
+                let (a, b) = (polygon[i], polygon[(i + 1) % n]);
+                let ab = b - a;
+                let len = ab.norm();
+                (len > 0.0).then(|| {
+                    let off = Vector2::new(ab.y, -ab.x) * (band / len);
+                    [a + off, b + off, b - off, a - off]
+                })
+            })
+            .collect();
+        GrownPolygon { vertices: polygon.to_vec(), slabs, band }
+    }
+
+    /// The row `y`'s stretch of the grown polygon, as its lowest and highest x (`None` where it
+    /// misses): the grown polygon is convex and the union of the polygon, a disc around each
+    /// vertex and a slab along each edge, so the stretch runs from the least to the greatest end
+    /// of theirs.
+    fn row(&self, y: f64) -> Option<(f64, f64)> {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut take = |x: f64| {
+            lo = lo.min(x);
+            hi = hi.max(x);
+        };
+        for v in &self.vertices {
+            let dy = y - v.y;
+            let r2 = self.band * self.band - dy * dy;
+            if r2 >= 0.0 {
+                let r = r2.sqrt();
+                take(v.x - r);
+                take(v.x + r);
+            }
         }
+        let mut crossings = |corners: &[Point2<f64>]| {
+            for (k, p) in corners.iter().enumerate() {
+                let q = corners[(k + 1) % corners.len()];
+                if (p.y <= y && y <= q.y) || (q.y <= y && y <= p.y) {
+                    if p.y == q.y {
+                        take(p.x);
+                        take(q.x);
+                    } else {
+                        take(p.x + (y - p.y) * (q.x - p.x) / (q.y - p.y));
+                    }
+                }
+            }
+        };
+        crossings(&self.vertices);
+        for slab in &self.slabs {
+            crossings(slab);
+        }
+        (lo <= hi).then_some((lo, hi))
     }
-    let best = (lo..=hi).min_by(|&a, &b| sd(a).total_cmp(&sd(b)))?;
-    if sd(best) > band {
-        return None;
-    }
-    // First column from the left within the band (sd falls towards `best`).
-    let (mut a, mut b) = (i0, best);
-    while a < b {
-        let m = (a + b) / 2;
-        if sd(m) <= band { b = m } else { a = m + 1 }
-    }
-    let left = a;
-    // Last column within the band (sd rises after `best`).
-    let (mut a, mut b) = (best, i1);
-    while a < b {
-        let m = (a + b).div_ceil(2);
-        if sd(m) <= band { a = m } else { b = m - 1 }
-    }
-    Some((left, a))
 }
 
 /// Gives the scalpel pixels of `labels` that a cell of `hand` projects onto back to the hand: the
@@ -934,6 +972,8 @@ fn tool_points(mesh: &Mesh, spacing: f64) -> Vec<Point3<f64>> {
 /// each node's distance to the nearest point filling the tool; beyond the grid, farther than `pad`.
 #[derive(Debug, Clone)]
 struct ToolField {
+    /// The box of the points filling the tool (a lower bound of the distance to the tool).
+    bounds: (Point3<f64>, Point3<f64>),
     origin: Point3<f64>,
     dims: [usize; 3],
     spacing: f64,
@@ -964,7 +1004,16 @@ impl ToolField {
             }
         }
         let distance = squared_distance(&feature, dims).iter().map(|d| (d.sqrt() * spacing) as f32).collect();
-        ToolField { origin, dims, spacing, pad, distance }
+        ToolField { bounds: (lo, hi), origin, dims, spacing, pad, distance }
+    }
+
+    /// Whether `p` (tool frame) lies farther than `reach` from the box of the points filling the
+    /// tool, hence from the tool: a test without the grid, which most points far from a slender
+    /// tool pass.
+    fn surely_beyond(&self, p: &Point3<f64>, reach: f64) -> bool {
+        let (lo, hi) = &self.bounds;
+        let gap = (lo - p).sup(&(p - hi)).sup(&Vector3::zeros());
+        gap.norm_squared() > reach * reach
     }
 
     /// Distance from `p` (tool frame) to the tool, to within the grid's spacing; beyond the grid,
@@ -992,7 +1041,10 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
     let mut out = occ.clone();
     out.cells.par_iter_mut().enumerate().for_each(|(k, c)| {
         let reach = margin + 0.87 * c.size + field.spacing;
-        let is_near = field.at(&(to_tool * c.centre())) <= reach;
+        let p = to_tool * c.centre();
+        // The grid's distance is between nodes (each within half a diagonal of its point): two
+        // spacings of slack keep the box test from deciding what the grid would not.
+        let is_near = !field.surely_beyond(&p, reach + 2.0 * field.spacing) && field.at(&p) <= reach;
         c.scalpel = is_near;
         c.hand = !is_near && !not_hand.get(k).copied().unwrap_or(false);
     });
@@ -1678,6 +1730,46 @@ mod tests {
         assert!(band_rows(&off, 2.0, 100, 100).is_empty(), "right of the image");
         let above: Vec<Point2<f64>> = square.iter().map(|p| p - Vector3::new(0.0, 500.0, 0.0).xy()).collect();
         assert!(band_rows(&above, 2.0, 100, 100).is_empty(), "above the image");
+    }
+
+    #[test]
+    fn band_rows_hold_exactly_the_pixels_within_the_band_of_the_polygon() {
+        use crate::geometry::Convex;
+        let mut seed = 11u64;
+        let mut next = |scale: f64| {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * scale
+        };
+        let (w, h) = (120, 90);
+        let mut checked = 0;
+        for round in 0..300 {
+            // Slivers, triangles and many-sided polygons, some crossing the image's border.
+            let (cx, cy, spread) = (next(140.0) - 10.0, next(110.0) - 10.0, 1.0 + next(40.0));
+            let count = 3 + round % 12;
+            let points: Vec<Point2<f64>> =
+                (0..count).map(|_| Point2::new(cx + next(spread), cy + next(spread * 0.3))).collect();
+            let polygon = convex_hull(&points);
+            if polygon.len() < 3 {
+                continue;
+            }
+            let band = [0.0, 0.5, 1.5, 3.0, 7.25][round % 5];
+            let rows = band_rows(&polygon, band, w, h);
+            let convex = Convex::new(&polygon);
+            for j in 0..h {
+                let row = rows.iter().find(|r| r.0 == j);
+                for i in 0..w {
+                    let sd = convex.nearest(&Point2::new(i as f64, j as f64)).expect("a polygon").sd;
+                    // Pixels on the band's edge to rounding may fall either way.
+                    if (sd - band).abs() < 1e-9 {
+                        continue;
+                    }
+                    let listed = row.is_some_and(|&(_, a, b)| a <= i && i <= b);
+                    assert_eq!(listed, sd <= band, "pixel ({i}, {j}), sd {sd}, band {band}, polygon {polygon:?}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 1_000_000, "{checked} pixels checked");
     }
 
     /// A distorted camera looking along +z and a thin diagonal tool drawn 0.5-0.57 m away.
