@@ -260,6 +260,29 @@ impl BackgroundModel {
         f64::from(*m).clamp(GAIN_RANGE.0, GAIN_RANGE.1)
     }
 
+    /// [`BackgroundModel::foreground_row`] for each row of a window `w` pixels wide from column
+    /// `x0`, row `y0`, of an image `full_w` pixels wide (`raw`, RGB): `labels` holds the window's
+    /// rows, `active[j]` is set to whether row `j` has any foreground. Compiled for the widest
+    /// vector instructions the processor has (pulp's run-time dispatch: the same integer
+    /// arithmetic, so the same labels, on any of them).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn foreground_window(
+        &self,
+        raw: &[u8],
+        full_w: usize,
+        (x0, y0, w): (usize, usize, usize),
+        t: Thresholds,
+        lut: &ClassLut,
+        labels: &mut [u8],
+        active: &mut [bool],
+    ) {
+        if w == 0 {
+            active.fill(false);
+            return;
+        }
+        pulp::Arch::new().dispatch(WindowPass { model: self, raw, full_w, x0, y0, w, t, lut, labels, active });
+    }
+
     /// Foreground test and colour classes for the `out.len()` pixels from pixel index `start`
     /// (`y · width + x`, within one row; `row_rgb` holds their colours): `out[i]` = 0 for
     /// background, else the encoded class of the pixel's colour. Returns whether any is
@@ -268,6 +291,7 @@ impl BackgroundModel {
     /// Bounds (all u16): s ≤ 765; 2Eₛ ≤ 1530; γ·Eₛ = hi(γ·2Eₛ) ≤ 1.99·765 < 1530; β·γEₛ + 3τ ≤
     /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + ν·3τ ≤ 765 + 765.
     /// Differences that could go negative saturate at 0.
+    #[inline(always)]
     pub(crate) fn foreground_row(
         &self,
         row_rgb: &[u8],
@@ -313,6 +337,34 @@ impl BackgroundModel {
             any |= code != 0;
         }
         any
+    }
+}
+
+/// The rows of one window through [`BackgroundModel::foreground_row`], as one dispatched pass
+/// ([`BackgroundModel::foreground_window`]).
+struct WindowPass<'a> {
+    model: &'a BackgroundModel,
+    raw: &'a [u8],
+    full_w: usize,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    t: Thresholds,
+    lut: &'a ClassLut,
+    labels: &'a mut [u8],
+    active: &'a mut [bool],
+}
+
+impl pulp::WithSimd for WindowPass<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let WindowPass { model, raw, full_w, x0, y0, w, t, lut, labels, active } = self;
+        for ((j, row_labels), any) in labels.chunks_exact_mut(w).enumerate().zip(active.iter_mut()) {
+            let start = (y0 + j) * full_w + x0;
+            *any = model.foreground_row(&raw[3 * start..3 * (start + w)], start, t, lut, row_labels);
+        }
     }
 }
 
@@ -414,4 +466,88 @@ fn temporal_median(frames: &[RgbImage], gains: &[f32], params: &SegmentParams) -
         tol.extend(t);
     }
     (median_raw, tol)
+}
+
+#[cfg(test)]
+mod tests {
+    use hullcut_dataset::label;
+
+    use super::*;
+
+    /// A reproducible image whose pixels scatter around `base` by up to `spread` per channel.
+    fn noisy(w: u32, h: u32, seed: u64, base: [u8; 3], spread: u8) -> RgbImage {
+        let mut state = seed;
+        RgbImage::from_fn(w, h, |_, _| {
+            image::Rgb(base.map(|c| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let offset = (state >> 33) as u32 % (2 * u32::from(spread) + 1);
+                (u32::from(c) + offset).saturating_sub(u32::from(spread)).min(255) as u8
+            }))
+        })
+    }
+
+    #[test]
+    fn the_dispatched_window_pass_labels_every_pixel_as_the_one_pixel_test_does() -> Result<(), CaptureError> {
+        // Possible shadows down to 0.5 of the background's brightness (the loop's setting).
+        let params = SegmentParams { shadow_depth: 0.5, ..SegmentParams::default() };
+        // Pixels seen as background, possible shadow and sure foreground.
+        let mut seen = [0usize; 3];
+        // Widths that are and are not multiples of the vector step, windows at odd offsets.
+        for (seed, (w, h)) in [(1, (64, 9)), (2, (97, 13)), (3, (37, 21))].into_iter() {
+            let empty: Vec<RgbImage> = (0..3).map(|k| noisy(w, h, seed * 10 + k, [120, 110, 90], 6)).collect();
+            let model = BackgroundModel::from_images(0, &empty, &params)?;
+            // Background with its noise, the background darkened (possible shadows), other colours.
+            let (calm, wild) =
+                (noisy(w, h, seed * 100, [120, 110, 90], 4), noisy(w, h, seed * 200, [110, 100, 95], 90));
+            let scene = RgbImage::from_fn(w, h, |x, y| match (x / 3 + 2 * y) % 3 {
+                0 => *calm.get_pixel(x, y),
+                1 => image::Rgb(calm.get_pixel(x, y).0.map(|c| (f64::from(c) * 0.7) as u8)),
+                _ => *wild.get_pixel(x, y),
+            });
+            let lut = ClassLut::from_fn(|[r, _, b]| if r > b { label::HAND } else { label::SCALPEL }, |l| l + 10);
+            for gain in [1.0, 0.8, 1.3] {
+                let t = Thresholds::new(&params, gain);
+                for (x0, y0, ww) in [(0, 0, w as usize), (3, 2, w as usize - 5), (w as usize / 2, 1, 1), (4, 4, 0)] {
+                    let rows = h as usize - y0;
+                    let (mut labels, mut active) = (vec![7u8; ww * rows], vec![true; rows]);
+                    model.foreground_window(
+                        scene.as_raw(),
+                        w as usize,
+                        (x0, y0, ww),
+                        t,
+                        &lut,
+                        &mut labels,
+                        &mut active,
+                    );
+                    for j in 0..rows {
+                        let mut any = false;
+                        for i in 0..ww {
+                            let k = (y0 + j) * w as usize + x0 + i;
+                            let p = [0, 1, 2].map(|c| scene.as_raw()[3 * k + c]);
+                            let m =
+                                [model.chroma_r[k], model.chroma_g[k], model.chroma_b[k], model.sum2[k], model.tol3[k]];
+                            let code = test_pixel(p.map(u16::from), m, t);
+                            let expected = if code == SURE { lut.get(p[0], p[1], p[2]) } else { code };
+                            assert_eq!(
+                                labels[j * ww + i],
+                                expected,
+                                "pixel ({}, {}), window from {x0}",
+                                x0 + i,
+                                y0 + j
+                            );
+                            any |= code != 0;
+                            seen[match code {
+                                0 => 0,
+                                ENC_SHADOW => 1,
+                                _ => 2,
+                            }] += 1;
+                        }
+                        assert_eq!(active[j], any, "row {}", y0 + j);
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 100), "every kind of pixel tested: {seen:?}");
+        Ok(())
+    }
 }

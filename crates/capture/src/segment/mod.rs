@@ -506,16 +506,8 @@ impl CameraSegmenter {
                     if params.exposure_compensation { model.exposure_gain(image, params, &mut s.ratios) } else { 1.0 };
                 self.last_gain = gain;
                 let t = Thresholds::new(params, gain);
-                if w > 0 {
-                    for (j, labels) in s.labels.chunks_exact_mut(w).enumerate() {
-                        let start = (y0 + j) * full_w + x0;
-                        let row = &raw[3 * start..3 * (start + w)];
-                        s.act0[j] = model.foreground_row(row, start, t, lut, labels);
-                    }
-                } else {
-                    // An empty window: no row holds anything.
-                    s.act0.fill(false);
-                }
+                // An empty window marks no row active.
+                model.foreground_window(raw, full_w, (x0, y0, w), t, lut, &mut s.labels, &mut s.act0);
             }
             Model::Mog2(m) => {
                 m.apply(image, &mut s.labels)?;
