@@ -624,7 +624,7 @@ fn band_labels(
     let mut out = all_hand(view.mask);
     let (w, h) = (out.width() as usize, out.height() as usize);
     let raw = out.as_mut();
-    let mut scalpel = PixelBox::EMPTY;
+    let mut scalpel = PixelBox::new(h);
     for poly in &polygons {
         for (j, a, b) in band_rows(poly, band, w, h) {
             for i in a..=b {
@@ -649,17 +649,26 @@ fn band_labels(
     out
 }
 
-/// The box of a view's scalpel pixels (empty until one is added).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The box of a view's scalpel pixels and each row's first and last of them (empty until one is
+/// added).
+#[derive(Debug, Clone, PartialEq)]
 struct PixelBox {
     lo: (usize, usize),
     hi: (usize, usize),
+    /// Per image row: its first and last column added (first > last: none).
+    rows: Vec<(usize, usize)>,
 }
 
 impl PixelBox {
-    const EMPTY: PixelBox = PixelBox { lo: (usize::MAX, usize::MAX), hi: (0, 0) };
+    /// No pixel yet, in an image `height` rows high.
+    fn new(height: usize) -> Self {
+        PixelBox { lo: (usize::MAX, usize::MAX), hi: (0, 0), rows: vec![(usize::MAX, 0); height] }
+    }
 
+    /// Adds pixel (`i`, `j`) (a row beyond the image's height is ignored).
     fn add(&mut self, i: usize, j: usize) {
+        let Some(row) = self.rows.get_mut(j) else { return };
+        *row = (row.0.min(i), row.1.max(i));
         self.lo = (self.lo.0.min(i), self.lo.1.min(j));
         self.hi = (self.hi.0.max(i), self.hi.1.max(j));
     }
@@ -671,7 +680,7 @@ impl PixelBox {
     /// The box of the pixels of `labels` valued `value`.
     #[cfg(test)]
     fn of(labels: &GrayImage, value: u8) -> Self {
-        let mut b = PixelBox::EMPTY;
+        let mut b = PixelBox::new(labels.height() as usize);
         for (i, j, p) in labels.enumerate_pixels() {
             if p.0[0] == value {
                 b.add(i as usize, j as usize);
@@ -818,11 +827,14 @@ impl GrownPolygon {
 /// those.
 fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8], scalpel: &PixelBox) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
-    // Cells projecting outside the scalpel pixels' box are skipped after one projection.
+    // Cells projecting outside the scalpel pixels' box are skipped after one projection, and
+    // each cell looks only at the scalpel pixels' stretch of each row (pixels only leave the
+    // scalpel below, so the stretches found before hold every pixel that may change).
     if scalpel.is_empty() {
         return;
     }
-    let PixelBox { lo, hi } = *scalpel;
+    let PixelBox { lo, hi, rows } = scalpel;
+    let (lo, hi) = (*lo, *hi);
     let f = cam.fx.max(cam.fy);
     // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
     // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
@@ -834,7 +846,13 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
         let z = cam.world_to_camera(&run.centre).z;
         cam.project_ball(&run.centre, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
             let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
-            uv.x + reach >= lo_x && uv.x - reach <= hi_x && uv.y + reach >= lo_y && uv.y - reach <= hi_y
+            let (ja, jb) = ((uv.y - reach).ceil().max(lo_y), (uv.y + reach).floor().min(hi_y));
+            uv.x + reach >= lo_x
+                && uv.x - reach <= hi_x
+                && ja <= jb
+                && rows[ja as usize..=jb as usize]
+                    .iter()
+                    .any(|&(a, b)| a as f64 <= uv.x + reach && b as f64 >= uv.x - reach)
         })
     };
     let reaching = |cells: &'_ [hullcut_hull::Cell], runs: &'_ [CellRun], doubtful: bool| {
@@ -863,7 +881,8 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
         }
         let nearest = z - 0.87 * c.size;
         for j in j0 as usize..=(j1 as usize).min(h - 1) {
-            for i in i0 as usize..=(i1 as usize).min(w - 1) {
+            let (a, b) = rows[j];
+            for i in (i0 as usize).max(a)..=(i1 as usize).min(w - 1).min(b) {
                 let k = j * w + i;
                 if raw[k] != label::SCALPEL || hints[k] == label::SCALPEL {
                     continue;
