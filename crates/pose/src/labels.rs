@@ -1856,7 +1856,7 @@ mod tests {
     }
 
     #[test]
-    fn runs_of_hand_cells_take_the_same_band_pixels_as_cells_one_by_one() {
+    fn runs_of_hand_cells_take_the_same_band_pixels_as_cells_one_by_one_and_as_the_whole_box() {
         // The diagonal tool drawn into a distorted camera, its band labelled scalpel; cells of
         // many sizes in front of it, behind it, beside it and near the camera, each alone in its
         // run (where the bound on a run is tightest) and, half of them, doubtful: ruled out by
@@ -1872,12 +1872,26 @@ mod tests {
             }
         }
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
-        let judged = |cells: &HandCells| {
+        // The same box with every row spanning it: no pixel ruled out by its row's stretch.
+        let boxed = PixelBox {
+            rows: (0..160)
+                .map(|j| {
+                    if (scalpel.lo.1..=scalpel.hi.1).contains(&j) {
+                        (scalpel.lo.0, scalpel.hi.0)
+                    } else {
+                        (usize::MAX, 0)
+                    }
+                })
+                .collect(),
+            ..scalpel.clone()
+        };
+        let judged_within = |cells: &HandCells, scalpel: &PixelBox| {
             let mut out = labels.clone();
             let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003 };
-            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160], &scalpel);
+            clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160], scalpel);
             out
         };
+        let judged = |cells: &HandCells| judged_within(cells, &scalpel);
         let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];
         let mut seed = 23u64;
         let mut next = || {
@@ -1893,8 +1907,13 @@ mod tests {
             let by_run = judged(&HandCells::new(cells.clone(), doubtful.clone()));
             let (runs, doubtful_runs) =
                 if k % 2 == 0 { (everything.to_vec(), Vec::new()) } else { (Vec::new(), everything.to_vec()) };
-            let itself = judged(&HandCells { cells, doubtful, runs, doubtful_runs });
+            let alone = HandCells { cells, doubtful, runs, doubtful_runs };
+            let itself = judged(&alone);
             assert!(by_run == itself, "cell {k} ({cell:?}) takes other pixels when judged by its run");
+            assert!(
+                judged_within(&alone, &boxed) == itself,
+                "cell {k} ({cell:?}) takes other pixels when every row of the box is looked at"
+            );
             if itself == labels { idle += 1 } else { taking += 1 }
         }
         assert!(taking > 50 && idle > 1000, "{taking} cells take band pixels, {idle} none");
