@@ -184,7 +184,13 @@ fn outline_points(raw: &[u8], stride: usize, height: usize, i: usize, j: usize, 
 
 /// World point → pixel, or `None` behind the camera or beyond the lens' invertible radius.
 pub(crate) fn project(camera: &Camera, radius: f64, p: &Point3<f64>) -> Option<Point2<f64>> {
-    let pc = camera.world_to_camera(p);
+    project_camera_point(camera, radius, &camera.world_to_camera(p))
+}
+
+/// [`project`] of a point already in the camera's frame (`pc`), for callers that also want its
+/// depth.
+#[inline]
+pub(crate) fn project_camera_point(camera: &Camera, radius: f64, pc: &Point3<f64>) -> Option<Point2<f64>> {
     if pc.z <= 1e-3 {
         return None;
     }

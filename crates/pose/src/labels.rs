@@ -25,7 +25,7 @@ use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 use crate::ToolError;
-use crate::evidence::project;
+use crate::evidence::{project, project_camera_point};
 use crate::geometry::convex_hull;
 use crate::table_shadow::TableShadows;
 use crate::template::Template;
@@ -825,7 +825,14 @@ impl GrownPolygon {
 /// view that sees the hand behind it). A band pixel beside the drawn tool that a cell covers is
 /// the hand's, wherever the cell lies; a doubtful cell ([`HandCells::doubtful`]) takes only
 /// those.
-fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFront, hints: &[u8], scalpel: &PixelBox) {
+fn clear_hand<'a>(
+    labels: &mut GrayImage,
+    cam: &Camera,
+    radius: f64,
+    hand: &HandInFront<'a>,
+    hints: &[u8],
+    scalpel: &PixelBox,
+) {
     let (w, h) = (labels.width() as usize, labels.height() as usize);
     // Cells projecting outside the scalpel pixels' box are skipped after one projection, and
     // each cell looks only at the scalpel pixels' stretch of each row (pixels only leave the
@@ -855,25 +862,26 @@ fn clear_hand(labels: &mut GrayImage, cam: &Camera, radius: f64, hand: &HandInFr
                     .any(|&(a, b)| a as f64 <= uv.x + reach && b as f64 >= uv.x - reach)
         })
     };
-    let reaching = |cells: &'_ [hullcut_hull::Cell], runs: &'_ [CellRun], doubtful: bool| {
-        let cells: Vec<(hullcut_hull::Cell, bool)> = runs
-            .iter()
+    let reaching = |cells: &'a [hullcut_hull::Cell], runs: &'a [CellRun], doubtful: bool| {
+        runs.iter()
             .filter(|run| run_reaches(run))
-            .flat_map(|run| cells[run.start..run.end].iter().map(move |c| (*c, doubtful)))
-            .collect();
-        cells
+            .flat_map(move |run| cells[run.start..run.end].iter().map(move |c| (c, doubtful)))
     };
     let raw = labels.as_mut();
-    let cells = reaching(&hand.hand.cells, &hand.hand.runs, false).into_iter().chain(reaching(
+    let cells = reaching(&hand.hand.cells, &hand.hand.runs, false).chain(reaching(
         &hand.hand.doubtful,
         &hand.hand.doubtful_runs,
         true,
     ));
     for (c, doubtful) in cells {
-        let centre = c.centre();
-        let z = cam.world_to_camera(&centre).z;
-        let Some(uv) = project(cam, radius, &centre).filter(|_| z > 0.0) else { continue };
+        let pc = cam.world_to_camera(&c.centre());
+        let z = pc.z;
+        let Some(uv) = project_camera_point(cam, radius, &pc) else { continue };
         let r = 0.87 * c.size * f / z;
+        // Missing the box by a whole stretch: nothing below would be visited.
+        if uv.x + r < lo_x || uv.x - r > hi_x || uv.y + r < lo_y || uv.y - r > hi_y {
+            continue;
+        }
         let (i0, j0) = ((uv.x - r).ceil().max(lo.0 as f64), (uv.y - r).ceil().max(lo.1 as f64));
         let (i1, j1) = ((uv.x + r).floor().min(hi.0 as f64), (uv.y + r).floor().min(hi.1 as f64));
         if i0 > i1 || j0 > j1 {
@@ -955,10 +963,11 @@ fn drawn_box(cam: &Camera, radius: f64, c: &hullcut_hull::Cell) -> Option<DrawnB
     let (mut lo, mut hi, mut z) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN), f64::MAX);
     for k in 0..8 {
         let p = c.min + Vector3::new((k & 1) as f64, ((k >> 1) & 1) as f64, ((k >> 2) & 1) as f64) * c.size;
-        let uv = project(cam, radius, &p)?;
+        let pc = cam.world_to_camera(&p);
+        let uv = project_camera_point(cam, radius, &pc)?;
         lo = lo.inf(&uv);
         hi = hi.sup(&uv);
-        z = z.min(cam.world_to_camera(&p).z);
+        z = z.min(pc.z);
     }
     Some((lo, hi, z))
 }
@@ -1253,8 +1262,8 @@ impl ToolDepth {
             .vertices
             .iter()
             .map(|p| {
-                let world = pose * p;
-                project(cam, radius, &world).map(|uv| (uv, cam.world_to_camera(&world).z))
+                let pc = cam.world_to_camera(&(pose * p));
+                project_camera_point(cam, radius, &pc).map(|uv| (uv, pc.z))
             })
             .collect();
         let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
