@@ -850,8 +850,9 @@ fn clear_hand<'a>(
     // micro-pixel of slack for rounding).
     let (lo_x, lo_y, hi_x, hi_y) = (lo.0 as f64, lo.1 as f64, hi.0 as f64, hi.1 as f64);
     let run_reaches = |run: &CellRun| {
-        let z = cam.world_to_camera(&run.centre).z;
-        cam.project_ball(&run.centre, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
+        let pc = cam.world_to_camera(&run.centre);
+        let z = pc.z;
+        cam.project_ball_in_camera(&pc, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
             let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
             let (ja, jb) = ((uv.y - reach).ceil().max(lo_y), (uv.y + reach).floor().min(hi_y));
             uv.x + reach >= lo_x
@@ -1412,11 +1413,14 @@ impl ToolDepth {
         // nothing (a micrometre of slack for rounding).
         let beyond = f64::from(farthest) + 1e-6 - margin;
         let reach = |c: &hullcut_hull::Cell| {
-            let centre = c.centre();
-            if !c.hand || cam.world_to_camera(&centre).z - c.bounding_radius() > beyond {
+            if !c.hand {
                 return None;
             }
-            if let Some((uv, r)) = cam.project_ball(&centre, c.bounding_radius(), NEAR_M, radius) {
+            let pc = cam.world_to_camera(&c.centre());
+            if pc.z - c.bounding_radius() > beyond {
+                return None;
+            }
+            if let Some((uv, r)) = cam.project_ball_in_camera(&pc, c.bounding_radius(), NEAR_M, radius) {
                 let pad = Vector2::new(r, r);
                 if !drawn_in(uv - pad, uv + pad) {
                     return None;
@@ -1427,10 +1431,11 @@ impl ToolDepth {
         // A run's ball holds its cells' balls: behind the tool, or projected onto no drawn pixel,
         // so is each of them (a nanometre and a micro-pixel of slack for rounding).
         let run_reaches = |run: &CellRun| {
-            if cam.world_to_camera(&run.centre).z - run.radius - 1e-9 > beyond {
+            let pc = cam.world_to_camera(&run.centre);
+            if pc.z - run.radius - 1e-9 > beyond {
                 return false;
             }
-            cam.project_ball(&run.centre, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
+            cam.project_ball_in_camera(&pc, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
                 let pad = Vector2::new(r + 1e-6, r + 1e-6);
                 drawn_in(uv - pad, uv + pad)
             })

@@ -187,7 +187,19 @@ impl Camera {
         near: f64,
         max_radius: f64,
     ) -> Option<(Point2<f64>, f64)> {
-        let pc = self.world_to_camera(centre);
+        self.project_ball_in_camera(&self.world_to_camera(centre), rho, near, max_radius)
+    }
+
+    /// [`Camera::project_ball`] of a centre already in the camera's frame (`pc`), for a caller
+    /// that has it (for its depth).
+    #[inline]
+    pub fn project_ball_in_camera(
+        &self,
+        pc: &Point3<f64>,
+        rho: f64,
+        near: f64,
+        max_radius: f64,
+    ) -> Option<(Point2<f64>, f64)> {
         // Comparisons that are false for NaN: a non-finite ball gives no disc.
         (pc.z - rho > near).then_some(())?;
         let xn = Vector2::new(pc.x / pc.z, pc.y / pc.z);
