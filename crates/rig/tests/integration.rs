@@ -46,6 +46,10 @@ mod projection {
         let rho = 0.003 * 3f64.sqrt() / 2.0;
         let (uv, r) = c.project_ball(&centre, rho, 1e-3, c.distortion.monotonic_radius()).expect("in view");
         assert!((uv - c.project(&centre).pixel).norm() < 1e-9);
+        // The same disc from the centre in the camera's frame.
+        let in_camera =
+            c.project_ball_in_camera(&c.world_to_camera(&centre), rho, 1e-3, c.distortion.monotonic_radius());
+        assert_eq!(in_camera, Some((uv, r)));
         // How far the corners of the 3 mm cell whose half-diagonal is rho actually spread.
         let spread = (0..8)
             .map(|k| {
