@@ -386,37 +386,38 @@ impl ToolLabeller {
                 // The tool drawn into every view, and the hull's cells labelled from those
                 // drawings: a cell is the hand's only where views see foreground the tool does not
                 // explain (the tool's own hull, fatter than the tool, hides nothing).
-                let drawn: Vec<Option<ToolDepth>> = views
-                    .par_iter()
-                    .map(|v| {
-                        v.and_then(|v| {
-                            ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), &self.mesh, &pose)
-                        })
-                    })
-                    .collect();
-                // Occluders per view: the hull's hand cells (labelled from those drawings) whose
-                // footprint in that very view holds hand pixels, i.e. cells that view can see as
-                // hand. A cell of the hand's hull that the view sees only where the tool is drawn
-                // is the hull's fat (a phantom in front of the tool), not what hides it. Only the
-                // cells near the tool are judged: the drawings are counted pixel by pixel, not
-                // tabled.
-                let sil: Vec<Option<Silhouette>> = views
-                    .par_iter()
-                    .zip(drawn.par_iter())
-                    .map(|(v, d)| v.map(|v| Silhouette::direct(v.camera, labels_without_occlusion(v, d.as_ref()))))
-                    .collect();
-                // Only cells drawn over the tool in some view can hide it there: the others are
-                // neither relabelled nor judged.
+                // Per view, in one task each: the tool drawn into it; its labels with the hull's
+                // cells judged against that drawing, for the occluders below: the hull's hand
+                // cells (labelled from those drawings) whose footprint in that very view holds hand
+                // pixels, i.e. cells that view can see as hand (a cell of the hand's hull that the
+                // view sees only where the tool is drawn is the hull's fat, a phantom in front of
+                // the tool, not what hides it; only the cells near the tool are judged, so the
+                // drawings are counted pixel by pixel, not tabled); and the cells drawn over the
+                // tool there: only cells drawn over the tool in some view can hide it, the others
+                // are neither relabelled nor judged.
                 let margin = self.params.occlusion_margin_m + occ.leaf_size;
                 let runs = CellRun::split(&occupancy.cells);
-                let over: Vec<Vec<(usize, DrawnBox)>> = views
+                type PerView = (Option<ToolDepth>, Option<Silhouette>, Vec<(usize, DrawnBox)>);
+                let per_view: Vec<PerView> = views
                     .par_iter()
-                    .zip(drawn.par_iter())
-                    .map(|(v, d)| match (v, d) {
-                        (Some(v), Some(d)) => d.cells_over(v.camera, &occupancy.cells, &runs, margin),
-                        _ => Vec::new(),
+                    .map(|v| {
+                        let Some(v) = v else { return (None, None, Vec::new()) };
+                        let d = ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), &self.mesh, &pose);
+                        let sil = Silhouette::direct(v.camera, labels_without_occlusion(*v, d.as_ref()));
+                        let over = d
+                            .as_ref()
+                            .map_or_else(Vec::new, |d| d.cells_over(v.camera, &occupancy.cells, &runs, margin));
+                        (d, Some(sil), over)
                     })
                     .collect();
+                let mut drawn = Vec::with_capacity(views.len());
+                let mut sil = Vec::with_capacity(views.len());
+                let mut over = Vec::with_capacity(views.len());
+                for (d, s, o) in per_view {
+                    drawn.push(d);
+                    sil.push(s);
+                    over.push(o);
+                }
                 let mut wanted: Vec<usize> = over.iter().flatten().map(|(i, _)| *i).collect();
                 wanted.sort_unstable();
                 wanted.dedup();
