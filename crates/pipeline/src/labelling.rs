@@ -649,7 +649,7 @@ impl Labelling {
             .collect();
         // One pass over each mask: its foreground and possible shadow pixels.
         let counts: Vec<Option<MaskCounts>> =
-            fg.iter().zip(&windows).map(|(m, &win)| m.as_ref().map(|m| MaskCounts::within(m, win))).collect();
+            fg.par_iter().zip(&windows).map(|(m, &win)| m.as_ref().map(|m| MaskCounts::within(m, win))).collect();
         let shadow_pixels: u64 = counts.iter().flatten().map(|c| c.shadow).sum();
         self.counters.shadow_pixels += shadow_pixels;
         let degraded = self.degraded_views(&counts);
