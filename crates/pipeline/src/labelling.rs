@@ -1230,7 +1230,8 @@ fn to_background(masks: &mut [Option<GrayImage>], given_back: &[Vec<usize>], kee
 /// ([`SHARPEN_LOG_RATIO`]).
 fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>) {
     let Some(classes) = classes else { return (None, None) };
-    (Some(ColourLut::new(&classes)), Some(ColourLut::confident(&classes, 2.0 * SHARPEN_LOG_RATIO)))
+    let (all, sure) = ColourLut::new_and_confident(&classes, 2.0 * SHARPEN_LOG_RATIO);
+    (Some(all), Some(sure))
 }
 
 /// The learned classes compiled to label only where sure ([`SHARPEN_LOG_RATIO`]) and explained by

@@ -198,6 +198,31 @@ struct Compiled {
 /// `reject`, or when it beats the runner-up by less than `margin` (in units of the score,
 /// `m² + ln det Σ`, i.e. twice the log-likelihood ratio).
 fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, margin: f64, f: [f64; 3]) -> u8 {
+    scores(compiled, f).decide(reject, margin)
+}
+
+/// How the classes score one colour: the best score (`m² + ln det Σ`), its label and squared
+/// Mahalanobis distance, and the runner-up's score.
+#[derive(Debug, Clone, Copy)]
+struct Scores {
+    best: (f64, u8, f64),
+    second: f64,
+}
+
+impl Scores {
+    /// The label [`classify_compiled`] gives for these scores.
+    fn decide(self, reject: Option<f64>, margin: f64) -> u8 {
+        let Scores { best, second } = self;
+        match reject {
+            Some(r) if best.2 > r => label::UNKNOWN,
+            _ if second - best.0 < margin => label::UNKNOWN,
+            _ => best.1,
+        }
+    }
+}
+
+/// The classes' scores of the features `f`.
+fn scores(compiled: &[Compiled], f: [f64; 3]) -> Scores {
     let mut best = (f64::INFINITY, label::UNKNOWN, f64::INFINITY);
     let mut second = f64::INFINITY;
     for Compiled { label: lbl, mean, inv, log_det } in compiled {
@@ -217,11 +242,7 @@ fn classify_compiled(compiled: &[Compiled], reject: Option<f64>, margin: f64, f:
             second = score;
         }
     }
-    match reject {
-        Some(r) if best.2 > r => label::UNKNOWN,
-        _ if second - best.0 < margin => label::UNKNOWN,
-        _ => best.1,
-    }
+    Scores { best, second }
 }
 
 /// Bits kept per channel in the lookup table.
@@ -257,18 +278,20 @@ impl ClassLut {
     /// The table of `label_of` evaluated at every bin's centre colour; `encode` maps a label to
     /// the working encoding.
     pub(crate) fn from_fn(label_of: impl Fn([u8; 3]) -> u8 + Sync, encode: impl Fn(u8) -> u8 + Sync) -> Self {
+        let table = Self::bins().map(|rgb| encode(label_of(rgb))).collect();
+        Self { table }
+    }
+
+    /// Every bin's centre colour, in the table's order.
+    fn bins() -> impl IndexedParallelIterator<Item = [u8; 3]> {
         let n = 1usize << LUT_BITS;
         let step = 1usize << (8 - LUT_BITS);
         // Centre of the bin.
-        let c = |v: usize| (v * step + step / 2) as u8;
-        let table = (0..n * n * n)
-            .into_par_iter()
-            .map(|i| {
-                let (r, g, b) = (i >> (2 * LUT_BITS), (i >> LUT_BITS) & (n - 1), i & (n - 1));
-                encode(label_of([c(r), c(g), c(b)]))
-            })
-            .collect();
-        Self { table }
+        let c = move |v: usize| (v * step + step / 2) as u8;
+        (0..n * n * n).into_par_iter().map(move |i| {
+            let (r, g, b) = (i >> (2 * LUT_BITS), (i >> LUT_BITS) & (n - 1), i & (n - 1));
+            [c(r), c(g), c(b)]
+        })
     }
 
     /// The encoded label of one colour.
@@ -341,6 +364,20 @@ impl ColourLut {
         ColourLut { lut: ClassLut::with_margin(Some(classes), margin, |l| l) }
     }
 
+    /// [`ColourLut::new`] and [`ColourLut::confident`] of the same classes, each colour's scores
+    /// computed once for both (the same tables: the margin only decides from the scores).
+    pub fn new_and_confident(classes: &ColourClasses, margin: f64) -> (Self, Self) {
+        let compiled = classes.compile();
+        let reject = classes.reject_mahalanobis2;
+        let (all, confident): (Vec<u8>, Vec<u8>) = ClassLut::bins()
+            .map(|[r, g, b]| {
+                let s = scores(&compiled, features(f64::from(r), f64::from(g), f64::from(b)));
+                (s.decide(reject, 0.0), s.decide(reject, margin))
+            })
+            .unzip();
+        (ColourLut { lut: ClassLut { table: all } }, ColourLut { lut: ClassLut { table: confident } })
+    }
+
     /// The label of one colour.
     pub fn get(&self, rgb: [u8; 3]) -> u8 {
         self.lut.get(rgb[0], rgb[1], rgb[2])
@@ -393,5 +430,32 @@ mod tests {
         }
         let seen = [label::HAND, label::SCALPEL, label::UNKNOWN].map(|l| labels[usize::from(l)]);
         assert!(seen.iter().all(|&n| n > 0), "hand, scalpel and unknown colours all read: {seen:?}");
+    }
+
+    #[test]
+    fn both_tables_at_once_are_the_tables_compiled_one_by_one() {
+        let shade = (0.25, 1.15);
+        for reject in [None, Some(11.34)] {
+            let classes = ColourClasses {
+                classes: vec![
+                    ColourClass::from_albedo(label::HAND, [90.0, 60.0, 160.0], shade, 0.04),
+                    ColourClass::from_albedo(label::SCALPEL, [140.0, 140.0, 150.0], shade, 0.02),
+                ],
+                reject_mahalanobis2: reject,
+            };
+            let (all, confident) = ColourLut::new_and_confident(&classes, 3.0);
+            let (one, two) = (ColourLut::new(&classes), ColourLut::confident(&classes, 3.0));
+            let mut differ = 0;
+            for r in (0..=255u8).step_by(4) {
+                for g in (0..=255u8).step_by(4) {
+                    for b in (0..=255u8).step_by(4) {
+                        assert_eq!(all.get([r, g, b]), one.get([r, g, b]), "{r} {g} {b}");
+                        assert_eq!(confident.get([r, g, b]), two.get([r, g, b]), "{r} {g} {b}");
+                        differ += usize::from(one.get([r, g, b]) != two.get([r, g, b]));
+                    }
+                }
+            }
+            assert!(differ > 100, "the margin leaves {differ} colours unknown");
+        }
     }
 }
