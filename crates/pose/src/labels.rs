@@ -726,7 +726,8 @@ impl HandCells {
 }
 
 /// The pixels of a `w`×`h` image within `band` of the convex `polygon` (counter-clockwise, as
-/// [`convex_hull`] gives it), as (row, first column, last column).
+/// [`convex_hull`] gives it), as (row, first column, last column); a band that is negative or not
+/// a number holds none.
 fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usize, usize, usize)> {
     let (mut lo, mut hi) = (Point2::new(f64::MAX, f64::MAX), Point2::new(f64::MIN, f64::MIN));
     for q in polygon {
@@ -735,7 +736,7 @@ fn band_rows(polygon: &[Point2<f64>], band: f64, w: usize, h: usize) -> Vec<(usi
     }
     let (i0, j0) = ((lo.x - band).floor().max(0.0) as usize, (lo.y - band).floor().max(0.0) as usize);
     let (i1, j1) = ((hi.x + band).ceil().min(w as f64 - 1.0), (hi.y + band).ceil().min(h as f64 - 1.0));
-    if i1 < i0 as f64 || j1 < j0 as f64 || polygon.len() < 2 {
+    if i1 < i0 as f64 || j1 < j0 as f64 || polygon.len() < 2 || band.is_nan() || band < 0.0 {
         return Vec::new();
     }
     let grown = GrownPolygon::new(polygon, band);
@@ -1037,28 +1038,39 @@ impl ToolField {
         ToolField { bounds: (lo, hi), origin, dims, spacing, pad, distance }
     }
 
-    /// Whether `p` (tool frame) lies farther than `reach` from the box of the points filling the
-    /// tool, hence from the tool: a test without the grid, which most points far from a slender
-    /// tool pass.
-    fn surely_beyond(&self, p: &Point3<f64>, reach: f64) -> bool {
+    /// Whether [`ToolField::at`]`(p) <= reach`, without reading the grid where the box of the
+    /// points filling the tool is out of reach: inside the grid its distance is between grid
+    /// nodes, each within half a diagonal of its point, so it is at least the distance to that
+    /// box less √3 spacings (two of slack); most points far from a slender tool stop there.
+    fn within(&self, p: &Point3<f64>, reach: f64) -> bool {
+        let Some(index) = self.node(p) else { return self.at(p) <= reach };
         let (lo, hi) = &self.bounds;
         let gap = (lo - p).sup(&(p - hi)).sup(&Vector3::zeros());
-        gap.norm_squared() > reach * reach
+        let slack = reach + 2.0 * self.spacing;
+        // A point with a coordinate that is not a number has no grid node: it never gets here.
+        let out_of_reach = gap.norm_squared() > slack * slack;
+        !out_of_reach && f64::from(self.distance[index]) <= reach
+    }
+
+    /// The index of the grid node nearest `p` (tool frame), `None` beyond the grid.
+    fn node(&self, p: &Point3<f64>) -> Option<usize> {
+        let k = (p - self.origin) / self.spacing;
+        let [x, y, z] = [k.x, k.y, k.z].map(|v| v.round());
+        let inside = |v: f64, n: usize| v >= 0.0 && v < n as f64;
+        (inside(x, self.dims[0]) && inside(y, self.dims[1]) && inside(z, self.dims[2]))
+            .then(|| ((z as usize) * self.dims[1] + y as usize) * self.dims[0] + x as usize)
     }
 
     /// Distance from `p` (tool frame) to the tool, to within the grid's spacing; beyond the grid,
     /// a lower bound (`pad` plus the distance to the grid).
     fn at(&self, p: &Point3<f64>) -> f64 {
-        let k = (p - self.origin) / self.spacing;
-        let [x, y, z] = [k.x, k.y, k.z].map(|v| v.round());
-        let inside = |v: f64, n: usize| v >= 0.0 && v < n as f64;
-        if !(inside(x, self.dims[0]) && inside(y, self.dims[1]) && inside(z, self.dims[2])) {
-            let outside = |v: f64, n: usize| (-v).max(v - (n as f64 - 1.0)).max(0.0);
-            let d = Vector3::new(outside(k.x, self.dims[0]), outside(k.y, self.dims[1]), outside(k.z, self.dims[2]));
-            return self.pad + d.norm() * self.spacing;
+        if let Some(index) = self.node(p) {
+            return f64::from(self.distance[index]);
         }
-        let [x, y, z] = [x, y, z].map(|v| v as usize);
-        f64::from(self.distance[(z * self.dims[1] + y) * self.dims[0] + x])
+        let k = (p - self.origin) / self.spacing;
+        let outside = |v: f64, n: usize| (-v).max(v - (n as f64 - 1.0)).max(0.0);
+        let d = Vector3::new(outside(k.x, self.dims[0]), outside(k.y, self.dims[1]), outside(k.z, self.dims[2]));
+        self.pad + d.norm() * self.spacing
     }
 }
 
@@ -1071,10 +1083,7 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
     let mut out = occ.clone();
     out.cells.par_iter_mut().enumerate().for_each(|(k, c)| {
         let reach = margin + 0.87 * c.size + field.spacing;
-        let p = to_tool * c.centre();
-        // The grid's distance is between nodes (each within half a diagonal of its point): two
-        // spacings of slack keep the box test from deciding what the grid would not.
-        let is_near = !field.surely_beyond(&p, reach + 2.0 * field.spacing) && field.at(&p) <= reach;
+        let is_near = field.within(&(to_tool * c.centre()), reach);
         c.scalpel = is_near;
         c.hand = !is_near && !not_hand.get(k).copied().unwrap_or(false);
     });
@@ -1764,6 +1773,32 @@ mod tests {
         assert!(band_rows(&off, 2.0, 100, 100).is_empty(), "right of the image");
         let above: Vec<Point2<f64>> = square.iter().map(|p| p - Vector3::new(0.0, 500.0, 0.0).xy()).collect();
         assert!(band_rows(&above, 2.0, 100, 100).is_empty(), "above the image");
+        assert!(band_rows(&square, f64::NAN, 100, 100).is_empty() && band_rows(&square, -1.0, 100, 100).is_empty());
+    }
+
+    #[test]
+    fn the_tools_nearness_reads_the_grid_as_the_distance_does_wherever_the_point() {
+        // A slender tool (a blade-like strip of points) and points inside the grid, beyond it
+        // and far away, with reaches from a leaf's to a coarse octree cell's.
+        let points: Vec<Point3<f64>> =
+            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
+        let field = ToolField::new(&points, 0.001, 0.022);
+        let mut seed = 5u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut near, mut far) = (0, 0);
+        for _ in 0..200_000 {
+            let p = Point3::new(next() * 0.4 - 0.12, next() * 0.2 - 0.09, next() * 0.2 - 0.1);
+            let reach = [0.004, 0.01, 0.03, 0.06][(next() * 4.0) as usize % 4];
+            let expected = field.at(&p) <= reach;
+            assert_eq!(field.within(&p, reach), expected, "{p:?} at reach {reach}");
+            if expected { near += 1 } else { far += 1 }
+        }
+        assert!(near > 10_000 && far > 10_000, "{near} near, {far} far");
+        let nan = Point3::new(f64::NAN, 0.0, 0.0);
+        assert_eq!(field.within(&nan, 0.01), field.at(&nan) <= 0.01);
     }
 
     #[test]
