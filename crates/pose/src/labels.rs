@@ -29,7 +29,7 @@ use crate::evidence::{project, project_camera_point};
 use crate::geometry::convex_hull;
 use crate::table_shadow::TableShadows;
 use crate::template::Template;
-use crate::track::{PoseEstimate, Tracker, TrackerParams, ViewInput};
+use crate::track::{MANY_VIEWS, PoseEstimate, Tracker, TrackerParams, ViewInput};
 
 /// A hint in a labeller's view mask: a foreground pixel that may be a cast shadow (the background's
 /// colour darkened). It is evidence of the tool only where the predicted tool is drawn, or a pixel
@@ -45,6 +45,22 @@ pub const POSSIBLE_SHADOW: u8 = 128;
 /// drawn into a shadow beside the blade would otherwise explain it, and creep into it (roll the
 /// blade about its long axis, frame set after frame set).
 pub const TABLE_SHADOW: u8 = 129;
+
+/// A hint in a labeller's view mask: a possible shadow ([`POSSIBLE_SHADOW`], and read as one
+/// throughout) whose colour is surely the tool's rather than the hand's. On a rig of fewer than
+/// six views with masks, where the tool is drawn over it, no cell of the hand's hull takes it from
+/// the tool: the hand does not look like it. A grey blade over a grey table looks like a shadow,
+/// and with four cameras the hand's hull is fat enough about the held tool to lie in front of the
+/// blade in half the views (random:503 in random:509: the right fit refused, seen by two views
+/// of four, after 15 frame sets trusted). With more views the hull is tight, and the colour
+/// would only keep the hand's grey shadow beside a steel blade for the tool where the track's
+/// prediction draws it (the built-in scene: 29 -> 37 trusted frame sets off by over 5° or 5 mm).
+pub const TOOL_COLOURED_SHADOW: u8 = 130;
+
+/// Whether a hint marks a possible shadow ([`POSSIBLE_SHADOW`] or [`TOOL_COLOURED_SHADOW`]).
+fn possible_shadow(hint: u8) -> bool {
+    hint == POSSIBLE_SHADOW || hint == TOOL_COLOURED_SHADOW
+}
 
 /// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
 /// puts the outline to a pixel or so).
@@ -114,6 +130,11 @@ pub struct LabelledFrame {
     /// Per view: where the fitted tool's mesh is drawn, hidden or not (`None` without a fit, a
     /// view, or the tool in it).
     pub tool_regions: Vec<Option<ToolRegion>>,
+    /// Per view (empty unless [`ToolLabeller::list_unoccluded`] asked for them, or without a
+    /// fit): the indices of the foreground pixels where the tool is drawn and no cell of the
+    /// hand's hull lies in front of it, phantom or not (those the fitted pose alone makes the
+    /// tool's, whichever cells are real).
+    pub unoccluded: Vec<Vec<usize>>,
     /// Counters and timings.
     pub stats: LabelStats,
 }
@@ -221,6 +242,8 @@ pub struct ToolLabeller {
     /// Distance to the tool, tool frame (for the hull's tool cells).
     field: ToolField,
     params: LabelParams,
+    /// Whether [`ToolLabeller::label`] lists each view's [`LabelledFrame::unoccluded`] pixels.
+    unoccluded: bool,
 }
 
 impl ToolLabeller {
@@ -235,12 +258,25 @@ impl ToolLabeller {
         // Padded by 2 cm over the margin: a cell farther than that from the tool is not near it
         // unless it is over 2 cm large, and those are told by the grid's distance.
         let field = ToolField::new(&tool_points(&tool.mesh, 0.001), 0.001, params.tool_margin_m + 0.02);
-        Ok(ToolLabeller { tracker: Tracker::new(template, tracker), mesh: tool.mesh.clone(), field, params })
+        Ok(ToolLabeller {
+            tracker: Tracker::new(template, tracker),
+            mesh: tool.mesh.clone(),
+            field,
+            params,
+            unoccluded: false,
+        })
     }
 
     /// The tracker (its template and settings).
     pub fn tracker(&self) -> &Tracker {
         &self.tracker
+    }
+
+    /// Whether [`ToolLabeller::label`] also lists, per view, the drawn tool's foreground pixels
+    /// that no cell of the hand's hull lies in front of ([`LabelledFrame::unoccluded`]; off by
+    /// default: it splats every such cell once more per view).
+    pub fn list_unoccluded(&mut self, on: bool) {
+        self.unoccluded = on;
     }
 
     /// The blade's outline in `camera` with the tool at `tool_to_world`: the convex hull of its
@@ -294,6 +330,7 @@ impl ToolLabeller {
         let mut stats = LabelStats::default();
         let clock = Instant::now();
         let template = self.tracker.template().clone();
+        let few_views = views.iter().flatten().count() < MANY_VIEWS;
         let provisional_for = |pose: &Isometry3<f64>| {
             let hull = near_tool(occ, &self.field, pose, self.params.tool_margin_m, not_hand);
             let hand = HandCells::new(
@@ -307,8 +344,12 @@ impl ToolLabeller {
                     v.map(|v| {
                         let radius = v.camera.distortion.monotonic_radius();
                         let depth = ToolDepth::draw(v.camera, radius, &self.mesh, pose);
-                        let in_front =
-                            HandInFront { hand: &hand, tool: depth.as_ref(), margin: self.params.occlusion_margin_m };
+                        let in_front = HandInFront {
+                            hand: &hand,
+                            tool: depth.as_ref(),
+                            margin: self.params.occlusion_margin_m,
+                            tool_colour_decides: few_views,
+                        };
                         band_labels(v, &template, pose, self.params.band_px, &in_front, table.map(|t| (t, k)))
                     })
                 })
@@ -379,7 +420,7 @@ impl ToolLabeller {
             }
         };
         let clock = Instant::now();
-        let (masks, occupancy, tool_regions) = match &estimate.fitted {
+        let (masks, occupancy, tool_regions, unoccluded) = match &estimate.fitted {
             Some(fitted) => {
                 let pose = fitted.tool_to_world;
                 let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m, not_hand);
@@ -466,7 +507,20 @@ impl ToolLabeller {
                     })
                     .collect();
                 let regions = drawn.iter().map(|d| d.as_ref().map(ToolDepth::region)).collect();
-                (masks, occupancy, regions)
+                let unoccluded = if self.unoccluded {
+                    views
+                        .par_iter()
+                        .zip(drawn.par_iter())
+                        .zip(over.par_iter())
+                        .map(|((v, d), over)| match (v, d) {
+                            (Some(v), Some(d)) => d.unoccluded(v.mask, over.iter().map(|(_, b)| *b), margin),
+                            _ => Vec::new(),
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                (masks, occupancy, regions, unoccluded)
             }
             None => {
                 let masks = views
@@ -482,11 +536,11 @@ impl ToolLabeller {
                         })
                     })
                     .collect();
-                (masks, occ.clone(), vec![None; views.len()])
+                (masks, occ.clone(), vec![None; views.len()], Vec::new())
             }
         };
         stats.draw_ms = clock.elapsed().as_secs_f64() * 1e3;
-        LabelledFrame { estimate, masks, occupancy, tool_regions, stats }
+        LabelledFrame { estimate, masks, occupancy, tool_regions, unoccluded, stats }
     }
 
     /// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
@@ -631,7 +685,7 @@ fn band_labels(
             for i in a..=b {
                 let k = j * w + i;
                 let hint = hints[k];
-                let shadow_beside = hint == POSSIBLE_SHADOW
+                let shadow_beside = possible_shadow(hint)
                     && match hand.tool {
                         Some(t) if t.at(i, j).is_some() => false,
                         Some(t) if t.near(i, j, SHADOW_REACH_PX) => {
@@ -702,6 +756,8 @@ struct HandInFront<'a> {
     /// A cell is behind the tool at a pixel where its nearest point lies this much farther from
     /// the camera than the tool drawn there, metres.
     margin: f64,
+    /// Whether a [`TOOL_COLOURED_SHADOW`] keeps its pixel from the cells (fewer than six views).
+    tool_colour_decides: bool,
 }
 
 /// The hull's cells away from the tool, in runs ([`CellRun`]) that [`clear_hand`] rules out
@@ -895,7 +951,10 @@ fn clear_hand<'a>(
             let (a, b) = rows[j];
             for i in (i0 as usize).max(a)..=(i1 as usize).min(w - 1).min(b) {
                 let k = j * w + i;
-                if raw[k] != label::SCALPEL || hints[k] == label::SCALPEL {
+                if raw[k] != label::SCALPEL
+                    || hints[k] == label::SCALPEL
+                    || (hand.tool_colour_decides && hints[k] == TOOL_COLOURED_SHADOW)
+                {
                     continue;
                 }
                 // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
@@ -1375,6 +1434,27 @@ impl ToolDepth {
         (i0 <= i1 && j0 <= j1).then_some((i0 as usize, i1 as usize, j0 as usize, j1 as usize))
     }
 
+    /// The indices (in `mask`'s image) of the foreground pixels of `mask` where the tool is drawn
+    /// and none of `cells` (the hand's, as [`drawn_box`]es) lies nearer than the tool's depth
+    /// less `margin`: [`ToolLabeller::final_labels`] would call them visible whichever of the
+    /// cells it took for occluders. A shadow the other views put on the table ([`TABLE_SHADOW`])
+    /// is not foreground here.
+    fn unoccluded(&self, mask: &GrayImage, cells: impl Iterator<Item = DrawnBox>, margin: f64) -> Vec<usize> {
+        let mut hand = vec![f32::INFINITY; self.depth.len()];
+        for (lo, hi, z) in cells {
+            self.splat_min(&mut hand, lo, hi, (z + margin) as f32);
+        }
+        let (w, raw) = (mask.width() as usize, mask.as_raw());
+        self.depth
+            .iter()
+            .zip(&hand)
+            .enumerate()
+            .filter(|(_, (d, h))| d.is_finite() && **h >= **d)
+            .map(|(k, _)| (self.y0 + k / self.w) * w + self.x0 + k % self.w)
+            .filter(|&px| raw.get(px).is_some_and(|&l| l != label::BACKGROUND && l != TABLE_SHADOW))
+            .collect()
+    }
+
     /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
     fn splat_min(&self, buffer: &mut [f32], lo: Point2<f64>, hi: Point2<f64>, z: f32) {
         let Some((i0, i1, j0, j1)) = self.span(lo, hi) else { return };
@@ -1571,7 +1651,7 @@ mod tests {
             let (camera, mut labels, tool, cell) = band_scene(z);
             let hints = GrayImage::new(100, 100);
             let cells = HandCells::new(vec![cell], Vec::new());
-            let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
+            let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003, tool_colour_decides: true };
             let scalpel = PixelBox::of(&labels, label::SCALPEL);
             clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
             assert_eq!(at_centre(&labels), expected, "a hand cell at {z} m, the tool at 0.5 m");
@@ -1583,7 +1663,7 @@ mod tests {
         let (camera, mut labels, tool, cell) = band_scene(0.4);
         let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(Vec::new(), vec![cell]);
-        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
+        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003, tool_colour_decides: true };
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL, "where the tool is drawn");
@@ -1592,7 +1672,7 @@ mod tests {
         let (camera, mut labels, _, cell) = band_scene(0.7);
         let hints = GrayImage::new(100, 100);
         let cells = HandCells::new(vec![cell], Vec::new());
-        let hand = HandInFront { hand: &cells, tool: None, margin: 0.003 };
+        let hand = HandInFront { hand: &cells, tool: None, margin: 0.003, tool_colour_decides: true };
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::HAND);
@@ -1601,11 +1681,73 @@ mod tests {
         let mut hints = GrayImage::new(100, 100);
         hints.put_pixel(50, 50, image::Luma([label::SCALPEL]));
         let cells = HandCells::new(vec![cell], Vec::new());
-        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003 };
+        let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003, tool_colour_decides: true };
         let scalpel = PixelBox::of(&labels, label::SCALPEL);
         clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
         assert_eq!(at_centre(&labels), label::SCALPEL);
         assert_eq!(labels.get_pixel(51, 50).0[0], label::HAND);
+        // So does a possible shadow of the tool's colour, where the tool's colour decides (a rig of
+        // few views); one of no sure colour goes to the hand in front of it.
+        for (hint, decides, expected) in [
+            (TOOL_COLOURED_SHADOW, true, label::SCALPEL),
+            (TOOL_COLOURED_SHADOW, false, label::HAND),
+            (POSSIBLE_SHADOW, true, label::HAND),
+        ] {
+            let (camera, mut labels, tool, cell) = band_scene(0.4);
+            let mut hints = GrayImage::new(100, 100);
+            hints.put_pixel(50, 50, image::Luma([hint]));
+            let cells = HandCells::new(vec![cell], Vec::new());
+            let hand = HandInFront { hand: &cells, tool: Some(&tool), margin: 0.003, tool_colour_decides: decides };
+            let scalpel = PixelBox::of(&labels, label::SCALPEL);
+            clear_hand(&mut labels, &camera, 10.0, &hand, hints.as_raw(), &scalpel);
+            assert_eq!(at_centre(&labels), expected, "hint {hint}, the tool's colour deciding: {decides}");
+        }
+    }
+
+    #[test]
+    fn the_unoccluded_tool_is_where_no_hand_cell_lies_in_front_of_its_drawing() {
+        let (camera, tool) = diagonal_tool();
+        let radius = camera.distortion.monotonic_radius();
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        // Foreground everywhere but one drawn pixel (background) and one shadow on the table.
+        let drawn: Vec<usize> = (0..tool.depth.len())
+            .filter(|&k| tool.depth[k].is_finite())
+            .map(|k| (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w)
+            .collect();
+        let mut mask = GrayImage::from_pixel(w as u32, h as u32, image::Luma([label::UNKNOWN]));
+        let (off, on_table) = (drawn[10], drawn[20]);
+        mask.as_mut()[off] = label::BACKGROUND;
+        mask.as_mut()[on_table] = TABLE_SHADOW;
+        // No cell: every drawn foreground pixel.
+        let all = tool.unoccluded(&mask, std::iter::empty(), 0.004);
+        assert_eq!(all.len(), drawn.len() - 2);
+        assert!(!all.contains(&off) && !all.contains(&on_table));
+        assert!(all.iter().all(|&k| k < w * h && drawn.contains(&k)));
+        // A 2 cm cell on the tool's line of sight in front of it hides what its box covers; the
+        // same cell behind the tool (beyond the margin) hides nothing.
+        let cell_at = |z: f64| {
+            let ray = camera.pixel_ray(nalgebra::Point2::new(100.0, 80.0)).expect("a ray");
+            let centre = ray.origin + ray.direction.into_inner() * z;
+            hullcut_hull::Cell {
+                min: centre - Vector3::repeat(0.01),
+                size: 0.02,
+                hand: true,
+                scalpel: false,
+                solid: true,
+                refuted_by: None,
+            }
+        };
+        let front = drawn_box(&camera, radius, &cell_at(0.3)).expect("the cell projects");
+        let hidden = tool.unoccluded(&mask, std::iter::once(front), 0.004);
+        assert!(!hidden.is_empty() && hidden.len() < all.len(), "{} of {}", hidden.len(), all.len());
+        for &k in &all {
+            let (x, y) = ((k % w) as f64, (k / w) as f64);
+            let inside =
+                x >= front.0.x.ceil() && x <= front.1.x.floor() && y >= front.0.y.ceil() && y <= front.1.y.floor();
+            assert_eq!(hidden.contains(&k), !inside, "pixel ({x}, {y}) against the cell's box {front:?}");
+        }
+        let behind = drawn_box(&camera, radius, &cell_at(0.6)).expect("the cell projects");
+        assert_eq!(tool.unoccluded(&mask, std::iter::once(behind), 0.004), all);
     }
 
     #[test]
@@ -1620,7 +1762,7 @@ mod tests {
         let radius = camera.distortion.monotonic_radius();
         let depth = ToolDepth::draw(&camera, radius, &scalpel.geometry.mesh, &pose);
         let cells = HandCells::new(Vec::new(), Vec::new());
-        let hand = HandInFront { hand: &cells, tool: depth.as_ref(), margin: 0.003 };
+        let hand = HandInFront { hand: &cells, tool: depth.as_ref(), margin: 0.003, tool_colour_decides: true };
         // A pixel in the middle of the blade's face.
         let uv = project(&camera, radius, &Point3::new(0.02, 0.0, 0.0)).expect("the blade in view");
         let (i, j) = (uv.x.round() as u32, uv.y.round() as u32);
@@ -1633,6 +1775,7 @@ mod tests {
         };
         assert_eq!(label_with(label::UNKNOWN), label::SCALPEL, "foreground where the tool is drawn");
         assert_eq!(label_with(POSSIBLE_SHADOW), label::SCALPEL, "a possible shadow where the tool is drawn");
+        assert_eq!(label_with(TOOL_COLOURED_SHADOW), label::SCALPEL, "one of the tool's colour, alike");
         assert_eq!(label_with(TABLE_SHADOW), label::HAND, "a shadow on the table, even where the tool is drawn");
     }
 
@@ -1937,7 +2080,7 @@ mod tests {
         };
         let judged_within = |cells: &HandCells, scalpel: &PixelBox| {
             let mut out = labels.clone();
-            let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003 };
+            let in_front = HandInFront { hand: cells, tool: Some(&tool), margin: 0.003, tool_colour_decides: true };
             clear_hand(&mut out, &camera, camera.distortion.monotonic_radius(), &in_front, &[0; 200 * 160], scalpel);
             out
         };

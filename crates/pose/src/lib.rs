@@ -38,7 +38,10 @@ mod template;
 mod track;
 
 pub use filter::{OneEuro, OneEuroParams};
-pub use labels::{LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, TABLE_SHADOW, ToolLabeller, ToolRegion};
+pub use labels::{
+    LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, TABLE_SHADOW, TOOL_COLOURED_SHADOW, ToolLabeller,
+    ToolRegion,
+};
 pub use metrics::{PoseError, pose_error};
 pub use table_shadow::{SHADE_TOLERANCE, Shading, TableShadows};
 pub use template::{Template, check_tool};

@@ -20,7 +20,7 @@ const ROI_MARGIN_PX: f64 = 12.0;
 /// hand hides much of a held scalpel, so a loose one can be several times larger).
 const SECOND_COMPONENT: f64 = 0.15;
 /// Views with a mask from which [`TrackerParams::min_views_seen_few`] no longer applies.
-const MANY_VIEWS: usize = 6;
+pub(crate) const MANY_VIEWS: usize = 6;
 /// Starting poses kept for a full fit when starting from the hull alone.
 const STARTS_FITTED: usize = 4;
 

@@ -28,7 +28,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// scalpel, the rest of the foreground the hand, no colour model needed. Where the tool cannot be
 /// fitted, and without a tool.json, the colours learned from the recording label the foreground:
 /// from the trusted frames' geometric labels, and from the masks/ of the frames named by
-/// --label-frames. Nothing is tuned to one glove: no colour is written in the code. Where the
+/// --label-frames; until a trusted frame has taught them, from up to ten frames whose fit agrees
+/// with the silhouettes but is not trusted (only the pixels that fit alone decides: the drawn
+/// tool where no hull cell lies in front of it, the hand far from it). Nothing is tuned to one
+/// glove: no colour is written in the code. Where the
 /// dataset has masks/, the masks are scored against them (IoU per label).
 ///
 /// Writes: OUT/masks/CAM/NNNNNN.png with --out; REPORT (JSON: foreground method per camera, the
@@ -273,6 +276,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         labels.counters.unknown,
         labels.counters.relabelled
     );
+    if labels.counters.bootstrapped > 0 {
+        println!(
+            "  the colours were first taught by {} frame set(s) whose fit agreed with the silhouettes but was not \
+             trusted (the drawn tool where no hull cell lies in front of it, the hand far from it)",
+            labels.counters.bootstrapped
+        );
+    }
     for (what, learned) in [("learned", &labels.appearance), ("sharpening", &labels.sharpening_appearance)] {
         for c in learned {
             if let Some(rgb) = c.rgb {
