@@ -40,6 +40,16 @@ const GEOMETRY_AGREEMENT: (f64, f64) = (0.82, 0.92);
 /// random:509: right fits, 0.4-1.3° and 1-2 mm, refused as seen by two views of four, frame set
 /// after frame set); the colours so taught tell the blade's pixels from the hand's there.
 const BOOTSTRAP_FRAMES: u64 = 10;
+/// ... when the frame set before had such a fit too, its tip within this distance (metres) and
+/// its blade's normal within [`BOOTSTRAP_TURN_DEG`] of this one's: a right fit holds from frame set
+/// to frame set, while fits that agree with the silhouettes by chance do not (random:257 in
+/// random:263, a blue glove holding a blue handle over brushed steel: agreeing fits 66-263 mm
+/// off, none two frame sets running, taught the table's grey as the tool's colour, and 17 fits
+/// were then trusted, all 12 mm off; random:503 in random:509's agreeing fits hold from frame set
+/// 3 to 21).
+const BOOTSTRAP_STEP_M: f64 = 0.005;
+/// ... (see [`BOOTSTRAP_STEP_M`]), degrees.
+const BOOTSTRAP_TURN_DEG: f64 = 5.0;
 /// ... when the fit's unoccluded tool pixels number at least this many over the views (a
 /// handful of pixels teaches nothing, and on a tool wholly hidden the fit decides nothing).
 const BOOTSTRAP_MIN_PIXELS: usize = 200;
@@ -222,6 +232,11 @@ pub struct LabelCounters {
     /// in front of it, the foreground far from it).
     #[serde(default)]
     pub bootstrapped: u64,
+    /// Frame sets whose untrusted fit would have taught the colours, but whose hand's colours
+    /// then explained the tool's mean colour (within their 99% ellipsoid): nothing was learned
+    /// from them.
+    #[serde(default)]
+    pub bootstrap_refused: u64,
     /// Pixels that looked like cast shadows (darker, chromaticity unchanged), over all views.
     pub shadow_pixels: u64,
     /// Of those, pixels the hull showed to be foreground (a dark object, not a shadow).
@@ -374,6 +389,9 @@ pub struct Labelling {
     /// The drawn blade's pixels on the frame sets learned from, and those of them the sure colours
     /// call the hand's (with forgetting): whether the fit gets hand hints ([`TOOL_AS_HAND_MAX`]).
     tool_as_hand: (f64, f64),
+    /// The last frame set's fit, where the tracker refused it but it agreed with the silhouettes:
+    /// its tip and blade normal ([`BOOTSTRAP_STEP_M`]).
+    last_agreeing: Option<(nalgebra::Point3<f64>, nalgebra::Vector3<f64>)>,
     /// The last frame set's possible shadows given back to the table (`None`: none were asked).
     shadow_on_table: Option<u64>,
     /// Weak foreground pixels confirmed in the last frame set (with the weak test only).
@@ -477,6 +495,7 @@ impl Labelling {
             sure,
             explained,
             tool_as_hand: (0.0, 0.0),
+            last_agreeing: None,
             shadow_on_table: None,
             weak_confirmed: None,
             hull,
@@ -824,10 +843,19 @@ impl Labelling {
         let trusted = estimate.valid && estimate.fitted.is_some();
         let learns = colours && trusted && estimate.confidence >= LEARN_CONFIDENCE;
         let agreement = estimate.diagnostics.explained.min(estimate.diagnostics.covered);
+        // An untrusted fit that agrees with the silhouettes, and whether the one of the frame set
+        // before agreed too, at nearly the same pose.
+        let agreeing = estimate.fitted.as_ref().filter(|_| !trusted && agreement >= GEOMETRY_AGREEMENT.1);
+        let steady = match (agreeing, &self.last_agreeing) {
+            (Some(f), Some((tip, normal))) => {
+                (f.tip - tip).norm() <= BOOTSTRAP_STEP_M
+                    && f.plane_normal.angle(normal) <= BOOTSTRAP_TURN_DEG.to_radians()
+            }
+            _ => false,
+        };
+        self.last_agreeing = agreeing.map(|f| (f.tip, f.plane_normal));
         let taught = (bootstrapping
-            && !trusted
-            && estimate.fitted.is_some()
-            && agreement >= GEOMETRY_AGREEMENT.1
+            && steady
             && labelled.unoccluded.iter().map(Vec::len).sum::<usize>() >= BOOTSTRAP_MIN_PIXELS)
             .then(|| bootstrap_labels(&labelled.masks, &labelled.tool_regions, &labelled.unoccluded));
         let mut learn_from = None;
@@ -868,7 +896,7 @@ impl Labelling {
             sharpen_all(&mut masks, self.explained.as_ref());
             learn_from = likelier;
             (masks, LabelSource::Geometry)
-        } else if colours && self.colours.is_some() {
+        } else if colours && self.colours_label() {
             let mut masks = fg.clone();
             self.colour(set, &mut masks);
             to_background(&mut masks, &given_back, false);
@@ -890,8 +918,7 @@ impl Labelling {
             self.judge_hand_hints(set, &blade);
         } else if let Some(taught) = taught {
             // Or, until one has, what an agreeing fit alone decides.
-            self.learn(set, &taught, &taught);
-            self.counters.bootstrapped += 1;
+            self.bootstrap(set, &taught);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
@@ -913,7 +940,7 @@ impl Labelling {
     /// trust before later frames taught the colours.
     /// The counters count it as `relabelled`, nothing else.
     pub fn relabel_by_colour(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Option<Labelled>, Error> {
-        if self.method != LabelMethod::Both || self.colours.is_none() {
+        if self.method != LabelMethod::Both || !self.colours_label() {
             return Ok(None);
         }
         // Without the tool, and with no history of usual foregrounds (this frame set is an old
@@ -1156,6 +1183,40 @@ impl Labelling {
             && self.counters.bootstrapped < BOOTSTRAP_FRAMES
     }
 
+    /// Learns `taught` (what an untrusted fit alone decides: [`bootstrap_labels`]) as the colours,
+    /// unless the hand's class then learned explains the tool's colour ([`tool_apart_from_hand`]):
+    /// a hand and a tool of one colour (a blue glove holding a blue handle) teach nothing the fit
+    /// could use, and their hints moved the fits (random:257 in random:263's hand IoU 0.959 ->
+    /// 0.925, scalpel 0.373 -> 0.099; squared distance of the tool's mean from the hand 1.26 on its
+    /// first such frame set, random:71 in random:109's 1.09): then the colours stay as they were.
+    fn bootstrap(&mut self, set: &FrameSet, taught: &[Option<GrayImage>]) {
+        let before = (
+            self.appearance.clone(),
+            self.sharpening.clone(),
+            self.colours.clone(),
+            self.sure.clone(),
+            self.explained.clone(),
+            self.counters.learned,
+        );
+        self.learn(set, taught, taught);
+        if tool_apart_from_hand(self.appearance.classes().as_ref()) {
+            self.counters.bootstrapped += 1;
+        } else {
+            (self.appearance, self.sharpening, self.colours, self.sure, self.explained, self.counters.learned) = before;
+            self.counters.bootstrap_refused += 1;
+        }
+    }
+
+    /// Whether the learned colours may label a frame set alone: once a trusted frame set or a
+    /// masked frame taught them. The colours an untrusted fit taught ([`BOOTSTRAP_FRAMES`]) only
+    /// hint the fit: where the hand and the tool share a colour (a blue glove holding a blue
+    /// handle) they label nothing right, and labelling by them alone took random:257 in
+    /// random:263's hand IoU from 0.959 to 0.575 and random:71 in random:109's from 0.640 to 0.009.
+    fn colours_label(&self) -> bool {
+        self.colours.is_some()
+            && (self.counters.learned > self.counters.bootstrapped || self.appearance.sources.mask_views > 0)
+    }
+
     /// Whether the fit gets hand hints: while the sure colours call little of the drawn blade the
     /// hand's ([`TOOL_AS_HAND_MAX`]).
     fn hand_hints(&self) -> bool {
@@ -1270,6 +1331,19 @@ fn to_background(masks: &mut [Option<GrayImage>], given_back: &[Vec<usize>], kee
             }
         }
     }
+}
+
+/// Whether the learned tool's mean colour lies outside the hand's 99% ellipsoid (squared
+/// Mahalanobis distance above [`SURE_MAHALANOBIS2`]): the hand's class does not explain the tool's
+/// usual colour; `false` without both classes. The tool's class may well explain the hand's mean:
+/// a blue handle, a grey blade and their blends make a broad class beside a bare hand's narrow
+/// one (random:503 in random:509: 8-11 one way, 104-152 the other), and the likelier class still
+/// tells them apart.
+fn tool_apart_from_hand(classes: Option<&ColourClasses>) -> bool {
+    let Some(classes) = classes else { return false };
+    let of = |l: u8| classes.classes.iter().find(|c| c.label == l);
+    let (Some(hand), Some(tool)) = (of(label::HAND), of(label::SCALPEL)) else { return false };
+    hand.mahalanobis2(&tool.mean).is_some_and(|m| m > SURE_MAHALANOBIS2)
 }
 
 /// The learned classes compiled two ways: every colour labelled; labelled only where sure
@@ -1424,10 +1498,10 @@ fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, regi
 
 #[cfg(test)]
 mod tests {
-    use hullcut_capture::segment::ColourClass;
     use image::{Rgb, RgbImage};
 
     use super::*;
+    use hullcut_capture::segment::ColourClass;
 
     #[test]
     fn two_boxes_share_their_overlap_and_nothing_when_they_only_touch() {
@@ -1568,6 +1642,31 @@ mod tests {
             assert_eq!(hints.as_raw(), &vec![label::HAND, TOOL_COLOURED_SHADOW]);
         }
         assert_eq!(fit_hints(None, true, &image, &mask, whole).as_raw(), &vec![POSSIBLE_SHADOW; 2]);
+    }
+
+    #[test]
+    fn an_untrusted_fit_teaches_only_a_tool_whose_colour_the_hand_does_not_explain() {
+        let skin = ColourClass::from_albedo(label::HAND, [200.0, 150.0, 120.0], (0.3, 1.0), 0.02);
+        let classes = |hand: &ColourClass, tool: ColourClass| ColourClasses {
+            classes: vec![hand.clone(), tool],
+            reject_mahalanobis2: None,
+        };
+        // A blue handle beside a bare hand: apart.
+        let blue = ColourClass::from_albedo(label::SCALPEL, [40.0, 60.0, 200.0], (0.3, 1.0), 0.03);
+        assert!(tool_apart_from_hand(Some(&classes(&skin, blue))));
+        // A broad tool class (handle, blade and their blends) explains the hand's mean, but the
+        // hand's class does not explain the tool's: apart.
+        let broad = ColourClass::from_albedo(label::SCALPEL, [110.0, 120.0, 150.0], (0.1, 1.0), 0.08);
+        assert!(broad.mahalanobis2(&skin.mean).is_some_and(|m| m < SURE_MAHALANOBIS2));
+        assert!(tool_apart_from_hand(Some(&classes(&skin, broad))));
+        // A tool of the hand's colour (a blue glove holding a blue handle): not apart.
+        let glove = ColourClass::from_albedo(label::HAND, [40.0, 60.0, 200.0], (0.2, 1.0), 0.04);
+        let handle = ColourClass::from_albedo(label::SCALPEL, [42.0, 58.0, 205.0], (0.3, 0.8), 0.02);
+        assert!(!tool_apart_from_hand(Some(&classes(&glove, handle))));
+        // Without both classes: nothing to tell apart.
+        assert!(!tool_apart_from_hand(None));
+        let one = ColourClasses { classes: vec![skin], reject_mahalanobis2: None };
+        assert!(!tool_apart_from_hand(Some(&one)));
     }
 
     #[test]
