@@ -38,7 +38,10 @@ const GEOMETRY_AGREEMENT: (f64, f64) = (0.82, 0.92);
 /// from the drawn tool. On a rig of four cameras the hand's hull is fat around the held tool, and
 /// its phantom cells hide the blade from the evidence of half the views (random:503 in
 /// random:509: right fits, 0.4-1.3° and 1-2 mm, refused as seen by two views of four, frame set
-/// after frame set); the colours so taught tell the blade's pixels from the hand's there.
+/// after frame set); the colours so taught tell the blade's pixels from the hand's there. They
+/// hint the fit, but label no frame set alone ([`Labelling::colours_label`]), and are taught only
+/// from a steady fit ([`BOOTSTRAP_STEP_M`]) whose tool the hand's colours do not explain
+/// ([`tool_apart_from_hand`]).
 const BOOTSTRAP_FRAMES: u64 = 10;
 /// ... when the frame set before had such a fit too, its tip within this distance (metres) and
 /// its blade's normal within [`BOOTSTRAP_TURN_DEG`] of this one's: a right fit holds from frame set

@@ -29,8 +29,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// fitted, and without a tool.json, the colours learned from the recording label the foreground:
 /// from the trusted frames' geometric labels, and from the masks/ of the frames named by
 /// --label-frames; until a trusted frame has taught them, from up to ten frames whose fit agrees
-/// with the silhouettes but is not trusted (only the pixels that fit alone decides: the drawn
-/// tool where no hull cell lies in front of it, the hand far from it). Nothing is tuned to one
+/// with the silhouettes but is not trusted, at nearly the pose of the frame before's (only the
+/// pixels that fit alone decides: the drawn tool where no hull cell lies in front of it, the hand
+/// far from it; not where the hand's colours explain the tool's; such colours only guide the
+/// fit, and label no frame alone). Nothing is tuned to one
 /// glove: no colour is written in the code. Where the
 /// dataset has masks/, the masks are scored against them (IoU per label).
 ///
