@@ -1441,10 +1441,11 @@ fn blade_as_hand(sure: &ColourLut, image: &image::RgbImage, pixels: &[usize]) ->
 /// ([`SHADOW_LIKE`]) [`POSSIBLE_SHADOW`], or [`label::HAND`] where its colour is surely the hand's:
 /// its colour is the background's darkened, so it may speak against the tool, never for it (where
 /// it is surely the tool's, [`TOOL_COLOURED_SHADOW`]: a possible shadow still, but one the hand's
-/// hull does not take from the drawn tool); background elsewhere. Without `hand_hints` ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of
-/// the hand's colour is [`label::UNKNOWN`] (a possible shadow of that colour stays the hand's: it
-/// is no shadow, and the hint only keeps it from the tool's shadows). Only the pixels in `win` are
-/// looked at: outside it the mask is background.
+/// hull does not take from the drawn tool on a small rig); background elsewhere. Without
+/// `hand_hints` ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of the hand's colour is
+/// [`label::UNKNOWN`] (a possible shadow of that colour stays the hand's: it is no shadow, and the
+/// hint only keeps it from the tool's shadows). Only the pixels in `win` are looked at: outside it
+/// the mask is background.
 fn fit_hints(
     sure: Option<&ColourLut>,
     hand_hints: bool,
@@ -1501,10 +1502,10 @@ fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, regi
 
 #[cfg(test)]
 mod tests {
+    use hullcut_capture::segment::ColourClass;
     use image::{Rgb, RgbImage};
 
     use super::*;
-    use hullcut_capture::segment::ColourClass;
 
     #[test]
     fn two_boxes_share_their_overlap_and_nothing_when_they_only_touch() {

@@ -48,8 +48,8 @@ pub const TABLE_SHADOW: u8 = 129;
 
 /// A hint in a labeller's view mask: a possible shadow ([`POSSIBLE_SHADOW`], and read as one
 /// throughout) whose colour is surely the tool's rather than the hand's. On a rig of fewer than
-/// six views with masks, where the tool is drawn over it, no cell of the hand's hull takes it from
-/// the tool: the hand does not look like it. A grey blade over a grey table looks like a shadow,
+/// six views with masks, where it is the tool's evidence (the tool drawn over it, or a pixel from
+/// it), no cell of the hand's hull takes it from the tool: the hand does not look like it. A grey blade over a grey table looks like a shadow,
 /// and with four cameras the hand's hull is fat enough about the held tool to lie in front of the
 /// blade in half the views (random:503 in random:509: the right fit refused, seen by two views
 /// of four, after 15 frame sets trusted). With more views the hull is tight, and the colour
@@ -1438,7 +1438,8 @@ impl ToolDepth {
     /// and none of `cells` (the hand's, as [`drawn_box`]es) lies nearer than the tool's depth
     /// less `margin`: [`ToolLabeller::final_labels`] would call them visible whichever of the
     /// cells it took for occluders. A shadow the other views put on the table ([`TABLE_SHADOW`])
-    /// is not foreground here.
+    /// is not foreground here, and a pixel whose colour is surely the hand's (a [`label::HAND`]
+    /// hint) is left out.
     fn unoccluded(&self, mask: &GrayImage, cells: impl Iterator<Item = DrawnBox>, margin: f64) -> Vec<usize> {
         let mut hand = vec![f32::INFINITY; self.depth.len()];
         for (lo, hi, z) in cells {
@@ -1451,7 +1452,7 @@ impl ToolDepth {
             .enumerate()
             .filter(|(_, (d, h))| d.is_finite() && **h >= **d)
             .map(|(k, _)| (self.y0 + k / self.w) * w + self.x0 + k % self.w)
-            .filter(|&px| raw.get(px).is_some_and(|&l| l != label::BACKGROUND && l != TABLE_SHADOW))
+            .filter(|&px| raw.get(px).is_some_and(|&l| l != label::BACKGROUND && l != TABLE_SHADOW && l != label::HAND))
             .collect()
     }
 
@@ -1715,13 +1716,14 @@ mod tests {
             .map(|k| (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w)
             .collect();
         let mut mask = GrayImage::from_pixel(w as u32, h as u32, image::Luma([label::UNKNOWN]));
-        let (off, on_table) = (drawn[10], drawn[20]);
+        let (off, on_table, hand) = (drawn[10], drawn[20], drawn[30]);
         mask.as_mut()[off] = label::BACKGROUND;
         mask.as_mut()[on_table] = TABLE_SHADOW;
-        // No cell: every drawn foreground pixel.
+        mask.as_mut()[hand] = label::HAND;
+        // No cell: every drawn foreground pixel but the one surely of the hand's colour.
         let all = tool.unoccluded(&mask, std::iter::empty(), 0.004);
-        assert_eq!(all.len(), drawn.len() - 2);
-        assert!(!all.contains(&off) && !all.contains(&on_table));
+        assert_eq!(all.len(), drawn.len() - 3);
+        assert!(!all.contains(&off) && !all.contains(&on_table) && !all.contains(&hand));
         assert!(all.iter().all(|&k| k < w * h && drawn.contains(&k)));
         // A 2 cm cell on the tool's line of sight in front of it hides what its box covers; the
         // same cell behind the tool (beyond the margin) hides nothing.
