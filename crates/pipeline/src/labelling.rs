@@ -836,7 +836,9 @@ impl Labelling {
         let bootstrapping = self.bootstrapping();
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
         let table = table_shadows.then(|| table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter));
-        labeller.list_unoccluded(bootstrapping);
+        // Only a frame set after an agreeing one may teach ([`BOOTSTRAP_STEP_M`]): the unoccluded
+        // pixels cost a splat per view, and a recording never trusted would pay it every frame set.
+        labeller.list_unoccluded(bootstrapping && self.last_agreeing.is_some());
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
         // The shadows given back to the table are background, unless the tool is drawn there;
         // neither the labels handed out nor the colours learned take them for the hand.
