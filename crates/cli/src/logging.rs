@@ -3,7 +3,8 @@
 //!
 //! When segmenting, where each frame set's labels came from goes to `labelling/source` (text) and
 //! the colours learned so far to `metrics/appearance/<label>/{colour,pixels}`, the possible
-//! shadows given back to the table to `metrics/shadows/on_table` ([`log_labelling`]).
+//! shadows given back to the table to `metrics/shadows/on_table`, the pixels an untrusted but
+//! agreeing fit taught the colours to `metrics/appearance/taught` ([`log_labelling`]).
 //!
 //! Decimation policy: images and masks every `every`-th frame (they dominate a recording's size:
 //! ~40 KB per JPEG image and 300 KB per mask at 640x480); poses and scalars every frame.
@@ -34,6 +35,10 @@ pub const SHADOW_ON_TABLE_ENTITY: &str = "metrics/shadows/on_table";
 /// The weak foreground the other views' hull confirmed in a frame set, pixels over its views
 /// (`--confirm-weak-foreground`; the report's `weak_confirmed`, frame set by frame set).
 pub const WEAK_CONFIRMED_ENTITY: &str = "metrics/foreground/weak_confirmed";
+/// The pixels an untrusted fit that agreed with the silhouettes taught the colours in a frame
+/// set, over its views, before any trusted fit taught them (the report's `counters.bootstrapped`
+/// counts these frame sets).
+pub const TAUGHT_ENTITY: &str = "metrics/appearance/taught";
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -60,12 +65,18 @@ pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
 /// Logs where a frame set's labels came from (a warning when the tool's fit was not trusted and
 /// no colour could label instead), the colours learned by then (a label with none learned yet
 /// logs nothing), the share of the drawn blade they call the hand's (once there is one) and the
-/// possible shadows given back to the table (where any were asked) and the weak foreground
-/// confirmed (with `--confirm-weak-foreground`), at the current time.
+/// possible shadows given back to the table (where any were asked), the weak foreground
+/// confirmed (with `--confirm-weak-foreground`) and the pixels an untrusted but agreeing fit
+/// taught the colours (where it did), at the current time.
 pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Result<()> {
     let (text, warning) = match trace.source {
         LabelSource::Geometry => ("geometry: the tool's trusted fit drawn into the views", false),
         LabelSource::Colour => ("colour: the learned colours (the tool's fit was not trusted)", false),
+        LabelSource::UntrustedGeometry if trace.taught.is_some() => (
+            "untrusted geometry: the tool's fit drawn although the tracker did not trust it; it agreed with the \
+             silhouettes and taught the colours",
+            true,
+        ),
         LabelSource::UntrustedGeometry => {
             ("untrusted geometry: the tool's fit drawn although the tracker did not trust it", true)
         }
@@ -80,6 +91,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     }
     if let Some(pixels) = trace.weak_confirmed {
         hullcut_viz::log_scalar(rec, WEAK_CONFIRMED_ENTITY, pixels as f64)?;
+    }
+    if let Some(pixels) = trace.taught {
+        hullcut_viz::log_scalar(rec, TAUGHT_ENTITY, pixels as f64)?;
     }
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;

@@ -652,6 +652,9 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     // So is the share of the drawn blade those colours call the hand's.
     let share = "/metrics/appearance/blade_as_hand";
     assert!(rows_of(share) >= 10, "{share}: {} rows", rows_of(share));
+    // The frame sets whose untrusted fit taught the colours are marked, as many as counted.
+    let taught = r["labelling"]["counters"]["bootstrapped"].as_u64().expect("bootstrapped");
+    assert_eq!(rows_of("/metrics/appearance/taught"), taught as usize, "{rows:?}");
 }
 
 /// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a

@@ -207,12 +207,17 @@ fn a_grey_blade_over_a_grey_table_on_four_cameras_is_found_by_the_colours_an_agr
     // IoU 0.288, hand 0.870. Two agreeing fits running, the second's unoccluded pixels teach the
     // colours, and the blade's possible shadows of the tool's colour are no longer the hand's: 17
     // trusted, scalpel 0.900, hand 0.921.
+    // The frame sets that taught are marked in the recording.
     let dir = tempfile::tempdir().expect("tempdir");
-    let r = segment(&resection(dir.path(), "random:503", "random:509", "standard", 20), &[]);
+    let rrd = dir.path().join("segment.rrd");
+    let ds = resection(dir.path(), "random:503", "random:509", "standard", 20);
+    let r = segment(&ds, &["--rrd", &path(&rrd), "--rrd-every", "1"]);
     let c = &r["labelling"]["counters"];
     let trusted = c["geometry"].as_u64().expect("geometry");
     let taught = c["bootstrapped"].as_u64().expect("bootstrapped");
     assert!(trusted >= 15 && taught >= 1, "{c}");
+    let rows = hullcut_viz::rrd_timeline_rows(&rrd).expect("the recording reads back");
+    assert_eq!(rows.get("/metrics/appearance/taught").copied(), Some(taught as usize), "{rows:?}");
     let got = [iou(&r, "hand"), iou(&r, "scalpel")];
     assert!(got[0] >= 0.9 && got[1] >= 0.8, "hand and scalpel IoU {got:?}");
 }

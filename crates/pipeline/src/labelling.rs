@@ -199,6 +199,9 @@ pub struct LabelTrace {
     /// Pixels of weak foreground the other views' hull confirmed in the frame set, over its views
     /// (`None` without [`Labelling::confirm_weak_foreground`]; [`Labelling::weak_confirmed`]).
     pub weak_confirmed: Option<u64>,
+    /// The pixels its untrusted fit taught the colours, over its views, where it agreed with the
+    /// silhouettes and taught them ([`Labelling::taught`]; `None` where it taught nothing).
+    pub taught: Option<u64>,
 }
 
 impl LabelSource {
@@ -399,6 +402,9 @@ pub struct Labelling {
     shadow_on_table: Option<u64>,
     /// Weak foreground pixels confirmed in the last frame set (with the weak test only).
     weak_confirmed: Option<u64>,
+    /// The pixels the last frame set's untrusted but agreeing fit taught the colours, over its
+    /// views (`None`: it taught nothing; [`BOOTSTRAP_FRAMES`]).
+    taught: Option<u64>,
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -500,6 +506,7 @@ impl Labelling {
             tool_as_hand: (0.0, 0.0),
             last_agreeing: None,
             shadow_on_table: None,
+            taught: None,
             weak_confirmed: None,
             hull,
             rig: ds.rig().clone(),
@@ -671,6 +678,7 @@ impl Labelling {
     pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();
+        self.taught = None;
         let mut fg = std::mem::take(&mut self.masks);
         self.segmenter
             .segment_frame_set_within(set, &mut fg, &self.windows)
@@ -1158,6 +1166,13 @@ impl Labelling {
         self.weak_confirmed
     }
 
+    /// The pixels the last labelled frame set's untrusted fit taught the colours, over its views,
+    /// where it agreed with the silhouettes and taught them ([`BOOTSTRAP_FRAMES`]; `None` where it
+    /// taught nothing).
+    pub fn taught(&self) -> Option<u64> {
+        self.taught
+    }
+
     /// The last labelled frame set's possible shadows given back to the table as the other views
     /// saw them, over its views (`None` where none were asked: no possible shadows, no tool, or a
     /// world frame that is not a table).
@@ -1206,6 +1221,8 @@ impl Labelling {
         self.learn(set, taught, taught);
         if tool_apart_from_hand(self.appearance.classes().as_ref()) {
             self.counters.bootstrapped += 1;
+            let labelled = |m: &Option<GrayImage>| m.as_ref().map_or(0, |m| m.iter().filter(|&&l| l != 0).count());
+            self.taught = Some(taught.iter().map(labelled).sum::<usize>() as u64);
         } else {
             (self.appearance, self.sharpening, self.colours, self.sure, self.explained, self.counters.learned) = before;
             self.counters.bootstrap_refused += 1;

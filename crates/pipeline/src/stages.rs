@@ -835,6 +835,7 @@ fn hull_stage(
                 blade_as_hand: labelling.blade_as_hand(),
                 shadow_on_table: labelling.shadow_on_table(),
                 weak_confirmed: labelling.weak_confirmed(),
+                taught: labelling.taught(),
             });
         }
         let occ = match labelled_hull {

@@ -81,7 +81,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// metrics/accuracy/NAME; when segmenting, where each frame set's labels came from under
 /// labelling/source, the learned colours under metrics/appearance/LABEL/{colour,pixels} and the
 /// share of the drawn blade they call the hand's under metrics/appearance/blade_as_hand, the
-/// possible shadows given back to the table under metrics/shadows/on_table; on
+/// possible shadows given back to the table under metrics/shadows/on_table, the pixels an
+/// untrusted fit that agreed with the silhouettes taught the colours (before a trusted one did)
+/// under metrics/appearance/taught; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -470,13 +472,15 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 
 /// The rerun entities a run logs when it segments (without mask files): where each frame set's
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
-/// hand's, and the possible shadows given back to the table.
-pub const SEGMENTING_ENTITIES: [&str; 5] = [
+/// hand's, the possible shadows given back to the table, and the pixels an untrusted fit that
+/// agreed with the silhouettes taught the colours (on the frame sets where it did).
+pub const SEGMENTING_ENTITIES: [&str; 6] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
     "metrics/appearance/blade_as_hand",
     "metrics/shadows/on_table",
+    crate::logging::TAUGHT_ENTITY,
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

@@ -42,7 +42,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// predicted masks under world/cams/NAME, where the labels came from under labelling/source and
 /// the learned colours under metrics/appearance/LABEL/{colour,pixels} and the share of the drawn
 /// blade they call the hand's under metrics/appearance/blade_as_hand, the possible shadows given
-/// back to the table under metrics/shadows/on_table, every --rrd-every frames)
+/// back to the table under metrics/shadows/on_table, the pixels an untrusted fit that agreed
+/// with the silhouettes taught the colours under metrics/appearance/taught, every --rrd-every
+/// frames)
 /// with --rrd.
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
@@ -225,6 +227,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             blade_as_hand: labelling.blade_as_hand(),
             shadow_on_table: labelling.shadow_on_table(),
             weak_confirmed: labelling.weak_confirmed(),
+            taught: labelling.taught(),
         };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
@@ -251,6 +254,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     // Relabelling by colour asks no shadows: the frame set's first pass did.
                     shadow_on_table: trace.shadow_on_table,
                     weak_confirmed: trace.weak_confirmed,
+                    // Relabelling by colour teaches nothing: the frame set's first pass did.
+                    taught: trace.taught,
                 },
             ),
             None => (masks, trace),
