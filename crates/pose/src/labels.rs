@@ -1456,13 +1456,6 @@ impl ToolDepth {
             .collect()
     }
 
-    /// Whether `z` is nearer than the drawn depth at some pixel centre in `[lo, hi]` where the
-    /// tool is drawn: only there can a cell splatted at `z` ([`ToolDepth::splat_min`]) hide it.
-    fn nearer_somewhere(&self, lo: Point2<f64>, hi: Point2<f64>, z: f32) -> bool {
-        let Some((i0, i1, j0, j1)) = self.span(lo, hi) else { return false };
-        (j0..=j1).any(|j| self.depth[j * self.w + i0..=j * self.w + i1].iter().any(|&d| d.is_finite() && z < d))
-    }
-
     /// Lowers `buffer` (laid out as `depth`) to `z` over the pixel centres in `[lo, hi]`.
     fn splat_min(&self, buffer: &mut [f32], lo: Point2<f64>, hi: Point2<f64>, z: f32) {
         let Some((i0, i1, j0, j1)) = self.span(lo, hi) else { return };
@@ -1476,9 +1469,8 @@ impl ToolDepth {
     }
 
     /// The indices of the hand's `cells` (with their [`drawn_box`]) that can hide the drawn tool in
-    /// [`ToolLabeller::final_labels`]: their [`drawn_box`] holds a pixel where the tool is drawn
-    /// nearer than their nearest corner plus `margin` (a cell behind the tool wherever it is
-    /// splatted hides no pixel of it, nor counts for [`ToolDepth::unoccluded`]). Each of
+    /// [`ToolLabeller::final_labels`]: their [`drawn_box`] holds a pixel where the tool is drawn,
+    /// and their nearest corner plus `margin` lies nearer than the farthest drawn depth. Each of
     /// `runs` (over `cells`: [`CellRun::split`]) is ruled out whole where its ball lies behind
     /// the tool or projects onto no drawn pixel; in the others, a cell's centre depth rules out
     /// those behind the tool, one projection of the centre with a disc around it
@@ -1525,10 +1517,7 @@ impl ToolDepth {
                     return None;
                 }
             }
-            drawn_box(cam, radius, c).filter(|&(lo, hi, z)| {
-                let z = (z + margin) as f32;
-                z < farthest && drawn_in(lo, hi) && self.nearer_somewhere(lo, hi, z)
-            })
+            drawn_box(cam, radius, c).filter(|&(lo, hi, z)| ((z + margin) as f32) < farthest && drawn_in(lo, hi))
         };
         // A run's ball holds its cells' balls: behind the tool, or projected onto no drawn pixel,
         // so is each of them (a nanometre and a micro-pixel of slack for rounding).
@@ -2150,10 +2139,9 @@ mod tests {
     }
 
     #[test]
-    fn the_cells_over_the_tool_are_exactly_those_that_hide_a_pixel_of_it() {
-        // A distorted camera, a thin diagonal tool drawn 0.5-0.57 m away, and hull cells of many
-        // sizes in front of it, behind it, beside it, between its near and far ends, and near
-        // the camera: a cell is kept where, splatted, it hides a pixel of the tool, and only there.
+    fn a_cell_not_drawn_over_the_tool_cannot_hide_it() {
+        // A distorted camera, a thin diagonal tool drawn 0.5 m away, and hull cells of many sizes
+        // in front of it, behind it, beside it and near the camera.
         let (camera, tool) = diagonal_tool();
         let mut seed = 11u64;
         let mut next = || {
@@ -2185,7 +2173,6 @@ mod tests {
             hides += usize::from(hidden);
             let kept = over.iter().find(|(i, _)| *i == k);
             assert!(!hidden || kept.is_some(), "cell {k} ({c:?}) hides the tool but was left out");
-            assert!(hidden || kept.is_none(), "cell {k} ({c:?}) hides no pixel of the tool but was kept");
             assert!(kept.is_none_or(|(_, b)| *b == (lo, hi, z)), "cell {k}: its box as splatted");
         }
         assert!(hides > 0, "some cells hide the tool");
