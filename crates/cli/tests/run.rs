@@ -681,6 +681,37 @@ fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
     assert_pieces_on_the_table(t, "mean_speed_m_s");
 }
 
+/// The labels of a frame set that is not logged are drawn only where they teach the colours: the
+/// loop needs its hull and the tool's pose, not its masks. How often the images are logged must
+/// not change what the loop does: the same recording (the first 30 frame sets of the resection on
+/// the random:47 rig in the random:88 look, the pointed scalpel, no masks) logged every frame set
+/// and every seventh gives the same pose frame by frame, the same labelling and the same organ,
+/// and each frame set logged has its label masks.
+#[test]
+fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let look = ["--rig", "random:47", "--appearance", "random:88", "--tool", "pointed"];
+    let synth = [&["--frames", "30", "--scene", "resect"][..], &look].concat();
+    let (every, sparse) = (dir.path().join("every"), dir.path().join("sparse"));
+    let [a, b] = [(&every, "1"), (&sparse, "7")].map(|(d, n)| {
+        std::fs::create_dir_all(d).expect("dir");
+        run_segmented(d, &synth, n)
+    });
+    assert!(a["counters"]["poses_trusted"].as_u64().expect("trusted") >= 20, "{}", a["counters"]);
+    assert_eq!(a["pose"]["per_frame"], b["pose"]["per_frame"]);
+    assert_eq!(a["labelling"]["counters"], b["labelling"]["counters"]);
+    assert_eq!(a["labelling"]["appearance"], b["labelling"]["appearance"]);
+    assert_eq!(a["tissue"]["pieces"], b["tissue"]["pieces"]);
+    // Learned from every fifth trusted frame set at most, not from every one.
+    let learned = a["labelling"]["counters"]["learned"].as_u64().expect("learned");
+    assert!((2..=7).contains(&learned), "{}", a["labelling"]["counters"]);
+    for (d, logged) in [(&every, 30), (&sparse, 5)] {
+        let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
+        let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);
+        assert_eq!(labels, logged, "{}: {rows:?}", d.display());
+    }
+}
+
 /// The lobe resection seen by nine cameras of a seeded random rig in a seeded random look (a bare
 /// hand, a blue handle, a grey checkered mat under a light that casts the hand's and the blade's
 /// shadows on it), no masks: the views near the light see the hand's shadow through the hand, and

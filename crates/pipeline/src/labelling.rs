@@ -56,8 +56,17 @@ const BOOTSTRAP_TURN_DEG: f64 = 5.0;
 /// ... when the fit's unoccluded tool pixels number at least this many over the views (a
 /// handful of pixels teaches nothing, and on a tool wholly hidden the fit decides nothing).
 const BOOTSTRAP_MIN_PIXELS: usize = 200;
-/// The colour classes are recompiled after this many frame sets learned from.
-const REFRESH_EVERY: u64 = 15;
+/// A trusted frame set teaches the colours when at least this many frame sets have passed since
+/// the last one that taught them (the first trusted one teaches): the colours of a hand and a
+/// tool change little from one frame set to the next, and learning needs the fitted tool drawn
+/// into every view, most of the labelling's time. Between them, inside the main job's loop, a
+/// frame set whose label masks nobody uses (none logged) is labelled only as far as the loop
+/// needs: the tool's fit and the hull's cells near it ([`Labelling::label_with`]). What was
+/// learned is forgotten by the frame sets passed, not by those learned from.
+const LEARN_EVERY: u64 = 5;
+/// The colour classes are compiled when they first learn, and again when they learn at least this
+/// many frame sets after that.
+const REFRESH_EVERY: u32 = 15;
 /// Foreground this close (pixels, square neighbourhood) to the drawn tool takes the label of its
 /// colour where the colour is sure: the geometry puts the tool to a pixel or two, and where the
 /// hand crosses it the hull cannot say which is in front to the pixel.
@@ -77,8 +86,8 @@ const SURE_MAHALANOBIS2: f64 = 11.34;
 /// the track, 0.1-0.3%; the pointed tool in random:137 17% from its first learned frame set, in
 /// random:271 64%.
 const TOOL_AS_HAND_MAX: f64 = 0.1;
-/// How much of the drawn blade's tally each learned frame set keeps of the one before (the
-/// appearance model forgets at the same pace).
+/// How much of the drawn blade's tally is kept per frame set passed (the appearance model
+/// forgets at the same pace).
 const TOOL_AS_HAND_KEEP: f64 = 0.97;
 /// A view's foreground is degraded when it is this many times its usual (the median over its
 /// last [`DEGRADED_HISTORY`] frame sets)...
@@ -405,6 +414,12 @@ pub struct Labelling {
     /// The pixels the last frame set's untrusted but agreeing fit taught the colours, over its
     /// views (`None`: it taught nothing; [`BOOTSTRAP_FRAMES`]).
     taught: Option<u64>,
+    /// Frame sets still to label before a trusted one may teach the colours ([`LEARN_EVERY`]).
+    until_learn: u64,
+    /// Frame sets labelled since the colours last learned (what they forget when they next do).
+    since_learned: u32,
+    /// ... and since they were last compiled ([`REFRESH_EVERY`]).
+    since_compiled: u32,
     hull: HullParams,
     rig: hullcut_rig::Rig,
     label_frames: Vec<u64>,
@@ -507,6 +522,9 @@ impl Labelling {
             last_agreeing: None,
             shadow_on_table: None,
             taught: None,
+            until_learn: 0,
+            since_learned: 0,
+            since_compiled: 0,
             weak_confirmed: None,
             hull,
             rig: ds.rig().clone(),
@@ -674,8 +692,16 @@ impl Labelling {
         self.segmenter.params()
     }
 
-    /// Labels one frame set.
+    /// Labels one frame set, its label masks drawn.
     pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Labelled, Error> {
+        self.label_with(set, carver, true)
+    }
+
+    /// Labels one frame set; without `masks_wanted`, a frame set the tool's trusted fit labels
+    /// gets no label masks unless it teaches the colours ([`LEARN_EVERY`]): its hull and pose are
+    /// the same either way, and so is every frame set after it (the masks of a frame set that
+    /// does not teach feed nothing that follows).
+    pub fn label_with(&mut self, set: &FrameSet, carver: &mut Carver, masks_wanted: bool) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();
         self.taught = None;
@@ -842,19 +868,26 @@ impl Labelling {
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
             .collect();
         let bootstrapping = self.bootstrapping();
+        let colours = self.method == LabelMethod::Both;
+        let learn_due = colours && self.until_learn == 0;
+        self.since_learned = self.since_learned.saturating_add(1);
+        self.since_compiled = self.since_compiled.saturating_add(1);
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
         let table = table_shadows.then(|| table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter));
         // Only a frame set after an agreeing one may teach ([`BOOTSTRAP_STEP_M`]): the unoccluded
         // pixels cost a splat per view, and a recording never trusted would pay it every frame set.
         labeller.list_unoccluded(bootstrapping && self.last_agreeing.is_some());
+        // The masks are drawn where they are wanted, where they may teach, and where an untrusted
+        // fit may (the colours label the other untrusted frame sets, or nothing does).
+        labeller.draw_labels(masks_wanted || learn_due || bootstrapping && self.last_agreeing.is_some());
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
         // The shadows given back to the table are background, unless the tool is drawn there;
         // neither the labels handed out nor the colours learned take them for the hand.
         to_background(&mut labelled.masks, &given_back, true);
         let estimate = labelled.estimate;
-        let colours = self.method == LabelMethod::Both;
         let trusted = estimate.valid && estimate.fitted.is_some();
-        let learns = colours && trusted && estimate.confidence >= LEARN_CONFIDENCE;
+        let learns = learn_due && trusted && estimate.confidence >= LEARN_CONFIDENCE;
+        self.until_learn = if learns { LEARN_EVERY - 1 } else { self.until_learn.saturating_sub(1) };
         let agreement = estimate.diagnostics.explained.min(estimate.diagnostics.covered);
         // An untrusted fit that agrees with the silhouettes, and whether the one of the frame set
         // before agreed too, at nearly the same pose.
@@ -927,8 +960,9 @@ impl Labelling {
         }
         if let Some((likelier, blade)) = learn_from {
             // Only a trusted fit's labels teach: `masks` are the labels handed out.
+            let passed = self.since_learned;
             self.learn(set, &likelier, &masks);
-            self.judge_hand_hints(set, &blade);
+            self.judge_hand_hints(set, &blade, passed);
         } else if let Some(taught) = taught {
             // Or, until one has, what an agreeing fit alone decides.
             self.bootstrap(set, &taught);
@@ -1118,8 +1152,10 @@ impl Labelling {
     fn learn(&mut self, set: &FrameSet, likelier: &[Option<GrayImage>], handed_out: &[Option<GrayImage>]) {
         // The labels are background outside each view's window.
         let windows = &self.windows;
+        // What was learned is forgotten by the frame sets passed since ([`LEARN_EVERY`]).
+        let passed = std::mem::take(&mut self.since_learned).max(1);
         let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>]| {
-            model.age();
+            model.age_by(passed);
             for (k, (view, mask)) in set.views.iter().zip(masks).enumerate() {
                 if let (Some(view), Some(mask)) = (view, mask) {
                     let window = Window::of_view(windows, k, mask.width(), mask.height());
@@ -1132,7 +1168,10 @@ impl Labelling {
         self.counters.learned += 1;
         // Each model compiled on its own: one not learned yet (no class) does not make the other
         // compile every frame set.
-        let refresh = self.counters.learned % REFRESH_EVERY == 1;
+        let refresh = self.counters.learned == 1 || self.since_compiled >= REFRESH_EVERY;
+        if refresh {
+            self.since_compiled = 0;
+        }
         if refresh || self.colours.is_none() {
             (self.colours, self.sure) = compile(self.appearance.classes());
         }
@@ -1144,7 +1183,8 @@ impl Labelling {
     /// Tallies how much of a learned frame set's drawn blade (`blade`, per view the indices of its
     /// scalpel pixels within the blade's outline, taken before any colour sharpened the labels)
     /// the sure colours, as just learned, call the hand's.
-    fn judge_hand_hints(&mut self, set: &FrameSet, blade: &[Vec<usize>]) {
+    /// What was tallied before is kept as for the `passed` frame sets since it was.
+    fn judge_hand_hints(&mut self, set: &FrameSet, blade: &[Vec<usize>], passed: u32) {
         let Some(sure) = &self.sure else { return };
         let (pixels, hand) = set
             .views
@@ -1155,7 +1195,8 @@ impl Labelling {
             })
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         let (b, h) = self.tool_as_hand;
-        self.tool_as_hand = (b * TOOL_AS_HAND_KEEP + pixels as f64, h * TOOL_AS_HAND_KEEP + hand as f64);
+        let keep = TOOL_AS_HAND_KEEP.powi(passed.max(1) as i32);
+        self.tool_as_hand = (b * keep + pixels as f64, h * keep + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
     }
@@ -1217,6 +1258,7 @@ impl Labelling {
             self.sure.clone(),
             self.explained.clone(),
             self.counters.learned,
+            (self.since_learned, self.since_compiled),
         );
         self.learn(set, taught, taught);
         if tool_apart_from_hand(self.appearance.classes().as_ref()) {
@@ -1224,7 +1266,15 @@ impl Labelling {
             let labelled = |m: &Option<GrayImage>| m.as_ref().map_or(0, |m| m.iter().filter(|&&l| l != 0).count());
             self.taught = Some(taught.iter().map(labelled).sum::<usize>() as u64);
         } else {
-            (self.appearance, self.sharpening, self.colours, self.sure, self.explained, self.counters.learned) = before;
+            (
+                self.appearance,
+                self.sharpening,
+                self.colours,
+                self.sure,
+                self.explained,
+                self.counters.learned,
+                (self.since_learned, self.since_compiled),
+            ) = before;
             self.counters.bootstrap_refused += 1;
         }
     }

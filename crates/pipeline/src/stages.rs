@@ -125,6 +125,11 @@ pub struct Setup {
     pub use_files: bool,
     /// Segmentation and labelling, when the masks are not files.
     pub labelling: Option<Labelling>,
+    /// When segmenting, the frame sets whose label masks the caller uses: those whose number on
+    /// the frame timeline (the frame's, plus the pass times one more than the last frame's) is a
+    /// multiple of this (1, the default: all; `None`: none). The others get the hull and the
+    /// pose, and their masks only where they teach the colours ([`Labelling::label_with`]).
+    pub masks_every: Option<u64>,
     /// Carving.
     pub hull: HullParams,
     /// Where carving runs.
@@ -179,6 +184,7 @@ impl Setup {
             pass_span_ns: 0,
             use_files,
             labelling: None,
+            masks_every: Some(1),
             hull,
             carver,
             template,
@@ -485,6 +491,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         pass_span_ns,
         use_files,
         labelling,
+        masks_every,
         hull,
         carver,
         template,
@@ -494,6 +501,11 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         realtime,
         stop,
     } = setup;
+    // A pass's frame sets follow the last pass's on the frame timeline.
+    let pass_frames = frames.last().map_or(1, |&last| last.saturating_add(1));
+    let masks_wanted = move |frame: u64, pass: u64| {
+        masks_every.is_some_and(|n| frame.saturating_add(pass.saturating_mul(pass_frames)).is_multiple_of(n.max(1)))
+    };
     let in_flight = in_flight.max(1);
     let abort = Arc::new(AtomicBool::new(false));
     let depth = Arc::new(QueueDepth::default());
@@ -529,8 +541,13 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         stage("hull", &abort, move || {
             let mut labelling = labelling;
             let mut region = CarveRegion::new(hull.workspace, hull.leaf_size);
-            let result =
-                hull_stage(&ds, labelling.as_mut(), (carver, &hull, &mut region), &read_rx, (&hull_tx, &depth));
+            let result = hull_stage(
+                &ds,
+                (labelling.as_mut(), &masks_wanted),
+                (carver, &hull, &mut region),
+                &read_rx,
+                (&hull_tx, &depth),
+            );
             ((labelling.as_ref().map(Labelling::report), region.counts), result)
         })?
     };
@@ -796,7 +813,7 @@ fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> Result<i64,
 /// checked by the reader.
 fn hull_stage(
     ds: &Dataset,
-    mut labelling: Option<&mut Labelling>,
+    (mut labelling, masks_wanted): (Option<&mut Labelling>, &dyn Fn(u64, u64) -> bool),
     (mut carver, params, region): (Carver, &HullParams, &mut CarveRegion),
     rx: &Receiver<Work>,
     (tx, depth): (&Sender<Work>, &QueueDepth),
@@ -809,7 +826,7 @@ fn hull_stage(
         if let Some(labelling) = labelling.as_deref_mut() {
             let clock = Instant::now();
             labelling.set_workspace(boxed);
-            let labelled = labelling.label(&work.set, &mut carver)?;
+            let labelled = labelling.label_with(&work.set, &mut carver, masks_wanted(frame, work.pass))?;
             if let Some(occ) = &labelled.occupancy {
                 // A clipped foreground hull stays (labelling a frame set twice would feed its
                 // track twice); the next frame set is carved in the whole volume.

@@ -123,12 +123,13 @@ pub struct LabelledFrame {
     /// The tracker's estimate for the frame.
     pub estimate: PoseEstimate,
     /// Per view (rig order): 0 background, 1 hand, 2 scalpel, 255 unknown; `None` for a missing
-    /// view.
+    /// view, and for every view of a fitted frame set whose labels were not drawn
+    /// ([`ToolLabeller::draw_labels`]).
     pub masks: Vec<Option<GrayImage>>,
     /// The foreground's hull with tool cells labelled scalpel and the others hand.
     pub occupancy: Occupancy,
     /// Per view: where the fitted tool's mesh is drawn, hidden or not (`None` without a fit, a
-    /// view, or the tool in it).
+    /// view, or the tool in it, and where the labels were not drawn).
     pub tool_regions: Vec<Option<ToolRegion>>,
     /// Per view (empty unless [`ToolLabeller::list_unoccluded`] asked for them, or without a
     /// fit): the indices of the foreground pixels where the tool is drawn and no cell of the
@@ -244,6 +245,8 @@ pub struct ToolLabeller {
     params: LabelParams,
     /// Whether [`ToolLabeller::label`] lists each view's [`LabelledFrame::unoccluded`] pixels.
     unoccluded: bool,
+    /// Whether [`ToolLabeller::label`] draws the views' labels ([`ToolLabeller::draw_labels`]).
+    draw: bool,
 }
 
 impl ToolLabeller {
@@ -264,6 +267,7 @@ impl ToolLabeller {
             field,
             params,
             unoccluded: false,
+            draw: true,
         })
     }
 
@@ -277,6 +281,15 @@ impl ToolLabeller {
     /// default: it splats every such cell once more per view).
     pub fn list_unoccluded(&mut self, on: bool) {
         self.unoccluded = on;
+    }
+
+    /// Whether [`ToolLabeller::label`] draws the fitted tool into the views and labels them (on
+    /// by default). Off, a fitted frame set gets the hull's cells near the tool labelled and its
+    /// pose, but no label masks ([`LabelledFrame::masks`] `None` for every view), no tool regions
+    /// and no unoccluded pixels: for a loop that uses only the hull and the pose on most frame
+    /// sets, the drawing is most of the labelling's time.
+    pub fn draw_labels(&mut self, on: bool) {
+        self.draw = on;
     }
 
     /// The blade's outline in `camera` with the tool at `tool_to_world`: the convex hull of its
@@ -421,6 +434,10 @@ impl ToolLabeller {
         };
         let clock = Instant::now();
         let (masks, occupancy, tool_regions, unoccluded) = match &estimate.fitted {
+            Some(fitted) if !self.draw => {
+                let occupancy = near_tool(occ, &self.field, &fitted.tool_to_world, self.params.tool_margin_m, not_hand);
+                (vec![None; views.len()], occupancy, vec![None; views.len()], Vec::new())
+            }
             Some(fitted) => {
                 let pose = fitted.tool_to_world;
                 let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m, not_hand);

@@ -192,9 +192,16 @@ impl AppearanceModel {
     /// Forgets a little of what was learned (call once per frame set learned from, before
     /// learning it), and compiles what is known so far to judge the new samples.
     pub fn age(&mut self) {
+        self.age_by(1);
+    }
+
+    /// [`AppearanceModel::age`] for a frame set learned from `frame_sets` frame sets after the last
+    /// one (those between taught nothing): what was learned keeps `forget^frame_sets` of its weight.
+    pub fn age_by(&mut self, frame_sets: u32) {
         self.gate = self.classes().map(|c| LazyLut::confident(&c, 2.0 * GATE_LOG_RATIO));
+        let keep = self.forget.powi(frame_sets.min(i32::MAX as u32) as i32);
         for s in &mut self.sums {
-            s.scale(self.forget);
+            s.scale(keep);
         }
     }
 
@@ -262,6 +269,16 @@ mod tests {
         let before = model.summary()[0].pixels;
         model.age();
         assert!((model.summary()[0].pixels - before * 0.97).abs() < 1e-9);
+        // Learned from five frame sets later, it forgets as five frame sets learned from do.
+        let mut by_five = model.clone();
+        by_five.age_by(5);
+        for _ in 0..5 {
+            model.age();
+        }
+        for (a, b) in by_five.summary().iter().zip(model.summary()) {
+            assert!((a.pixels - b.pixels).abs() < 1e-9 * b.pixels, "{a:?} against {b:?}");
+            assert_eq!(a.rgb, b.rgb);
+        }
     }
 
     /// What `learn` did before it skipped the background: every pixel visited in turn.

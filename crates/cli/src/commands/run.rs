@@ -683,6 +683,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         pass_span_ns,
         use_files,
         labelling,
+        // The label masks of the frame sets logged with their images (the logger's `shown`).
+        masks_every: Some(args.rrd_every),
         hull,
         carver,
         template: template.clone(),
