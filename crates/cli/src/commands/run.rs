@@ -193,7 +193,9 @@ pub struct Args {
     queue: usize,
     /// Log images (JPEG), masks, hull leaves and meshes and the lattice nodes every N-th frame; the
     /// blade, the swept surface and the scalars every frame; the tissue surface whenever it has
-    /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged).
+    /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged). When
+    /// segmenting, the label masks of the frames between are not drawn (unless they teach the
+    /// colours): N changes the time segmentation takes, not what the loop computes.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
     /// Decode the frame sets into memory before the loop when they take at most this many MiB
