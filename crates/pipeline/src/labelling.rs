@@ -325,7 +325,8 @@ pub struct LabellingReport {
 /// One frame set's labels.
 #[derive(Debug)]
 pub struct Labelled {
-    /// Per view: 0 background, 1 hand, 2 scalpel, 255 unknown.
+    /// Per view: 0 background, 1 hand, 2 scalpel, 255 unknown; `None` for a missing view, and for
+    /// every view of a frame set labelled without its masks ([`Labelling::label_with`]).
     pub masks: Vec<Option<GrayImage>>,
     /// The foreground's hull with the tool's cells labelled, when the geometry ran (no need to
     /// carve again).
@@ -697,10 +698,12 @@ impl Labelling {
         self.label_with(set, carver, true)
     }
 
-    /// Labels one frame set; without `masks_wanted`, a frame set the tool's trusted fit labels
-    /// gets no label masks unless it teaches the colours ([`LEARN_EVERY`]): its hull and pose are
-    /// the same either way, and so is every frame set after it (the masks of a frame set that
-    /// does not teach feed nothing that follows).
+    /// Labels one frame set; without `masks_wanted`, a frame set the tool's fit labels (trusted
+    /// or not) gets no label masks (`None` for every view) unless it may teach the colours (a
+    /// trusted frame set at most every fifth frame set; an agreeing untrusted one while no trusted
+    /// one has): its hull and pose are the same either way, and so is every frame set after it
+    /// (the masks of a frame set that does not teach feed nothing that follows). A frame set the
+    /// learned colours label gets its masks either way.
     pub fn label_with(&mut self, set: &FrameSet, carver: &mut Carver, masks_wanted: bool) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();
@@ -1208,8 +1211,8 @@ impl Labelling {
     }
 
     /// The pixels the last labelled frame set's untrusted fit taught the colours, over its views,
-    /// where it agreed with the silhouettes and taught them ([`BOOTSTRAP_FRAMES`]; `None` where it
-    /// taught nothing).
+    /// where it agreed with the silhouettes and taught them (before any trusted fit did; `None`
+    /// where it taught nothing).
     pub fn taught(&self) -> Option<u64> {
         self.taught
     }
