@@ -251,7 +251,8 @@ fn push(series: &mut Vec<Series>, label: &str, point: (f64, f64)) {
 }
 
 /// The loop of one configuration on `source`: the organ at the configuration's cell, segmenting
-/// with the tool's geometry and the learned colours when it does not read mask files.
+/// with the tool's geometry and the learned colours when it does not read mask files (no label
+/// masks drawn but those that teach the colours: nothing here logs them).
 fn loop_setup(ds: &Arc<Dataset>, source: FrameSource, hull: &HullParams, config: &Config) -> anyhow::Result<Setup> {
     let organ = tissue::build("organ", config.cell, None, None)?;
     let labelling = if config.segment {
@@ -262,6 +263,9 @@ fn loop_setup(ds: &Arc<Dataset>, source: FrameSource, hull: &HullParams, config:
     };
     let mut setup = Setup::new(source, ds.frame_numbers(), !config.segment, hull.clone(), Carver::Cpu, organ);
     setup.labelling = labelling;
+    // Nothing is logged here: no frame set's label masks are used (those that teach the colours
+    // are drawn all the same), as in a run that logs nothing.
+    setup.masks_every = None;
     setup.in_flight = config.in_flight;
     Ok(setup)
 }
