@@ -705,6 +705,12 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
     // Learned from every fifth trusted frame set at most, not from every one.
     let learned = a["labelling"]["counters"]["learned"].as_u64().expect("learned");
     assert!((2..=7).contains(&learned), "{}", a["labelling"]["counters"]);
+    // Logged every frame set, every fitted one is drawn; every seventh, those logged and those
+    // that may teach (12 of 30 on 2026-11-29), not the rest.
+    let drawn = |r: &serde_json::Value| r["labelling"]["drawn"].as_u64().expect("drawn");
+    let fitted = 30 - a["labelling"]["counters"]["unknown"].as_u64().expect("unknown");
+    assert_eq!(drawn(&a), fitted, "{}", a["labelling"]);
+    assert!(drawn(&b) >= learned && drawn(&b) < drawn(&a), "{} of {}", drawn(&b), drawn(&a));
     for (d, logged) in [(&every, 30), (&sparse, 5)] {
         let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
         let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);

@@ -57,7 +57,8 @@ const BOOTSTRAP_TURN_DEG: f64 = 5.0;
 /// handful of pixels teaches nothing, and on a tool wholly hidden the fit decides nothing).
 const BOOTSTRAP_MIN_PIXELS: usize = 200;
 /// A trusted frame set teaches the colours when at least this many frame sets have passed since
-/// the last one that taught them (the first trusted one teaches): the colours of a hand and a
+/// the last one that taught them (trusted, or agreeing before any trusted one did:
+/// [`BOOTSTRAP_FRAMES`]); while none has, the first trusted one teaches. The colours of a hand and a
 /// tool change little from one frame set to the next, and learning needs the fitted tool drawn
 /// into every view, most of the labelling's time. Between them, inside the main job's loop, a
 /// frame set whose label masks nobody uses (none logged) is labelled only as far as the loop
@@ -320,6 +321,11 @@ pub struct LabellingReport {
     pub sharpening_appearance: Vec<LearnedColour>,
     /// Frame sets and views it learned from.
     pub appearance_sources: hullcut_capture::segment::AppearanceSources,
+    /// Frame sets whose fitted tool was drawn into the views to label them: every fitted one
+    /// outside the main job's loop; inside it, those logged with their images and those that may
+    /// teach the colours ([`Labelling::label_with`]). 0 in reports written before it was counted.
+    #[serde(default)]
+    pub drawn: u64,
 }
 
 /// One frame set's labels.
@@ -415,9 +421,10 @@ pub struct Labelling {
     /// The pixels the last frame set's untrusted but agreeing fit taught the colours, over its
     /// views (`None`: it taught nothing; [`BOOTSTRAP_FRAMES`]).
     taught: Option<u64>,
-    /// Frame sets still to label before a trusted one may teach the colours ([`LEARN_EVERY`]).
-    until_learn: u64,
-    /// Frame sets labelled since the colours last learned (what they forget when they next do).
+    /// Fitted frame sets whose labels were drawn ([`LabellingReport::drawn`]).
+    drawn: u64,
+    /// Frame sets labelled since the colours last learned (what they forget when they next do, and
+    /// whether a trusted frame set may teach them: [`LEARN_EVERY`]).
     since_learned: u32,
     /// ... and since they were last compiled ([`REFRESH_EVERY`]).
     since_compiled: u32,
@@ -523,7 +530,7 @@ impl Labelling {
             last_agreeing: None,
             shadow_on_table: None,
             taught: None,
-            until_learn: 0,
+            drawn: 0,
             since_learned: 0,
             since_compiled: 0,
             weak_confirmed: None,
@@ -872,8 +879,8 @@ impl Labelling {
             .collect();
         let bootstrapping = self.bootstrapping();
         let colours = self.method == LabelMethod::Both;
-        let learn_due = colours && self.until_learn == 0;
         self.since_learned = self.since_learned.saturating_add(1);
+        let learn_due = colours && (self.counters.learned == 0 || u64::from(self.since_learned) >= LEARN_EVERY);
         self.since_compiled = self.since_compiled.saturating_add(1);
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
         let table = table_shadows.then(|| table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter));
@@ -882,15 +889,16 @@ impl Labelling {
         labeller.list_unoccluded(bootstrapping && self.last_agreeing.is_some());
         // The masks are drawn where they are wanted, where they may teach, and where an untrusted
         // fit may (the colours label the other untrusted frame sets, or nothing does).
-        labeller.draw_labels(masks_wanted || learn_due || bootstrapping && self.last_agreeing.is_some());
+        let draw = masks_wanted || learn_due || bootstrapping && self.last_agreeing.is_some();
+        labeller.draw_labels(draw);
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
+        self.drawn += u64::from(draw && labelled.estimate.fitted.is_some());
         // The shadows given back to the table are background, unless the tool is drawn there;
         // neither the labels handed out nor the colours learned take them for the hand.
         to_background(&mut labelled.masks, &given_back, true);
         let estimate = labelled.estimate;
         let trusted = estimate.valid && estimate.fitted.is_some();
         let learns = learn_due && trusted && estimate.confidence >= LEARN_CONFIDENCE;
-        self.until_learn = if learns { LEARN_EVERY - 1 } else { self.until_learn.saturating_sub(1) };
         let agreement = estimate.diagnostics.explained.min(estimate.diagnostics.covered);
         // An untrusted fit that agrees with the silhouettes, and whether the one of the frame set
         // before agreed too, at nearly the same pose.
@@ -1198,7 +1206,7 @@ impl Labelling {
             })
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         let (b, h) = self.tool_as_hand;
-        let keep = TOOL_AS_HAND_KEEP.powi(passed.max(1) as i32);
+        let keep = TOOL_AS_HAND_KEEP.powi(passed.clamp(1, i32::MAX as u32) as i32);
         self.tool_as_hand = (b * keep + pixels as f64, h * keep + hand as f64);
         self.counters.tool_as_hand = self.tool_as_hand_share();
         self.counters.hand_hints = self.hand_hints();
@@ -1310,6 +1318,7 @@ impl Labelling {
             appearance: self.appearance.summary(),
             sharpening_appearance: self.sharpening.summary(),
             appearance_sources: self.appearance.sources,
+            drawn: self.drawn,
         }
     }
 
