@@ -711,6 +711,10 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
     let fitted = 30 - a["labelling"]["counters"]["unknown"].as_u64().expect("unknown");
     assert_eq!(drawn(&a), fitted, "{}", a["labelling"]);
     assert!(drawn(&b) >= learned && drawn(&b) < drawn(&a), "{} of {}", drawn(&b), drawn(&a));
+    // The foreground's hull is carved at the leaf only near the tool once its track predicts it:
+    // not on the first frame set (no track yet), on most after it.
+    let fine = a["labelling"]["counters"]["hull_fine_near_tool"].as_u64().expect("fine near the tool");
+    assert!((20..30).contains(&fine), "{}", a["labelling"]["counters"]);
     for (d, logged) in [(&every, 30), (&sparse, 5)] {
         let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
         let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);

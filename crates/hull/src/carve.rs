@@ -957,6 +957,20 @@ pub fn refine_label(
     l: u8,
     levels: u32,
 ) -> Result<Occupancy, HullError> {
+    refine_cells(views, params, occ, levels, |_, c| c.has(l))
+}
+
+/// Carves the leaves of `occ` that `select` picks (by index and cell) again, `levels` octree
+/// levels finer, as [`refine_label`] does for a label's leaves: a hull carved at a coarse leaf
+/// and refined where detail matters (near a tool, say) holds there the cells a carving at the fine
+/// leaf would keep, since carving is conservative. Larger uniform cells stay whole.
+pub fn refine_cells(
+    views: &[Option<Silhouette>],
+    params: &HullParams,
+    occ: Occupancy,
+    levels: u32,
+    select: impl Fn(usize, &Cell) -> bool,
+) -> Result<Occupancy, HullError> {
     if levels == 0 {
         return Ok(occ);
     }
@@ -972,8 +986,10 @@ pub fn refine_label(
         blade_levels: 0,
         ..params.clone()
     };
-    let (seeds, mut cells): (Vec<Cell>, Vec<Cell>) =
-        occ.cells.into_iter().partition(|c| c.has(l) && c.size < 1.5 * leaf);
+    let (mut seeds, mut cells) = (Vec::new(), Vec::with_capacity(occ.cells.len()));
+    for (k, c) in occ.cells.into_iter().enumerate() {
+        if select(k, &c) && c.size < 1.5 * leaf { seeds.push(c) } else { cells.push(c) }
+    }
     let refined = carve_within(views, &fine, &seeds)?;
     let mut stats = occ.stats;
     stats.footprint_tests += refined.stats.footprint_tests;

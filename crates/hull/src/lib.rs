@@ -31,7 +31,7 @@ mod volume;
 
 pub use carve::{
     Aabb, CarveStats, Cell, Footprint, HullParams, MAX_DEPTH, MAX_REFINE_LEVELS, Occupancy, carve, carve_within,
-    footprint, footprint_counts, refine_label, relabel,
+    footprint, footprint_counts, refine_cells, refine_label, relabel,
 };
 pub use silhouette::{Counts, Silhouette};
 pub use surface::{DenseGrid, is_watertight};

@@ -12,7 +12,7 @@ use hullcut_capture::segment::{
 };
 use hullcut_dataset::{Dataset, FrameSet, ToolGeometry, label};
 use hullcut_hull::shadow::{SHADOW_HULL_HEIGHT, cover, cover_split, keep_supported, still_seen};
-use hullcut_hull::{HullParams, Occupancy, Silhouette, direct_silhouettes, silhouettes};
+use hullcut_hull::{HullError, HullParams, Occupancy, Silhouette, direct_silhouettes, refine_cells, silhouettes};
 use hullcut_pose::{
     LabelParams, LabelStats, POSSIBLE_SHADOW, PoseEstimate, Shading, TABLE_SHADOW, TOOL_COLOURED_SHADOW, TableShadows,
     ToolLabeller, ToolRegion, TrackerParams, ViewInput,
@@ -65,6 +65,12 @@ const BOOTSTRAP_MIN_PIXELS: usize = 200;
 /// needs: the tool's fit and the hull's cells near it ([`Labelling::label_with`]). What was
 /// learned is forgotten by the frame sets passed, not by those learned from.
 const LEARN_EVERY: u64 = 5;
+
+/// Where the tool's track predicts it, the foreground's hull is carved at the leaf within this
+/// distance of the predicted tool and at twice the leaf beyond ([`Labelling::carve_foreground`]),
+/// metres: room for the prediction's error and the fingers around the handle.
+const FINE_NEAR_TOOL_M: f64 = 0.015;
+
 /// The colour classes are compiled when they first learn, and again when they learn at least this
 /// many frame sets after that.
 const REFRESH_EVERY: u32 = 15;
@@ -273,6 +279,11 @@ pub struct LabelCounters {
     /// Views whose foreground jumped far above their usual (someone behind the table, a light
     /// switched on): their foreground was cut to what the hull explains, the frame set kept.
     pub degraded_views: u64,
+    /// Frame sets whose foreground hull was carved at twice the leaf away from the tool and at
+    /// the leaf within 1 cm of where its track predicted it (the others, at the leaf throughout:
+    /// no prediction yet, or the track lost).
+    #[serde(default)]
+    pub hull_fine_near_tool: u64,
     /// The share of the drawn blade's pixels (the tool's labels within the blade's outline), on
     /// the frame sets learned from (recent ones weighing more), that the sure colours call the
     /// hand's.
@@ -555,6 +566,31 @@ impl Labelling {
         self.windows = self.rig.cameras.iter().map(|c| crate::region::window(c, &workspace, pad)).collect();
     }
 
+    /// The hull of the views' foreground, and whether it was carved finer near the tool: where the
+    /// tool's track predicts it, the hull is carved at twice the leaf, then again at the leaf
+    /// within [`FINE_NEAR_TOOL_M`] of the predicted tool ([`hullcut_hull::refine_cells`]). There
+    /// it holds the cells a carving at the leaf would (carving is conservative); away from the
+    /// tool (the hand's bulk, the wrist) its leaves are twice as large, which the labels do not
+    /// need finer: a hand cell matters to them where it lies in front of the tool or beside it.
+    /// Without a prediction, or with sliver trimming or blade refinement asked for, the whole hull
+    /// is carved at the leaf.
+    fn carve_foreground(
+        &self,
+        carver: &mut Carver,
+        views: &[Option<Silhouette>],
+        timestamp_ns: i64,
+    ) -> Result<(Occupancy, bool), HullError> {
+        let adaptive = !self.hull.trim_slivers && self.hull.blade_levels == 0;
+        let predicted = self.tool.as_ref().filter(|t| adaptive && t.tracker().predicted(timestamp_ns).is_some());
+        let Some(tool) = predicted else { return Ok((carver.carve(views, &self.hull)?, false)) };
+        let coarse = HullParams { leaf_size: 2.0 * self.hull.leaf_size, ..self.hull.clone() };
+        let occ = carver.carve(views, &coarse)?;
+        match tool.near_predicted(timestamp_ns, &occ, FINE_NEAR_TOOL_M) {
+            Some(near) => Ok((refine_cells(views, &self.hull, occ, 1, |k, _| near[k])?, true)),
+            None => Ok((carver.carve(views, &self.hull)?, false)),
+        }
+    }
+
     /// Pixels around a box's projection that segmentation tests too: the footprint margin of
     /// carving, the clean-up's reach (opening, closing, the neighbour test) and two more.
     fn window_pad(&self) -> f64 {
@@ -775,7 +811,9 @@ impl Labelling {
         let clock = Instant::now();
         let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
         let views = silhouettes(&self.rig, &refs).with_context(|| format!("frame {frame}"))?;
-        let mut occ = carver.carve(&views, &self.hull).with_context(|| format!("frame {frame}"))?;
+        let (mut occ, near_tool) =
+            self.carve_foreground(carver, &views, set.timestamp_ns).with_context(|| format!("frame {frame}"))?;
+        self.counters.hull_fine_near_tool += u64::from(near_tool);
         let mut marked_only = Vec::new();
         // The possible shadows as the views saw them, before the hull resolved them: where a ray
         // meets the table, the other views tell a shadow from a dull tool ([`TableShadows`]).

@@ -8,8 +8,8 @@ mod robustness;
 use hullcut_dataset::{Mesh, label};
 use hullcut_hull::accuracy::grid_iou;
 use hullcut_hull::{
-    DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, carve_within, footprint_counts, is_watertight,
-    relabel, silhouettes,
+    Cell, DenseGrid, HullParams, Occupancy, Silhouette, WorkingVolume, carve, carve_within, footprint_counts,
+    is_watertight, refine_cells, relabel, silhouettes,
 };
 use hullcut_rig::{Rig, default_rig, lab8_rig, random_rig};
 use hullcut_synth::{CameraRenderer, Light, Part, TriMesh};
@@ -332,6 +332,47 @@ fn a_finer_hull_inside_a_coarser_one_equals_the_whole_carving() {
         assert!(iou > 0.999, "{name}: IoU {iou}");
         // It skips the levels above the seeds: fewer tests than the whole carving.
         assert!(within.stats.footprint_tests < whole.stats.footprint_tests, "{name}: not cheaper");
+    }
+}
+
+#[test]
+fn a_hull_refined_near_a_point_is_the_fine_carving_there_and_the_coarse_one_elsewhere() {
+    // What segmentation's labelling carves where the tool's track predicts it: twice the leaf,
+    // then the leaf within reach of one place. Carving is conservative, so inside the refined
+    // cells the hull holds the fine carving's cells (by their index on the fine grid, cell for
+    // cell) and every other cell is the coarse carving's.
+    let focus = Point3::from(CENTRE) + Vector3::new(RADIUS, 0.0, 0.0);
+    for (name, rig) in rigs() {
+        let v = views(&rig, &render(&rig, &[sphere()]));
+        let (fine_params, coarse_params) = (params(&rig, LEAF), params(&rig, 2.0 * LEAF));
+        let fine = carve(&v, &fine_params).expect("carve");
+        let coarse = carve(&v, &coarse_params).expect("carve");
+        let near = |c: &Cell| (c.centre() - focus).norm() < 0.015;
+        let seeds: Vec<Cell> = coarse.cells.iter().filter(|c| near(c) && c.size < 3.0 * LEAF).copied().collect();
+        let mixed = refine_cells(&v, &fine_params, coarse.clone(), 1, |_, c| near(c)).expect("refine");
+        assert!(!seeds.is_empty() && mixed.stats.leaves_refined == seeds.len() as u64, "{name}");
+        assert_eq!(mixed.leaf_size, LEAF);
+        let origin = fine_params.workspace.min;
+        let key = |c: &Cell| {
+            let at = |a: usize| ((c.min[a] - origin[a]) / LEAF).round() as i64;
+            ([at(0), at(1), at(2)], (c.size / LEAF).round() as i64, c.hand)
+        };
+        let in_seed = |c: &Cell| {
+            let p = c.centre();
+            seeds.iter().any(|s| (0..3).all(|a| p[a] > s.min[a] && p[a] < s.min[a] + s.size))
+        };
+        let sorted = |o: &Occupancy, inside: bool| {
+            let mut keys: Vec<_> = o.cells.iter().filter(|c| in_seed(c) == inside).map(key).collect();
+            keys.sort_unstable();
+            keys
+        };
+        let refined = sorted(&mixed, true);
+        assert!(!refined.is_empty(), "{name}: nothing kept where refined");
+        assert_eq!(refined, sorted(&fine, true), "{name}: the refined cells are not the fine carving's");
+        assert_eq!(sorted(&mixed, false), sorted(&coarse, false), "{name}: cells away from the point changed");
+        // Finer where refined, so no larger than the coarse hull and no smaller than the fine one.
+        let (f, m, c) = (fine.volume(None), mixed.volume(None), coarse.volume(None));
+        assert!(f <= m + 1e-12 && m < c, "{name}: volumes {f} {m} {c}");
     }
 }
 
