@@ -280,7 +280,7 @@ pub struct LabelCounters {
     /// switched on): their foreground was cut to what the hull explains, the frame set kept.
     pub degraded_views: u64,
     /// Frame sets whose foreground hull was carved at twice the leaf away from the tool and at
-    /// the leaf within 1 cm of where its track predicted it (the others, at the leaf throughout:
+    /// the leaf within 1.5 cm of where its track predicted it (the others, at the leaf throughout:
     /// no prediction yet, or the track lost).
     #[serde(default)]
     pub hull_fine_near_tool: u64,

@@ -24,8 +24,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// them, else from the recording itself (the median of frames spread over it, the moving hand
 /// rejected); isolated pixels are removed and small holes closed. The labels: with the dataset's
 /// tool.json, the known tool is fitted into the hull of the foreground (carved at --voxel in the
-/// working volume; at twice --voxel farther than 1 cm from where the tool's track predicts it) and drawn into every view, the hand's occlusion respected: its pixels are the
-/// scalpel, the rest of the foreground the hand, no colour model needed. Where the tool cannot be
+/// working volume; at twice --voxel farther than 1.5 cm from where the tool's track predicts it)
+/// and drawn into every view, the hand's occlusion respected: its pixels are the scalpel, the rest
+/// of the foreground the hand, no colour model needed. Where the tool cannot be
 /// fitted, and without a tool.json, the colours learned from the recording label the foreground:
 /// from the trusted frames' geometric labels, and from the masks/ of the frames named by
 /// --label-frames; until a trusted frame has taught them, from up to ten frames whose fit agrees
