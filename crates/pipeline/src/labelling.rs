@@ -71,6 +71,16 @@ const LEARN_EVERY: u64 = 5;
 /// metres: room for the prediction's error and the fingers around the handle.
 const FINE_NEAR_TOOL_M: f64 = 0.015;
 
+/// The hull is carved finer only near the predicted tool where the prediction carries the tool at
+/// most this far from its last trusted pose, metres, looking at most [`MAX_PREDICTED_AHEAD_S`]
+/// ahead ([`hullcut_pose::Tracker::prediction_reach`]): the tool moves 5-10 mm from one frame set
+/// to the next at 30 fps in the resection; at 10 fps 4-17 cm, and the prediction may be off by as
+/// much, the tool carved coarse where it is fitted.
+const MAX_PREDICTED_SHIFT_M: f64 = 0.01;
+
+/// See [`MAX_PREDICTED_SHIFT_M`], seconds: a frame set at 20 fps or faster after a trusted one.
+const MAX_PREDICTED_AHEAD_S: f64 = 0.05;
+
 /// The colour classes are compiled when they first learn, and again when they learn at least this
 /// many frame sets after that.
 const REFRESH_EVERY: u32 = 15;
@@ -281,7 +291,8 @@ pub struct LabelCounters {
     pub degraded_views: u64,
     /// Frame sets whose foreground hull was carved at twice the leaf away from the tool and at
     /// the leaf within 1.5 cm of where its track predicted it (the others, at the leaf throughout:
-    /// no prediction yet, or the track lost).
+    /// no prediction yet, the track lost, or a prediction that looks more than 50 ms ahead or
+    /// carries the tool more than 1 cm).
     #[serde(default)]
     pub hull_fine_near_tool: u64,
     /// The share of the drawn blade's pixels (the tool's labels within the blade's outline), on
@@ -572,8 +583,9 @@ impl Labelling {
     /// it holds the cells a carving at the leaf would (carving is conservative); away from the
     /// tool (the hand's bulk, the wrist) its leaves are twice as large, which the labels do not
     /// need finer: a hand cell matters to them where it lies in front of the tool or beside it.
-    /// Without a prediction, or with sliver trimming or blade refinement asked for, the whole hull
-    /// is carved at the leaf.
+    /// Without a prediction, where it reaches farther than [`MAX_PREDICTED_SHIFT_M`] or
+    /// [`MAX_PREDICTED_AHEAD_S`], or with sliver trimming or blade refinement asked for, the whole
+    /// hull is carved at the leaf.
     fn carve_foreground(
         &self,
         carver: &mut Carver,
@@ -581,8 +593,14 @@ impl Labelling {
         timestamp_ns: i64,
     ) -> Result<(Occupancy, bool), HullError> {
         let adaptive = !self.hull.trim_slivers && self.hull.blade_levels == 0;
-        let predicted = self.tool.as_ref().filter(|t| adaptive && t.tracker().predicted(timestamp_ns).is_some());
-        let Some(tool) = predicted else { return Ok((carver.carve(views, &self.hull)?, false)) };
+        let steady = |t: &&ToolLabeller| {
+            t.tracker()
+                .prediction_reach(timestamp_ns)
+                .is_some_and(|(shift, ahead)| shift <= MAX_PREDICTED_SHIFT_M && ahead <= MAX_PREDICTED_AHEAD_S)
+        };
+        let Some(tool) = self.tool.as_ref().filter(|t| adaptive && steady(t)) else {
+            return Ok((carver.carve(views, &self.hull)?, false));
+        };
         let coarse = HullParams { leaf_size: 2.0 * self.hull.leaf_size, ..self.hull.clone() };
         let occ = carver.carve(views, &coarse)?;
         match tool.near_predicted(timestamp_ns, &occ, FINE_NEAR_TOOL_M) {

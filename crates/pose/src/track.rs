@@ -411,6 +411,19 @@ impl Tracker {
         self.predict(time_s)
     }
 
+    /// How far [`Tracker::predicted`] reaches for a frame set at `timestamp_ns`: the largest
+    /// displacement of the template's points (blade and body) from the last trusted pose, metres,
+    /// and the seconds since that pose (`None` where it predicts nothing). The prediction may be
+    /// off by about as much as it carries the tool (the tool stopped, or sped up), and more the
+    /// longer it looks ahead.
+    pub fn prediction_reach(&self, timestamp_ns: i64) -> Option<(f64, f64)> {
+        let pose = self.predicted(timestamp_ns)?;
+        let (t, last) = self.trusted?;
+        let points = self.template.blade.iter().chain(&self.template.body);
+        let shift = points.map(|p| (pose * p - last * p).norm()).fold(0.0, f64::max);
+        Some((shift, timestamp_ns as f64 * 1e-9 - t))
+    }
+
     /// Constant-velocity prediction from the last trusted pose.
     fn predict(&self, time_s: f64) -> Option<Isometry3<f64>> {
         let (t, pose) = self.trusted?;

@@ -159,7 +159,8 @@ pub struct Args {
     #[arg(long)]
     confirm_weak_foreground: bool,
     /// Leaf (voxel) size of the hull, metres. With segmented masks, while the tool's track
-    /// predicts it, the hull is this fine within 1.5 cm of the predicted tool and twice as coarse
+    /// predicts it closely (the frame set before trusted, at 20 fps or more, the tool moved at most
+    /// 1 cm), the hull is this fine within 1.5 cm of the predicted tool and twice as coarse
     /// elsewhere (the hand's bulk needs no finer; `labelling.counters.hull_fine_near_tool` in the
     /// report counts such frame sets).
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]

@@ -24,10 +24,10 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// them, else from the recording itself (the median of frames spread over it, the moving hand
 /// rejected); isolated pixels are removed and small holes closed. The labels: with the dataset's
 /// tool.json, the known tool is fitted into the hull of the foreground (carved at --voxel in the
-/// working volume; at twice --voxel farther than 1.5 cm from where the tool's track predicts it)
-/// and drawn into every view, the hand's occlusion respected: its pixels are the scalpel, the rest
-/// of the foreground the hand, no colour model needed. Where the tool cannot be
-/// fitted, and without a tool.json, the colours learned from the recording label the foreground:
+/// working volume; at twice --voxel farther than 1.5 cm from where the tool's track predicts it,
+/// at 20 fps or more) and drawn into every view, the hand's occlusion respected: its pixels are
+/// the scalpel, the rest of the foreground the hand, no colour model needed. Where the tool cannot
+/// be fitted, and without a tool.json, the colours learned from the recording label the foreground:
 /// from the trusted frames' geometric labels, and from the masks/ of the frames named by
 /// --label-frames; until a trusted frame has taught them, from up to ten frames whose fit agrees
 /// with the silhouettes but is not trusted, at nearly the pose of the frame before's (only the
@@ -84,7 +84,7 @@ pub struct Args {
     #[arg(long)]
     confirm_weak_foreground: bool,
     /// Leaf of the foreground's hull that the tool is fitted into, metres (twice it away from
-    /// the tool while its track predicts it).
+    /// the tool while its track predicts it closely: see `run --help`).
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
     voxel: f64,
     /// The working volume, world metres (default: dataset.toml's, else the rig's).
