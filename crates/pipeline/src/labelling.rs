@@ -604,7 +604,7 @@ impl Labelling {
         let coarse = HullParams { leaf_size: 2.0 * self.hull.leaf_size, ..self.hull.clone() };
         let occ = carver.carve(views, &coarse)?;
         match tool.near_predicted(timestamp_ns, &occ, FINE_NEAR_TOOL_M) {
-            Some(near) => Ok((refine_cells(views, &self.hull, occ, 1, |k, _| near[k])?, true)),
+            Some(near) => Ok((refine_cells(views, &self.hull, occ, 1, |k, _| near.get(k) == Some(&true))?, true)),
             None => Ok((carver.carve(views, &self.hull)?, false)),
         }
     }

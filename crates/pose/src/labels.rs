@@ -1439,8 +1439,6 @@ impl ToolDepth {
         d.is_finite().then_some(f64::from(d))
     }
 
-    /// The pixel centres of the drawn box in `[lo, hi]`, as columns and rows of `depth` (first
-    /// and last column, first and last row), or `None` where they miss it.
     /// The farthest drawn depth (−∞ where nothing is drawn).
     fn farthest(&self) -> f32 {
         self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max)
@@ -1469,6 +1467,8 @@ impl ToolDepth {
         })
     }
 
+    /// The pixel centres of the drawn box in `[lo, hi]`, as columns and rows of `depth` (first
+    /// and last column, first and last row), or `None` where they miss it.
     fn span(&self, lo: Point2<f64>, hi: Point2<f64>) -> Option<(usize, usize, usize, usize)> {
         let h = self.depth.len() / self.w.max(1);
         let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
