@@ -598,10 +598,13 @@ impl Labelling {
                 .prediction_reach(timestamp_ns)
                 .is_some_and(|(shift, ahead)| shift <= MAX_PREDICTED_SHIFT_M && ahead <= MAX_PREDICTED_AHEAD_S)
         };
-        let Some(tool) = self.tool.as_ref().filter(|t| adaptive && steady(t)) else {
+        let coarse = HullParams { leaf_size: 2.0 * self.hull.leaf_size, ..self.hull.clone() };
+        // The coarse carving's leaves must be cells of the fine octree (one level up): not so where
+        // the box is a leaf or less wide.
+        let nested = matches!((self.hull.depth(), coarse.depth()), (Ok(f), Ok(c)) if f == c + 1);
+        let Some(tool) = self.tool.as_ref().filter(|t| adaptive && nested && steady(t)) else {
             return Ok((carver.carve(views, &self.hull)?, false));
         };
-        let coarse = HullParams { leaf_size: 2.0 * self.hull.leaf_size, ..self.hull.clone() };
         let occ = carver.carve(views, &coarse)?;
         match tool.near_predicted(timestamp_ns, &occ, FINE_NEAR_TOOL_M) {
             Some(near) => Ok((refine_cells(views, &self.hull, occ, 1, |k, _| near.get(k) == Some(&true))?, true)),

@@ -1439,34 +1439,6 @@ impl ToolDepth {
         d.is_finite().then_some(f64::from(d))
     }
 
-    /// The farthest drawn depth (−∞ where nothing is drawn).
-    fn farthest(&self) -> f32 {
-        self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max)
-    }
-
-    /// The summed-area table of the drawn pixels ((w + 1) × (h + 1), a zero row and column first).
-    fn drawn_table(&self) -> Vec<u32> {
-        let (w, h) = (self.w, self.depth.len() / self.w.max(1));
-        let mut sat = vec![0u32; (w + 1) * (h + 1)];
-        for j in 0..h {
-            let mut row = 0;
-            for i in 0..w {
-                row += u32::from(self.depth[j * w + i].is_finite());
-                sat[(j + 1) * (w + 1) + i + 1] = sat[j * (w + 1) + i + 1] + row;
-            }
-        }
-        sat
-    }
-
-    /// Whether the pixel box `lo`..`hi` holds a drawn pixel (`sat`: [`ToolDepth::drawn_table`]).
-    fn drawn_in(&self, sat: &[u32], lo: Point2<f64>, hi: Point2<f64>) -> bool {
-        let w = self.w;
-        self.span(lo, hi).is_some_and(|(i0, i1, j0, j1)| {
-            let at = |i: usize, j: usize| sat[j * (w + 1) + i];
-            at(i1 + 1, j1 + 1) + at(i0, j0) > at(i0, j1 + 1) + at(i1 + 1, j0)
-        })
-    }
-
     /// The pixel centres of the drawn box in `[lo, hi]`, as columns and rows of `depth` (first
     /// and last column, first and last row), or `None` where they miss it.
     fn span(&self, lo: Point2<f64>, hi: Point2<f64>) -> Option<(usize, usize, usize, usize)> {
@@ -1528,9 +1500,22 @@ impl ToolDepth {
         runs: &[CellRun],
         margin: f64,
     ) -> Vec<(usize, DrawnBox)> {
-        let farthest = self.farthest();
-        let sat = self.drawn_table();
-        let drawn_in = |lo: Point2<f64>, hi: Point2<f64>| self.drawn_in(&sat, lo, hi);
+        let farthest = self.depth.iter().copied().filter(|d| d.is_finite()).fold(f32::NEG_INFINITY, f32::max);
+        let (w, h) = (self.w, self.depth.len() / self.w.max(1));
+        let mut sat = vec![0u32; (w + 1) * (h + 1)];
+        for j in 0..h {
+            let mut row = 0;
+            for i in 0..w {
+                row += u32::from(self.depth[j * w + i].is_finite());
+                sat[(j + 1) * (w + 1) + i + 1] = sat[j * (w + 1) + i + 1] + row;
+            }
+        }
+        let drawn_in = |lo: Point2<f64>, hi: Point2<f64>| {
+            self.span(lo, hi).is_some_and(|(i0, i1, j0, j1)| {
+                let at = |i: usize, j: usize| sat[j * (w + 1) + i];
+                at(i1 + 1, j1 + 1) + at(i0, j0) > at(i0, j1 + 1) + at(i1 + 1, j0)
+            })
+        };
         let radius = cam.distortion.monotonic_radius();
         // A cell whose nearest point, plus the margin, lies beyond the farthest drawn depth hides
         // nothing (a micrometre of slack for rounding).
