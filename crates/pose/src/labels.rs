@@ -25,7 +25,7 @@ use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 use crate::ToolError;
-use crate::evidence::{project, project_camera_point};
+use crate::evidence::{project, project_batch, project_camera_point};
 use crate::geometry::convex_hull;
 use crate::table_shadow::TableShadows;
 use crate::template::Template;
@@ -938,54 +938,70 @@ fn clear_hand<'a>(
                     .any(|&(a, b)| a as f64 <= uv.x + reach && b as f64 >= uv.x - reach)
         })
     };
-    let reaching = |cells: &'a [hullcut_hull::Cell], runs: &'a [CellRun], doubtful: bool| {
-        runs.iter()
-            .filter(|run| run_reaches(run))
-            .flat_map(move |run| cells[run.start..run.end].iter().map(move |c| (c, doubtful)))
-    };
     let raw = labels.as_mut();
-    let cells = reaching(&hand.hand.cells, &hand.hand.runs, false).chain(reaching(
-        &hand.hand.doubtful,
-        &hand.hand.doubtful_runs,
-        true,
-    ));
-    for (c, doubtful) in cells {
-        let pc = cam.world_to_camera(&c.centre());
-        let z = pc.z;
-        let Some(uv) = project_camera_point(cam, radius, &pc) else { continue };
-        let r = 0.87 * c.size * f / z;
-        // Missing the box by a whole stretch: nothing below would be visited.
-        if uv.x + r < lo_x || uv.x - r > hi_x || uv.y + r < lo_y || uv.y - r > hi_y {
-            continue;
-        }
-        let (i0, j0) = ((uv.x - r).ceil().max(lo.0 as f64), (uv.y - r).ceil().max(lo.1 as f64));
-        let (i1, j1) = ((uv.x + r).floor().min(hi.0 as f64), (uv.y + r).floor().min(hi.1 as f64));
-        if i0 > i1 || j0 > j1 {
-            continue;
-        }
-        let nearest = z - 0.87 * c.size;
-        for j in j0 as usize..=(j1 as usize).min(h - 1) {
-            let (a, b) = rows[j];
-            for i in (i0 as usize).max(a)..=(i1 as usize).min(w - 1).min(b) {
-                let k = j * w + i;
-                if raw[k] != label::SCALPEL
-                    || hints[k] == label::SCALPEL
-                    || (hand.tool_colour_decides && hints[k] == TOOL_COLOURED_SHADOW)
-                {
+    let groups = [(&hand.hand.cells, &hand.hand.runs, false), (&hand.hand.doubtful, &hand.hand.doubtful_runs, true)];
+    // The reaching runs' cells, their centres projected a run at a time ([`project_batch`]).
+    for (cells, runs, doubtful) in groups {
+        for run in runs.iter().filter(|run| run_reaches(run)) {
+            let run = &cells[run.start..run.end];
+            let at = project_batch(cam, radius, run.len(), |k| run[k].centre());
+            for (k, c) in run.iter().enumerate().filter(|&(k, _)| at.ok[k]) {
+                let (uv, z) = (Point2::new(at.u[k], at.v[k]), at.z[k]);
+                let r = 0.87 * c.size * f / z;
+                // Missing the box by a whole stretch: nothing below would be visited.
+                if uv.x + r < lo_x || uv.x - r > hi_x || uv.y + r < lo_y || uv.y - r > hi_y {
                     continue;
                 }
-                // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
-                // pixel unless it lies behind the tool there.
-                let takes = match hand.tool.and_then(|t| t.at(i, j)) {
-                    Some(d) => !doubtful && nearest <= d + hand.margin,
-                    None => true,
-                };
-                if takes {
-                    raw[k] = label::HAND;
+                // The disc's pixels within the box (the test above keeps these in it).
+                let (i0, j0) = (ceil_within(uv.x - r, lo_x, hi_x), ceil_within(uv.y - r, lo_y, hi_y));
+                let (i1, j1) = (floor_within(uv.x + r, lo_x, hi_x), floor_within(uv.y + r, lo_y, hi_y));
+                if i0 > i1 || j0 > j1 {
+                    continue;
+                }
+                let nearest = z - 0.87 * c.size;
+                for j in j0..=j1.min(h - 1) {
+                    let (a, b) = rows[j];
+                    for i in i0.max(a)..=i1.min(w - 1).min(b) {
+                        let k = j * w + i;
+                        if raw[k] != label::SCALPEL
+                            || hints[k] == label::SCALPEL
+                            || (hand.tool_colour_decides && hints[k] == TOOL_COLOURED_SHADOW)
+                        {
+                            continue;
+                        }
+                        // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
+                        // pixel unless it lies behind the tool there.
+                        let takes = match hand.tool.and_then(|t| t.at(i, j)) {
+                            Some(d) => !doubtful && nearest <= d + hand.margin,
+                            None => true,
+                        };
+                        if takes {
+                            raw[k] = label::HAND;
+                        }
+                    }
                 }
             }
         }
     }
+}
+
+/// `x.ceil()` clamped to `[lo, hi]` (whole numbers at least 0): the least whole number in the
+/// range at or above `x`, or `hi + 1` where there is none (`lo` for NaN), without the library
+/// call `ceil` is where the build does not assume SSE4.1 (four roundings per hand cell in
+/// [`clear_hand`]).
+#[inline]
+fn ceil_within(x: f64, lo: f64, hi: f64) -> usize {
+    // Whole numbers in [lo, hi + 1] convert exactly, and truncation is the floor there.
+    let v = x.max(lo).min(hi + 1.0);
+    let t = v as usize;
+    t + usize::from((t as f64) < v)
+}
+
+/// `x.floor()` clamped to `[lo, hi]` (whole numbers at least 0; `hi` for NaN): see
+/// [`ceil_within`].
+#[inline]
+fn floor_within(x: f64, lo: f64, hi: f64) -> usize {
+    x.min(hi).max(lo) as usize
 }
 
 /// Foreground covered by the projected scalpel cells of `hull` (the thin parts): scalpel; other
@@ -1557,7 +1573,7 @@ impl ToolDepth {
 
 /// Consecutive cells judged together ahead of their own tests in [`ToolDepth::cells_over`]: the
 /// hull's cells come in octree order, so such a run is compact.
-const RUN_CELLS: usize = 16;
+const RUN_CELLS: usize = crate::evidence::BATCH;
 
 /// A run of consecutive cells (`start..end`) and a ball that holds each of their bounding balls.
 #[derive(Debug, Clone, Copy)]
@@ -1961,6 +1977,21 @@ mod tests {
         assert!(near > 10_000 && far > 10_000, "{near} near, {far} far");
         let nan = Point3::new(f64::NAN, 0.0, 0.0);
         assert_eq!(field.within(&nan, 0.01), field.at(&nan) <= 0.01);
+    }
+
+    #[test]
+    fn clamped_roundings_are_the_library_s() {
+        let n = 40;
+        let mut values = vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 0.0, 1e300, -1e300];
+        for k in -3..=(2 * n as i64 + 3) {
+            let half = k as f64 / 2.0 - 1.0;
+            values.extend([half, half.next_up(), half.next_down(), half + 0.25]);
+        }
+        for v in values {
+            let (lo, hi) = (3.0, 31.0);
+            assert_eq!(ceil_within(v, lo, hi), v.ceil().max(lo).min(hi + 1.0) as usize, "ceil {v:?}");
+            assert_eq!(floor_within(v, lo, hi), v.floor().min(hi).max(lo) as usize, "floor {v:?}");
+        }
     }
 
     #[test]
