@@ -715,6 +715,11 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
     // not on the first frame set (no track yet), on most after it.
     let fine = a["labelling"]["counters"]["hull_fine_near_tool"].as_u64().expect("fine near the tool");
     assert!((20..30).contains(&fine), "{}", a["labelling"]["counters"]);
+    // Each view is segmented only near the last hull once there is one: not on the first frame
+    // set nor on the 16th (the whole volume's box), on most others.
+    let near = a["labelling"]["counters"]["segmented_near_hull"].as_u64().expect("segmented near the hull");
+    let reached = a["labelling"]["counters"]["reached_past_hull"].as_u64().expect("reached past it");
+    assert!((20..=28).contains(&near) && reached <= 2, "{}", a["labelling"]["counters"]);
     for (d, logged) in [(&every, 30), (&sparse, 5)] {
         let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
         let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);

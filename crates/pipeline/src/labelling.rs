@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::backend::Carver;
 use crate::error::{Context as _, Error, fail};
-use crate::region::CarveRegion;
+use crate::region::{BLOCK_M, CarveRegion, PAD_M};
 
 /// A trusted frame set's geometric labels teach the appearance model when its confidence is at
 /// least this.
@@ -308,6 +308,16 @@ pub struct LabelCounters {
     /// `--confirm-weak-foreground`), over all views.
     #[serde(default)]
     pub weak_confirmed: u64,
+    /// Frame sets whose views were segmented only where the last hull, grown by the motion
+    /// allowed for, can be seen (row by row: [`crate::region::stretches`]); the others, in the
+    /// whole rectangle of the box carved in (the first frame set, the whole volume every 15th,
+    /// after one whose foreground reached past its stretches).
+    #[serde(default)]
+    pub segmented_near_hull: u64,
+    /// Of those, frame sets whose foreground reached the end of a stretch in some view (the next
+    /// one is segmented in the box's whole rectangle).
+    #[serde(default)]
+    pub reached_past_hull: u64,
 }
 
 /// Reports written before `hand_hints` was counted gave the fit its hand hints throughout.
@@ -413,6 +423,13 @@ pub struct Labelling {
     weak_region: Option<CarveRegion>,
     /// Per view, the pixels segmented ([`Labelling::set_workspace`]; empty: every pixel).
     windows: Vec<Option<Window>>,
+    /// Per view, the columns of each row segmented within its window (empty: the whole window).
+    stretches: Vec<Option<Vec<(u32, u32)>>>,
+    /// The blocks ([`crate::region::blocks`]) of the last frame set's hull, unless its
+    /// foreground reached past its stretches (or nothing was carved).
+    last_blocks: Option<Vec<nalgebra::Point3<f64>>>,
+    /// The whole working volume (a workspace of its own is segmented in its whole rectangle).
+    full_workspace: hullcut_hull::Aabb,
     /// The pixels of each view that the other views confirmed as foreground in this frame set.
     weak_pixels: Vec<Vec<usize>>,
     /// The weak test's masks, reused from frame set to frame set.
@@ -540,6 +557,9 @@ impl Labelling {
             weak: None,
             weak_region: None,
             windows: Vec::new(),
+            stretches: Vec::new(),
+            last_blocks: None,
+            full_workspace: hull.workspace,
             weak_pixels: Vec::new(),
             loose: Vec::new(),
             tool,
@@ -570,11 +590,25 @@ impl Labelling {
     /// it was made with, on its leaf grid: [`crate::region::CarveRegion`]), and segments each
     /// view only where that box can be seen ([`crate::region::window`], grown by carving's
     /// footprint margin and the clean-up's reach): the rest of its mask is background. In the main job's loop the
-    /// box around the last hull covers 8-23% of each view of the built-in scene.
+    /// box around the last hull covers 8-23% of each view of the built-in scene. A box smaller
+    /// than the working volume is the last hull's grown by the motion allowed for
+    /// ([`crate::region::PAD_M`]); within its rectangle each view is then segmented only where the
+    /// last hull's blocks, grown as much, can be seen, row by row ([`crate::region::stretches`]),
+    /// unless that hull's foreground reached past the stretches it was segmented in.
     pub fn set_workspace(&mut self, workspace: hullcut_hull::Aabb) {
         self.hull.workspace = workspace;
         let pad = self.window_pad();
         self.windows = self.rig.cameras.iter().map(|c| crate::region::window(c, &workspace, pad)).collect();
+        self.stretches.clear();
+        if let Some(blocks) = self.last_blocks.as_ref().filter(|_| workspace != self.full_workspace) {
+            let reach = 0.5 * BLOCK_M * 3f64.sqrt() + PAD_M;
+            self.stretches = (self.rig.cameras.iter().zip(&self.windows))
+                .map(|(c, w)| {
+                    let window = w.unwrap_or(Window::whole(c.width, c.height));
+                    crate::region::stretches(c, blocks, reach, pad, window)
+                })
+                .collect();
+        }
     }
 
     /// The hull of the views' foreground, and whether it was carved finer near the tool: where the
@@ -773,9 +807,16 @@ impl Labelling {
         let clock = Instant::now();
         self.taught = None;
         let mut fg = std::mem::take(&mut self.masks);
-        self.segmenter
-            .segment_frame_set_within(set, &mut fg, &self.windows)
+        let reached = self
+            .segmenter
+            .segment_frame_set_stretches(set, &mut fg, &self.windows, &self.stretches)
             .with_context(|| format!("segmenting frame {frame}"))?;
+        let near_hull = self.stretches.iter().any(Option::is_some);
+        let reached = reached.contains(&true);
+        self.counters.segmented_near_hull += u64::from(near_hull);
+        self.counters.reached_past_hull += u64::from(near_hull && reached);
+        // Set again once this frame set's hull is carved.
+        self.last_blocks = None;
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;
         let foreground_ms = clock.elapsed().as_secs_f64() * 1e3;
         // Outside its window a view's mask is background: the passes over masks below look inside.
@@ -854,6 +895,7 @@ impl Labelling {
         if let Some(region) = &mut self.weak_region {
             region.update(&self.hull.workspace, &occ);
         }
+        self.last_blocks = (!reached).then(|| crate::region::blocks(&occ, BLOCK_M)).filter(|b| !b.is_empty());
         for ((view, mask), _) in views.iter().zip(fg.iter_mut()).zip(&degraded).filter(|(_, d)| **d) {
             if let (Some(view), Some(mask)) = (view, mask) {
                 // What the hull does not explain in this view is not in the working volume.

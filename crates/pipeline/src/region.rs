@@ -182,6 +182,123 @@ pub fn window(camera: &Camera, b: &Aabb, pad: f64) -> Option<Window> {
     Some(window.clipped(camera.width, camera.height))
 }
 
+/// Side of the blocks a hull is summed up in for [`stretches`], metres: a hand's hull is some
+/// tens of them, and a block's ball is wider than a cell's by less than the motion allowed for.
+pub const BLOCK_M: f64 = 0.025;
+
+/// The centres of the blocks of side `size` (a grid from the world's origin) that `occ`'s
+/// cells touch (every point of a cell lies in one of them), but those whose 26 neighbours all
+/// are: for balls of a radius `R` at least the side around the centres, the neighbours' balls
+/// cover such a block's ball (a point at `t ≤ R` from its centre in direction `d` is within `R`
+/// of the neighbour along `d`'s largest axis, since `t² − 2t·s·|d|∞ + s² ≤ R²` holds at `t = 0`
+/// and at `t = R`, as `s ≤ 2R/√3`, and so between), so [`stretches`] need not project it.
+pub fn blocks(occ: &Occupancy, size: f64) -> Vec<Point3<f64>> {
+    let Some(bounds) = bounds(occ) else { return Vec::new() };
+    // A grid one block wider than the hull all round (so every block's neighbours are on it),
+    // its origin on the world's grid: in it coordinates are at least 0, where truncation is the
+    // floor (the library's rounding calls would cost more than the rest).
+    let origin = bounds.min.map(|v| ((v / size).floor() - 1.0) * size);
+    let extent = (bounds.max - origin).map(|v| (v / size).floor() + 2.0);
+    // A hull beyond any working volume (or not finite): no blocks, the whole windows segmented.
+    let cells = extent.x * extent.y * extent.z;
+    if cells.is_nan() || cells > f64::from(1 << 24) || !origin.iter().all(|v| v.is_finite()) {
+        return Vec::new();
+    }
+    let (nx, ny, nz) = (extent.x as usize, extent.y as usize, extent.z as usize);
+    let at = |x: usize, y: usize, z: usize| (z * ny + y) * nx + x;
+    let mut touched = vec![false; nx * ny * nz];
+    for c in &occ.cells {
+        let lo = (c.min - origin).map(|v| ((v / size) as usize).max(1));
+        let hi = (c.min + Vector3::repeat(c.size) - origin).map(|v| (v / size) as usize);
+        for z in lo.z..=hi.z.min(nz - 2) {
+            for y in lo.y..=hi.y.min(ny - 2) {
+                for x in lo.x..=hi.x.min(nx - 2) {
+                    touched[at(x, y, z)] = true;
+                }
+            }
+        }
+    }
+    let inner = |x: usize, y: usize, z: usize| {
+        (z - 1..=z + 1).all(|zz| (y - 1..=y + 1).all(|yy| (x - 1..=x + 1).all(|xx| touched[at(xx, yy, zz)])))
+    };
+    let mut centres = Vec::new();
+    for z in 1..nz - 1 {
+        for y in 1..ny - 1 {
+            for x in 1..nx - 1 {
+                if touched[at(x, y, z)] && !inner(x, y, z) {
+                    let k = Vector3::new(x as f64, y as f64, z as f64);
+                    centres.push(origin + (k + Vector3::repeat(0.5)) * size);
+                }
+            }
+        }
+    }
+    centres
+}
+
+/// Rows whose stretches [`stretches`] takes together: each group's stretch holds every row's.
+const GROUP_ROWS: usize = 4;
+
+/// Per image row of `camera`, the columns `a..b` within `window` where a ball of radius `reach`
+/// around one of `centres` can be seen, grown by `pad` pixels (rows outside the window, or that
+/// no ball reaches, have none: `a == b`): for each ball, the disc [`Camera::project_ball`]
+/// bounds its projection with, through any lens, and each row's stretch from the first to the
+/// last of its discs' pixels, taken over four rows at a time (a disc's widest row in
+/// the group). `None` where a ball comes within a millimetre of the camera's plane or beyond the
+/// lens' invertible radius (then test the whole window), or where there are no centres.
+pub fn stretches(
+    camera: &Camera,
+    centres: &[Point3<f64>],
+    reach: f64,
+    pad: f64,
+    window: Window,
+) -> Option<Vec<(u32, u32)>> {
+    if centres.is_empty() {
+        return None;
+    }
+    let radius = camera.distortion.monotonic_radius();
+    let h = camera.height as usize;
+    let mut groups = vec![(u32::MAX, 0u32); h.div_ceil(GROUP_ROWS)];
+    let (x0, x1) = (f64::from(window.x0), f64::from(window.x1));
+    let (y0, y1) = (f64::from(window.y0), f64::from(window.y1) - 1.0);
+    for c in centres {
+        let (uv, r) = camera.project_ball(c, reach, 1e-3, radius)?;
+        let r = r + pad.max(0.0);
+        let (ya, yb) = ((uv.y - r).ceil().max(y0), (uv.y + r).floor().min(y1));
+        if ya.partial_cmp(&yb).is_none_or(|o| o.is_gt()) {
+            continue;
+        }
+        let (ya, yb) = (ya as usize, yb as usize);
+        for g in ya / GROUP_ROWS..=yb / GROUP_ROWS {
+            // The group's row nearest the disc's centre row: the disc is widest there.
+            let (first, last) = ((g * GROUP_ROWS).max(ya), (g * GROUP_ROWS + GROUP_ROWS - 1).min(yb));
+            let dy = if uv.y < first as f64 {
+                first as f64 - uv.y
+            } else if uv.y > last as f64 {
+                uv.y - last as f64
+            } else {
+                0.0
+            };
+            let half = (r * r - dy * dy).max(0.0).sqrt();
+            // Truncation rounds down at or above 0, and `x + 2` rounded down is past `x` rounded
+            // up (the library's rounding calls cost more than the rest).
+            let (a, b) = ((uv.x - half).max(x0), (uv.x + half + 2.0).min(x1));
+            if a < b {
+                let group = &mut groups[g];
+                *group = (group.0.min(a as u32), group.1.max(b as u32));
+            }
+        }
+    }
+    let inside = |y: usize| (window.y0 as usize..window.y1 as usize).contains(&y);
+    Some(
+        (0..h)
+            .map(|y| match groups[y / GROUP_ROWS] {
+                (a, b) if a < b && inside(y) => (a, b),
+                _ => (0, 0),
+            })
+            .collect(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use hullcut_hull::{Cell, HullParams, carve, silhouettes};
@@ -306,6 +423,89 @@ mod tests {
             (padded.x0 + 10, padded.y0 + 10, padded.x1 - 10, padded.y1 - 10),
             (small.x0, small.y0, small.x1, small.y1)
         );
+    }
+
+    #[test]
+    fn every_point_near_a_cell_projects_into_the_stretches_of_its_blocks() {
+        let rigs = [
+            hullcut_rig::RigPreset::Default.rig(),
+            hullcut_rig::RigPreset::Lab8.rig(),
+            hullcut_rig::RigPreset::Random(9).rig(),
+        ];
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut seen, mut stretched) = (0, 0);
+        for rig in &rigs {
+            for _ in 0..8 {
+                // A cluster of cells of a leaf's to an octree cell's size.
+                let centre = Point3::new(next() * 0.3 - 0.15, next() * 0.3 - 0.15, 0.02 + next() * 0.2);
+                let cells: Vec<(Point3<f64>, f64)> = (0..40)
+                    .map(|_| {
+                        let size = [0.003125, 0.00625, 0.025, 0.05][(next() * 4.0) as usize % 4];
+                        (centre + Vector3::new(next(), next(), next()) * 0.06, size)
+                    })
+                    .collect();
+                let occ = occupancy(&cells);
+                let centres = blocks(&occ, BLOCK_M);
+                assert!(!centres.is_empty() && centres.len() < 40 * 27, "{} blocks", centres.len());
+                // Balls of the blocks' half-diagonal grown by 3 cm: every point within 3 cm of a
+                // cell projects into the stretches (blocks inside others' are not projected: the
+                // rays through their points leave the blocks through one that is).
+                let reach = 0.5 * BLOCK_M * 3f64.sqrt() + 0.03;
+                for camera in &rig.cameras {
+                    let window = Window::whole(camera.width, camera.height);
+                    let Some(rows) = stretches(camera, &centres, reach, 2.0, window) else { continue };
+                    stretched += 1;
+                    assert_eq!(rows.len(), camera.height as usize);
+                    for &(min, size) in &cells {
+                        for _ in 0..30 {
+                            let d = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+                            let inside = min + Vector3::new(next(), next(), next()) * size;
+                            let p = inside + d.normalize() * 0.03 * next().sqrt();
+                            let pr = camera.project(&p);
+                            if !pr.visible {
+                                continue;
+                            }
+                            seen += 1;
+                            let (x, y) = (pr.pixel.x.round(), pr.pixel.y.round());
+                            let (a, bb) = rows[y as usize];
+                            assert!(x >= f64::from(a) && x < f64::from(bb), "{p:?} at ({x}, {y}) outside {a}..{bb}");
+                        }
+                    }
+                    // Rows far from every ball have none.
+                    assert!(rows.iter().any(|&(a, b)| a == b), "some row has no stretch");
+                }
+            }
+        }
+        assert!(stretched > 60 && seen > 20_000, "{stretched} views, {seen} points seen");
+        // A solid cube of 5x5x5 blocks (one cell each): the 27 inside are not kept.
+        let cube: Vec<(Point3<f64>, f64)> = (0..125)
+            .map(|k| {
+                let corner = Point3::new((k % 5) as f64, (k / 5 % 5) as f64, (k / 25) as f64) + Vector3::repeat(0.1);
+                (corner * BLOCK_M, BLOCK_M * 0.8)
+            })
+            .collect();
+        assert_eq!(blocks(&occupancy(&cube), BLOCK_M).len(), 125 - 27);
+        // No centres, or a ball behind the camera: the whole window.
+        let camera = &rigs[0].cameras[0];
+        let window = Window::whole(camera.width, camera.height);
+        assert_eq!(stretches(camera, &[], 0.05, 2.0, window), None);
+        let behind = camera.centre() - camera.viewing_direction().into_inner();
+        assert_eq!(stretches(camera, &[behind], 0.05, 2.0, window), None);
+        // Stretches stay within a smaller window.
+        let small = Window { x0: 100, y0: 50, x1: 300, y1: 200 };
+        let ahead = camera.centre() + camera.viewing_direction().into_inner() * 0.5;
+        let rows = stretches(camera, &[ahead], 0.2, 2.0, small).expect("seen");
+        for (y, &(a, b)) in rows.iter().enumerate() {
+            if a < b {
+                assert!((50..200).contains(&y) && a >= 100 && b <= 300, "row {y}: {a}..{b}");
+            }
+        }
     }
 
     #[test]

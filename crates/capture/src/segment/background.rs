@@ -262,15 +262,18 @@ impl BackgroundModel {
 
     /// [`BackgroundModel::foreground_row`] for each row of a window `w` pixels wide from column
     /// `x0`, row `y0`, of an image `full_w` pixels wide (`raw`, RGB): `labels` holds the window's
-    /// rows, `active[j]` is set to whether row `j` has any foreground. Compiled for the widest
-    /// vector instructions the processor has (pulp's run-time dispatch: the same integer
-    /// arithmetic, so the same labels, on any of them).
+    /// rows, `active[j]` is set to whether row `j` has any foreground. With `stretches`, only the
+    /// columns `a..b` of image row `y` that `stretches[y]` names are tested (within the window;
+    /// a row beyond `stretches` has none); the rest of the window is background. Compiled for
+    /// the widest vector instructions the processor has (pulp's run-time dispatch: the same
+    /// integer arithmetic, so the same labels, on any of them).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn foreground_window(
         &self,
         raw: &[u8],
         full_w: usize,
         (x0, y0, w): (usize, usize, usize),
+        stretches: Option<&[(u32, u32)]>,
         t: Thresholds,
         lut: &ClassLut,
         labels: &mut [u8],
@@ -280,7 +283,19 @@ impl BackgroundModel {
             active.fill(false);
             return;
         }
-        pulp::Arch::new().dispatch(WindowPass { model: self, raw, full_w, x0, y0, w, t, lut, labels, active });
+        pulp::Arch::new().dispatch(WindowPass {
+            model: self,
+            raw,
+            full_w,
+            x0,
+            y0,
+            w,
+            stretches,
+            t,
+            lut,
+            labels,
+            active,
+        });
     }
 
     /// Foreground test and colour classes for the `out.len()` pixels from pixel index `start`
@@ -349,10 +364,22 @@ struct WindowPass<'a> {
     x0: usize,
     y0: usize,
     w: usize,
+    stretches: Option<&'a [(u32, u32)]>,
     t: Thresholds,
     lut: &'a ClassLut,
     labels: &'a mut [u8],
     active: &'a mut [bool],
+}
+
+/// The columns of a window's row that are tested: image row `y`'s stretch in `stretches` (none
+/// beyond it), clipped to the window's `w` columns from `x0`, as columns of the window; all of
+/// them without stretches.
+#[inline]
+pub(crate) fn tested_columns(stretches: Option<&[(u32, u32)]>, y: usize, x0: usize, w: usize) -> (usize, usize) {
+    let Some(stretches) = stretches else { return (0, w) };
+    let (a, b) = stretches.get(y).map_or((0, 0), |&(a, b)| (a as usize, b as usize));
+    let (a, b) = (a.clamp(x0, x0 + w) - x0, b.clamp(x0, x0 + w) - x0);
+    (a, b.max(a))
 }
 
 impl pulp::WithSimd for WindowPass<'_> {
@@ -360,10 +387,25 @@ impl pulp::WithSimd for WindowPass<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let WindowPass { model, raw, full_w, x0, y0, w, t, lut, labels, active } = self;
+        let WindowPass { model, raw, full_w, x0, y0, w, stretches, t, lut, labels, active } = self;
         for ((j, row_labels), any) in labels.chunks_exact_mut(w).enumerate().zip(active.iter_mut()) {
-            let start = (y0 + j) * full_w + x0;
-            *any = model.foreground_row(&raw[3 * start..3 * (start + w)], start, t, lut, row_labels);
+            let (a, b) = tested_columns(stretches, y0 + j, x0, w);
+            // A stretch is tested in whole vector steps where the window has room (the pixels
+            // one at a time cost several times as much), the pixels beyond it cleared after.
+            let steps = (b - a).div_ceil(LANES) * LANES;
+            let (c, d) = if a + steps <= w {
+                (a, a + steps)
+            } else if b >= steps {
+                (b - steps, b)
+            } else {
+                (a, b)
+            };
+            let start = (y0 + j) * full_w + x0 + c;
+            let found =
+                model.foreground_row(&raw[3 * start..3 * (start + d - c)], start, t, lut, &mut row_labels[c..d]);
+            row_labels[..a].fill(0);
+            row_labels[b..].fill(0);
+            *any = found && ((c, d) == (a, b) || row_labels[a..b].iter().any(|&l| l != 0));
         }
     }
 }
@@ -507,13 +549,22 @@ mod tests {
             let lut = ClassLut::from_fn(|[r, _, b]| if r > b { label::HAND } else { label::SCALPEL }, |l| l + 10);
             for gain in [1.0, 0.8, 1.3] {
                 let t = Thresholds::new(&params, gain);
-                for (x0, y0, ww) in [(0, 0, w as usize), (3, 2, w as usize - 5), (w as usize / 2, 1, 1), (4, 4, 0)] {
+                // Stretches that start and end anywhere (off the window, reversed, empty), and
+                // none for the last rows.
+                let stretches: Vec<(u32, u32)> = (0..h - 2)
+                    .map(|y| ((y * 7 + seed as u32) % (w + 4), (y * 13 + 2 * seed as u32) % (w + 6)))
+                    .collect();
+                let windows = [(0, 0, w as usize), (3, 2, w as usize - 5), (w as usize / 2, 1, 1), (4, 4, 0)];
+                for ((x0, y0, ww), stretches) in
+                    windows.into_iter().flat_map(|win| [(win, None), (win, Some(&stretches[..]))])
+                {
                     let rows = h as usize - y0;
                     let (mut labels, mut active) = (vec![7u8; ww * rows], vec![true; rows]);
                     model.foreground_window(
                         scene.as_raw(),
                         w as usize,
                         (x0, y0, ww),
+                        stretches,
                         t,
                         &lut,
                         &mut labels,
@@ -523,10 +574,13 @@ mod tests {
                         let mut any = false;
                         for i in 0..ww {
                             let k = (y0 + j) * w as usize + x0 + i;
+                            let tested = stretches.is_none_or(|s| {
+                                s.get(y0 + j).is_some_and(|&(a, b)| (a as usize..b as usize).contains(&(x0 + i)))
+                            });
                             let p = [0, 1, 2].map(|c| scene.as_raw()[3 * k + c]);
                             let m =
                                 [model.chroma_r[k], model.chroma_g[k], model.chroma_b[k], model.sum2[k], model.tol3[k]];
-                            let code = test_pixel(p.map(u16::from), m, t);
+                            let code = if tested { test_pixel(p.map(u16::from), m, t) } else { 0 };
                             let expected = if code == SURE { lut.get(p[0], p[1], p[2]) } else { code };
                             assert_eq!(
                                 labels[j * ww + i],

@@ -362,7 +362,7 @@ impl Segmenter {
             *out = GrayImage::new(image.width(), image.height());
         }
         let (w, h) = image.dimensions();
-        cam.run(image, &self.params, &self.lut, out, Window::whole(w, h))
+        cam.run(image, &self.params, &self.lut, out, Window::whole(w, h), None).map(|_| ())
     }
 
     /// Segments every view of a frame set, cameras in parallel; `None` where the view is missing.
@@ -395,25 +395,47 @@ impl Segmenter {
         masks: &mut Vec<Option<GrayImage>>,
         windows: &[Option<Window>],
     ) -> Result<(), CaptureError> {
+        self.segment_frame_set_stretches(set, masks, windows, &[]).map(|_| ())
+    }
+
+    /// Like [`Self::segment_frame_set_within`], testing in view `k` with `stretches[k]` only the
+    /// columns `a..b` of each image row `y` that `stretches[k][y]` names, within its window (a
+    /// row beyond it has none): a caller that knows where the objects can be more closely than
+    /// a rectangle (around the last hull's projection) saves the rest. Returns per view whether
+    /// its mask has foreground at the end of a stretch that lies inside the window (or in a row
+    /// beside a row with none): there the objects may reach past the stretches, and the caller
+    /// should test the whole window next time. The MOG2 fallback tests the whole image.
+    pub fn segment_frame_set_stretches(
+        &mut self,
+        set: &FrameSet,
+        masks: &mut Vec<Option<GrayImage>>,
+        windows: &[Option<Window>],
+        stretches: &[Option<Vec<(u32, u32)>>],
+    ) -> Result<Vec<bool>, CaptureError> {
         if set.views.len() > self.cameras.len() {
             return Err(CaptureError::UnknownCamera { camera: set.views.len() - 1, cameras: self.cameras.len() });
         }
         masks.resize(set.views.len(), None);
         let (params, lut) = (&self.params, &self.lut);
-        self.cameras.par_iter_mut().zip(set.views.par_iter()).zip(masks.par_iter_mut()).enumerate().try_for_each(
-            |(k, ((cam, view), mask))| {
+        self.cameras
+            .par_iter_mut()
+            .zip(set.views.par_iter())
+            .zip(masks.par_iter_mut())
+            .enumerate()
+            .map(|(k, ((cam, view), mask))| {
                 let Some(view) = view else {
                     *mask = None;
-                    return Ok(());
+                    return Ok(false);
                 };
                 let (w, h) = view.image.dimensions();
                 let out = match mask {
                     Some(m) if m.dimensions() == (w, h) => m,
                     _ => mask.insert(GrayImage::new(w, h)),
                 };
-                cam.run(&view.image, params, lut, out, Window::of_view(windows, k, w, h))
-            },
-        )
+                let stretches = stretches.get(k).and_then(Option::as_deref);
+                cam.run(&view.image, params, lut, out, Window::of_view(windows, k, w, h), stretches)
+            })
+            .collect()
     }
 }
 
@@ -470,7 +492,8 @@ impl CameraSegmenter {
         lut: &ClassLut,
         out: &mut GrayImage,
         window: Window,
-    ) -> Result<(), CaptureError> {
+        stretches: Option<&[(u32, u32)]>,
+    ) -> Result<bool, CaptureError> {
         let (w, h) = image.dimensions();
         match self.size {
             Some((ew, eh)) if (ew, eh) != (w, h) => {
@@ -487,7 +510,8 @@ impl CameraSegmenter {
         }
         let full_w = w as usize;
         // MOG2 keeps its model from every pixel.
-        let window = if matches!(self.model, Model::Mog2(_)) { Window::whole(w, h) } else { window };
+        let mog2 = matches!(self.model, Model::Mog2(_));
+        let (window, stretches) = if mog2 { (Window::whole(w, h), None) } else { (window, stretches) };
         let (x0, y0) = (window.x0 as usize, window.y0 as usize);
         // The buffers hold the window; rows and columns below are the window's.
         let (w, h) = (window.x1 as usize - x0, window.y1 as usize - y0);
@@ -507,7 +531,7 @@ impl CameraSegmenter {
                 self.last_gain = gain;
                 let t = Thresholds::new(params, gain);
                 // An empty window marks no row active.
-                model.foreground_window(raw, full_w, (x0, y0, w), t, lut, &mut s.labels, &mut s.act0);
+                model.foreground_window(raw, full_w, (x0, y0, w), stretches, t, lut, &mut s.labels, &mut s.act0);
             }
             Model::Mog2(m) => {
                 m.apply(image, &mut s.labels)?;
@@ -594,8 +618,33 @@ impl CameraSegmenter {
                 }
             }
         }
-        Ok(())
+        Ok(stretches.is_some_and(|st| reaches_past(&mut out, st, h)))
     }
+}
+
+/// Whether a mask's window has foreground at the end of a row's stretch (`stretches`, the
+/// tested columns per image row) that lies inside the window, or in a row whose neighbour in the
+/// window has no stretch: the objects may go on past the stretches there. Possible shadows do
+/// not count: a hand's shadow on the table reaches farther from the hand than objects move
+/// between frame sets, and only near the objects does the hull tell it from them.
+fn reaches_past(out: &mut WindowRows, stretches: &[(u32, u32)], h: usize) -> bool {
+    let object = |p: u8| p != label::BACKGROUND && p != SHADOW_LIKE;
+    let (x0, y0, w) = (out.x0, out.y0, out.w);
+    let columns = |j: usize| background::tested_columns(Some(stretches), y0 + j, x0, w);
+    (0..h).any(|j| {
+        let (a, b) = columns(j);
+        if a >= b {
+            return false;
+        }
+        let row = out.row(j);
+        let ends = (a > 0 && object(row[a])) || (b < w && object(row[b - 1]));
+        let open = |n: usize| {
+            let (c, d) = columns(n);
+            c >= d
+        };
+        let edge_row = (j > 0 && open(j - 1)) || (j + 1 < h && open(j + 1));
+        ends || edge_row && row[a..b].iter().any(|&p| object(p))
+    })
 }
 
 /// The rows of a window within a mask.

@@ -235,6 +235,72 @@ fn a_window_segments_its_pixels_as_the_whole_image_does_and_nothing_else() -> Re
     Ok(())
 }
 
+/// Stretches of rows test only their pixels: around each row's foreground (grown by the
+/// clean-up's reach and more) they give the whole image's mask and report nothing reaching past
+/// them; cut through the objects they report it; without stretches for a view, its window.
+#[test]
+fn stretches_segment_their_pixels_and_tell_when_the_objects_reach_past_them() -> Result<()> {
+    let params = SegmentParams { open_radius: 1, close_radius: 2, ..with_palette() };
+    let reach = params.open_radius + params.close_radius + 1;
+    let mut whole = segmenter(params.clone())?;
+    let mut stretched = segmenter(params)?;
+    let (set, _) = frame_set(5);
+    let reference = whole.segment_frame_set(&set)?;
+    // Each row's foreground in the reference, from its first to its last pixel.
+    let extent = |m: &GrayImage| -> Vec<Option<(u32, u32)>> {
+        (0..m.height())
+            .map(|y| {
+                let xs: Vec<u32> = (0..m.width()).filter(|&x| m.get_pixel(x, y).0[0] != label::BACKGROUND).collect();
+                Some((*xs.first()?, *xs.last()? + 1))
+            })
+            .collect()
+    };
+    let extents: Vec<Vec<Option<(u32, u32)>>> =
+        reference.iter().map(|m| extent(m.as_ref().expect("present"))).collect();
+    let around = |rows: &[Option<(u32, u32)>], grow: u32| -> Vec<(u32, u32)> {
+        (0..rows.len())
+            .map(|y| {
+                // The rows within `grow` of this one, their extents grown by `grow`.
+                let near =
+                    rows[y.saturating_sub(grow as usize)..(y + grow as usize + 1).min(rows.len())].iter().flatten();
+                near.fold((u32::MAX, 0), |(a, b), &(c, d)| (a.min(c.saturating_sub(grow)), b.max(d + grow)))
+            })
+            .collect()
+    };
+    let margin = 3 * reach;
+    let wide: Vec<Option<Vec<(u32, u32)>>> =
+        extents.iter().enumerate().map(|(k, e)| (k != 2).then(|| around(e, margin))).collect();
+    let mut masks = Vec::new();
+    let reached = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &wide)?;
+    assert_eq!(reached, vec![false; set.views.len()], "nothing reaches past stretches around the objects");
+    let mut compared = 0u64;
+    for (k, (m, r)) in masks.iter().zip(&reference).enumerate() {
+        let (m, r) = (m.as_ref().expect("present"), r.as_ref().expect("present"));
+        let Some(stretches) = &wide[k] else {
+            assert!(m == r, "camera {k}: no stretches, the whole window");
+            continue;
+        };
+        for (x, y, p) in m.enumerate_pixels() {
+            let (a, b) = stretches[y as usize];
+            if x < a || x >= b {
+                assert_eq!(p.0[0], label::BACKGROUND, "camera {k}, pixel ({x}, {y}) outside its stretch");
+            } else {
+                assert_eq!(p.0[0], r.get_pixel(x, y).0[0], "camera {k}, pixel ({x}, {y})");
+                compared += u64::from(p.0[0] != label::BACKGROUND);
+            }
+        }
+    }
+    assert!(compared > 10_000, "{compared} foreground pixels compared");
+    // The left half of each row's foreground only: the objects reach past the stretches' ends.
+    let halves: Vec<Option<Vec<(u32, u32)>>> = extents
+        .iter()
+        .map(|e| Some(e.iter().map(|r| r.map_or((0, 0), |(a, b)| (a.saturating_sub(margin), (a + b) / 2))).collect()))
+        .collect();
+    let reached = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &halves)?;
+    assert_eq!(reached, vec![true; set.views.len()], "cut through the objects");
+    Ok(())
+}
+
 #[test]
 fn parallel_frame_set_equals_camera_by_camera() -> Result<()> {
     let (set, _) = frame_set(3);
