@@ -311,7 +311,8 @@ pub struct LabelCounters {
     /// Frame sets whose views were segmented only where the last hull, grown by the motion
     /// allowed for, can be seen (row by row: [`crate::region::stretches`]); the others, in the
     /// whole rectangle of the box carved in (the first frame set, the whole volume every 15th,
-    /// after one whose foreground reached past its stretches).
+    /// after one whose foreground reached past its stretches; all with the weak foreground
+    /// confirmed).
     #[serde(default)]
     pub segmented_near_hull: u64,
     /// Of those, frame sets whose foreground reached the end of a stretch in some view (the next
@@ -594,13 +595,17 @@ impl Labelling {
     /// than the working volume is the last hull's grown by the motion allowed for
     /// ([`crate::region::PAD_M`]); within its rectangle each view is then segmented only where the
     /// last hull's blocks, grown as much, can be seen, row by row ([`crate::region::stretches`]),
-    /// unless that hull's foreground reached past the stretches it was segmented in.
+    /// unless that hull's foreground reached past the stretches it was segmented in (or the weak
+    /// foreground is confirmed: [`Labelling::confirm_weak_foreground`]).
     pub fn set_workspace(&mut self, workspace: hullcut_hull::Aabb) {
         self.hull.workspace = workspace;
         let pad = self.window_pad();
         self.windows = self.rig.cameras.iter().map(|c| crate::region::window(c, &workspace, pad)).collect();
         self.stretches.clear();
-        if let Some(blocks) = self.last_blocks.as_ref().filter(|_| workspace != self.full_workspace) {
+        // The weak test, which sees the whole rectangle, would take what the stretches leave out
+        // for weak foreground.
+        let near_hull = workspace != self.full_workspace && self.weak.is_none();
+        if let Some(blocks) = self.last_blocks.as_ref().filter(|_| near_hull) {
             let reach = 0.5 * BLOCK_M * 3f64.sqrt() + PAD_M;
             self.stretches = (self.rig.cameras.iter().zip(&self.windows))
                 .map(|(c, w)| {
