@@ -359,22 +359,31 @@ mod tests {
         assert_eq!(region.next_box(), full);
     }
 
-    #[test]
-    fn every_point_of_a_box_projects_into_its_window_through_any_lens() {
-        // Three rigs' lenses (lab8's and the random rig's distort), boxes small and large,
-        // near and off the image.
-        let rigs = [
+    /// The default rig, lab8 and a seeded random rig (lab8's and the random rig's lenses distort).
+    fn three_rigs(seed: u64) -> [hullcut_rig::Rig; 3] {
+        [
             hullcut_rig::RigPreset::Default.rig(),
             hullcut_rig::RigPreset::Lab8.rig(),
-            hullcut_rig::RigPreset::Random(5).rig(),
-        ];
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move || {
+            hullcut_rig::RigPreset::Random(seed).rig(),
+        ]
+    }
+
+    /// A reproducible stream of numbers in [0, 1) (xorshift).
+    fn numbers(mut state: u64) -> impl FnMut() -> f64 {
+        move || {
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        }
+    }
+
+    #[test]
+    fn every_point_of_a_box_projects_into_its_window_through_any_lens() {
+        // Three rigs' lenses (lab8's and the random rig's distort), boxes small and large,
+        // near and off the image.
+        let rigs = three_rigs(5);
+        let mut next = numbers(0x2545_f491_4f6c_dd1d);
         let (mut tested, mut inside_image) = (0, 0);
         for rig in &rigs {
             for _ in 0..60 {
@@ -427,18 +436,8 @@ mod tests {
 
     #[test]
     fn every_point_near_a_cell_projects_into_the_stretches_of_its_blocks() {
-        let rigs = [
-            hullcut_rig::RigPreset::Default.rig(),
-            hullcut_rig::RigPreset::Lab8.rig(),
-            hullcut_rig::RigPreset::Random(9).rig(),
-        ];
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let rigs = three_rigs(9);
+        let mut next = numbers(0x9e37_79b9_7f4a_7c15);
         let (mut seen, mut stretched) = (0, 0);
         for rig in &rigs {
             for _ in 0..8 {
