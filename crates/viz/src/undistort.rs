@@ -115,30 +115,62 @@ impl UndistortMap {
         }
         out.clear();
         out.resize(pixels.len(), 0);
-        let row = w * channels;
-        for (tap, dst) in self.source.iter().zip(out.chunks_exact_mut(channels)) {
-            if tap.base == Tap::NONE {
-                continue;
-            }
-            let a = tap.base as usize * channels;
-            if interpolate {
-                // Fixed point: weights in 1/256 per axis, the sum rounded back to 8 bits.
-                let right = if tap.flags & Tap::RIGHT != 0 { channels } else { 0 };
-                let down = if tap.flags & Tap::DOWN != 0 { row } else { 0 };
-                let (fu, fv) = (u32::from(tap.fu), u32::from(tap.fv));
-                for (c, d) in dst.iter_mut().enumerate() {
-                    let p = |k: usize| u32::from(pixels[a + k + c]);
-                    let top = p(0) * (256 - fu) + p(right) * fu;
-                    let bottom = p(down) * (256 - fu) + p(down + right) * fu;
-                    *d = ((top * (256 - fv) + bottom * fv + (1 << 15)) >> 16) as u8;
+        // The usual pixel sizes with the channel count known to the compiler (a pass with it
+        // unrolled, no call per pixel to copy a runtime-sized slice); any other the same way.
+        match (channels, interpolate) {
+            (1, true) => remap_taps::<1, true>(&self.source, pixels, w, out),
+            (1, false) => remap_taps::<1, false>(&self.source, pixels, w, out),
+            (3, true) => remap_taps::<3, true>(&self.source, pixels, w, out),
+            (3, false) => remap_taps::<3, false>(&self.source, pixels, w, out),
+            (4, true) => remap_taps::<4, true>(&self.source, pixels, w, out),
+            (4, false) => remap_taps::<4, false>(&self.source, pixels, w, out),
+            _ => {
+                for (tap, dst) in self.source.iter().zip(out.chunks_exact_mut(channels.max(1))) {
+                    sample(tap, pixels, w * channels, channels, interpolate, dst);
                 }
-            } else {
-                let right = if tap.flags & Tap::NEAR_RIGHT != 0 { channels } else { 0 };
-                let down = if tap.flags & Tap::NEAR_DOWN != 0 { row } else { 0 };
-                dst.copy_from_slice(&pixels[a + right + down..a + right + down + channels]);
             }
         }
         true
+    }
+}
+
+/// [`UndistortMap::remap_into`]'s pass for `C` channels: each destination pixel sampled through
+/// its tap (bilinear when `INTERPOLATE`, else nearest).
+fn remap_taps<const C: usize, const INTERPOLATE: bool>(taps: &[Tap], pixels: &[u8], w: usize, out: &mut [u8]) {
+    for (tap, dst) in taps.iter().zip(out.chunks_exact_mut(C)) {
+        sample(tap, pixels, w * C, C, INTERPOLATE, dst);
+    }
+}
+
+/// Samples the `channels` of one destination pixel (`dst`) through `tap` from `pixels` (rows of
+/// `row` bytes); left as it is (0) where the tap has no source.
+#[inline(always)]
+fn sample(tap: &Tap, pixels: &[u8], row: usize, channels: usize, interpolate: bool, dst: &mut [u8]) {
+    if tap.base == Tap::NONE {
+        return;
+    }
+    let a = tap.base as usize * channels;
+    if interpolate {
+        // Fixed point: weights in 1/256 per axis, the sum rounded back to 8 bits.
+        let right = if tap.flags & Tap::RIGHT != 0 { channels } else { 0 };
+        let down = if tap.flags & Tap::DOWN != 0 { row } else { 0 };
+        let (fu, fv) = (u32::from(tap.fu), u32::from(tap.fv));
+        let (Some(top), Some(bottom)) =
+            (pixels.get(a..a + right + channels), pixels.get(a + down..a + down + right + channels))
+        else {
+            return;
+        };
+        for (c, d) in dst.iter_mut().enumerate().take(channels) {
+            let t = u32::from(top[c]) * (256 - fu) + u32::from(top[right + c]) * fu;
+            let b = u32::from(bottom[c]) * (256 - fu) + u32::from(bottom[right + c]) * fu;
+            *d = ((t * (256 - fv) + b * fv + (1 << 15)) >> 16) as u8;
+        }
+    } else {
+        let right = if tap.flags & Tap::NEAR_RIGHT != 0 { channels } else { 0 };
+        let down = if tap.flags & Tap::NEAR_DOWN != 0 { row } else { 0 };
+        if let Some(src) = pixels.get(a + right + down..a + right + down + channels) {
+            dst.copy_from_slice(src);
+        }
     }
 }
 
@@ -166,12 +198,19 @@ mod tests {
     }
 
     /// The fixed-point remap against the same sampling in floating point: bilinear within one
-    /// grey level, nearest exact, on a distorted camera and random pixels of three channels.
+    /// grey level, nearest exact, on a distorted camera and random pixels of one to four channels.
     #[test]
     fn fixed_point_taps_sample_as_floating_point_does() {
+        // 1, 3 and 4 channels have passes of their own; 2 takes the general one.
+        for channels in 1..=4 {
+            fixed_point_taps_sample_as_floating_point_does_with(channels);
+        }
+    }
+
+    fn fixed_point_taps_sample_as_floating_point_does_with(channels: usize) {
         let mut cam = Camera::new("c", 97, 61, 70.0, 72.0, 47.3, 30.8);
         cam.distortion = Distortion { k1: -0.25, k2: 0.06, p1: 1e-3, p2: -5e-4, k3: 0.0 };
-        let (w, h, channels) = (97usize, 61usize, 3usize);
+        let (w, h) = (97usize, 61usize);
         let mut seed = 7u64;
         let pixels: Vec<u8> = (0..w * h * channels)
             .map(|_| {
@@ -205,11 +244,15 @@ mod tests {
                     let bottom = at(i0, j1, c) * (1.0 - fu) + at(i1, j1, c) * fu;
                     let expected = (top * (1.0 - fv) + bottom * fv).round() as i32;
                     worst = worst.max((i32::from(bilinear[k + c]) - expected).abs());
-                    assert_eq!(nearest[k + c], pixels[(nj * w + ni) * channels + c], "pixel ({i}, {j})");
+                    assert_eq!(
+                        nearest[k + c],
+                        pixels[(nj * w + ni) * channels + c],
+                        "pixel ({i}, {j}), {channels} channels"
+                    );
                 }
             }
         }
         assert!(sampled > w * h / 2, "{sampled} pixels sampled");
-        assert!(worst <= 1, "bilinear off by {worst} grey levels");
+        assert!(worst <= 1, "bilinear off by {worst} grey levels, {channels} channels");
     }
 }
