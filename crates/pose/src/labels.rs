@@ -1104,6 +1104,28 @@ struct ToolField {
     distance: Vec<f32>,
 }
 
+/// `v` rounded to the nearest integer (halves away from zero, as [`f64::round`]) when that is
+/// in `0..n`, without a call to the library's rounding (the build assumes no SSE4.1): the
+/// truncation toward zero is one instruction, and `v` less its integer part is exact.
+fn round_below(v: f64, n: usize) -> Option<usize> {
+    // Rounds to -1 or below, or is not a number; and at or past `n`.
+    if v.is_nan() || v <= -0.5 || v >= n as f64 {
+        return None;
+    }
+    let whole = v as usize;
+    let rounded = whole + usize::from(v - whole as f64 >= 0.5);
+    (rounded < n).then_some(rounded)
+}
+
+/// What [`ToolField::lookup`] tells of a point without reading the grid.
+#[derive(Debug, Clone, Copy)]
+enum Lookup {
+    /// Within reach or not, from the tool's box alone (or the grid's bound beyond it).
+    Decided(bool),
+    /// The grid node that decides.
+    Node(usize),
+}
+
 impl ToolField {
     /// The field of `points` (filling the tool, tool frame).
     fn new(points: &[Point3<f64>], spacing: f64, pad: f64) -> Self {
@@ -1130,27 +1152,41 @@ impl ToolField {
         ToolField { bounds: (lo, hi), origin, dims, spacing, pad, distance }
     }
 
-    /// Whether [`ToolField::at`]`(p) <= reach`, without reading the grid where the box of the
+    /// Whether [`ToolField::at`]`(p) <= reach` ([`near_tool`] decides each cell so, a cell's
+    /// grid read put off to a pass of its own), without reading the grid where the box of the
     /// points filling the tool is out of reach: inside the grid its distance is between grid
     /// nodes, each within half a diagonal of its point, so it is at least the distance to that
     /// box less √3 spacings (two of slack); most points far from a slender tool stop there.
+    #[cfg(test)]
     fn within(&self, p: &Point3<f64>, reach: f64) -> bool {
-        let Some(index) = self.node(p) else { return self.at(p) <= reach };
+        match self.lookup(p, reach) {
+            Lookup::Decided(near) => near,
+            Lookup::Node(index) => self.node_within(index, reach),
+        }
+    }
+
+    /// [`ToolField::within`] as far as it goes without reading the grid: decided, or the grid
+    /// node to read.
+    fn lookup(&self, p: &Point3<f64>, reach: f64) -> Lookup {
+        let Some(index) = self.node(p) else { return Lookup::Decided(self.at(p) <= reach) };
         let (lo, hi) = &self.bounds;
         let gap = (lo - p).sup(&(p - hi)).sup(&Vector3::zeros());
         let slack = reach + 2.0 * self.spacing;
         // A point with a coordinate that is not a number has no grid node: it never gets here.
-        let out_of_reach = gap.norm_squared() > slack * slack;
-        !out_of_reach && f64::from(self.distance[index]) <= reach
+        if gap.norm_squared() > slack * slack { Lookup::Decided(false) } else { Lookup::Node(index) }
+    }
+
+    /// Whether grid node `index` (from [`ToolField::lookup`]) is within `reach` of the tool.
+    fn node_within(&self, index: usize, reach: f64) -> bool {
+        f64::from(self.distance[index]) <= reach
     }
 
     /// The index of the grid node nearest `p` (tool frame), `None` beyond the grid.
     fn node(&self, p: &Point3<f64>) -> Option<usize> {
         let k = (p - self.origin) / self.spacing;
-        let [x, y, z] = [k.x, k.y, k.z].map(|v| v.round());
-        let inside = |v: f64, n: usize| v >= 0.0 && v < n as f64;
-        (inside(x, self.dims[0]) && inside(y, self.dims[1]) && inside(z, self.dims[2]))
-            .then(|| ((z as usize) * self.dims[1] + y as usize) * self.dims[0] + x as usize)
+        let (x, y, z) =
+            (round_below(k.x, self.dims[0])?, round_below(k.y, self.dims[1])?, round_below(k.z, self.dims[2])?);
+        Some((z * self.dims[1] + y) * self.dims[0] + x)
     }
 
     /// Distance from `p` (tool frame) to the tool, to within the grid's spacing; beyond the grid,
@@ -1173,14 +1209,30 @@ impl ToolField {
 fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64, not_hand: &[bool]) -> Occupancy {
     let to_tool = pose.inverse();
     let mut out = occ.clone();
-    out.cells.par_iter_mut().enumerate().for_each(|(k, c)| {
-        let reach = margin + 0.87 * c.size + field.spacing;
-        let is_near = field.within(&(to_tool * c.centre()), reach);
-        c.scalpel = is_near;
-        c.hand = !is_near && !not_hand.get(k).copied().unwrap_or(false);
+    out.cells.par_chunks_mut(NEAR_TOOL_CHUNK).enumerate().for_each(|(n, cells)| {
+        // The cells the tool's box leaves in reach read the grid in a pass of their own, its
+        // reads (scattered over a field of megabytes) in flight together.
+        let mut read: Vec<(usize, usize, f64)> = Vec::new();
+        for (k, c) in cells.iter_mut().enumerate() {
+            let reach = margin + 0.87 * c.size + field.spacing;
+            match field.lookup(&(to_tool * c.centre()), reach) {
+                Lookup::Decided(near) => c.scalpel = near,
+                Lookup::Node(index) => read.push((k, index, reach)),
+            }
+        }
+        for (k, index, reach) in read {
+            cells[k].scalpel = field.node_within(index, reach);
+        }
+        let first = n * NEAR_TOOL_CHUNK;
+        for (k, c) in cells.iter_mut().enumerate() {
+            c.hand = !c.scalpel && !not_hand.get(first + k).copied().unwrap_or(false);
+        }
     });
     out
 }
+
+/// Cells per task of [`near_tool`].
+const NEAR_TOOL_CHUNK: usize = 512;
 
 /// The hull's thin parts: leaves an opening of the occupied leaves by a ball of `radius` removes,
 /// labelled scalpel (every other cell hand), and their 26-connected components as lists of cell
@@ -1979,6 +2031,56 @@ mod tests {
         assert_eq!(field.within(&nan, 0.01), field.at(&nan) <= 0.01);
     }
 
+    /// The hull's cells near the tool, labelled a chunk at a time with the grid read in a pass
+    /// of its own, are those [`ToolField::within`] finds one cell at a time; every other cell is
+    /// the hand's unless `not_hand` marks it.
+    #[test]
+    fn cells_near_the_tool_are_those_within_reach_one_by_one() {
+        let points: Vec<Point3<f64>> =
+            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
+        let field = ToolField::new(&points, 0.001, 0.022);
+        let pose = Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.3, -0.2, 0.9));
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // More cells than one chunk holds, of a leaf's size and a coarse cell's, about the tool.
+        let cells: Vec<hullcut_hull::Cell> = (0..3 * NEAR_TOOL_CHUNK + 77)
+            .map(|_| {
+                let size = if next() < 0.8 { 0.004 } else { 0.008 };
+                let at = pose * Point3::new(next() * 0.2 - 0.025, next() * 0.06 - 0.024, next() * 0.05 - 0.025);
+                hullcut_hull::Cell {
+                    min: at - Vector3::repeat(size / 2.0),
+                    size,
+                    hand: false,
+                    scalpel: false,
+                    solid: true,
+                    refuted_by: None,
+                }
+            })
+            .collect();
+        let not_hand: Vec<bool> = (0..cells.len()).map(|k| k % 3 == 0).collect();
+        let occ = Occupancy {
+            cells,
+            leaf_size: 0.004,
+            origin: Point3::new(-0.1, -0.1, -0.07),
+            resolution: 128,
+            stats: hullcut_hull::CarveStats::default(),
+        };
+        let margin = 0.002;
+        let labelled = near_tool(&occ, &field, &pose, margin, &not_hand);
+        let to_tool = pose.inverse();
+        let mut near = 0;
+        for (k, (c, l)) in occ.cells.iter().zip(&labelled.cells).enumerate() {
+            let expected = field.within(&(to_tool * c.centre()), margin + 0.87 * c.size + field.spacing);
+            assert_eq!(l.scalpel, expected, "cell {k}");
+            assert_eq!(l.hand, !expected && !not_hand[k], "cell {k}");
+            near += usize::from(expected);
+        }
+        assert!(near > 50 && near < occ.cells.len() - 500, "{near} of {} cells near the tool", occ.cells.len());
+    }
+
     #[test]
     fn clamped_roundings_are_the_library_s() {
         let n = 40;
@@ -1991,6 +2093,9 @@ mod tests {
             let (lo, hi) = (3.0, 31.0);
             assert_eq!(ceil_within(v, lo, hi), v.ceil().max(lo).min(hi + 1.0) as usize, "ceil {v:?}");
             assert_eq!(floor_within(v, lo, hi), v.floor().min(hi).max(lo) as usize, "floor {v:?}");
+            let r = v.round();
+            let library = (r >= 0.0 && r < n as f64).then_some(r as usize);
+            assert_eq!(round_below(v, n), library, "round {v:?}");
         }
     }
 
