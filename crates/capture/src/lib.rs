@@ -31,7 +31,7 @@ pub use error::CaptureError;
 pub use jpeg::JpegEncoder;
 pub use segment::{
     AppearanceModel, BackgroundModel, BackgroundSource, ColourClass, ColourClasses, ColourLut, IouAccumulator,
-    LabelScore, Method, Mog2Params, SegmentParams, SegmentationReport, Segmenter, Window, iou,
+    LabelScore, Method, Mog2Params, SegmentParams, SegmentationReport, Segmenter, ViewTested, Window, iou,
 };
 pub use source::{
     Capture, CaptureParams, CaptureStats, Clock, ClockKind, FrameSource, QueuePolicy, SourceConfig, SourceEvent,

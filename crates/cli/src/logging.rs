@@ -39,6 +39,13 @@ pub const WEAK_CONFIRMED_ENTITY: &str = "metrics/foreground/weak_confirmed";
 /// set, over its views, before any trusted fit taught them (the report's `counters.bootstrapped`
 /// counts these frame sets).
 pub const TAUGHT_ENTITY: &str = "metrics/appearance/taught";
+/// The pixels whose foreground a frame set's segmentation tested, over its views (the report's
+/// `counters.pixels_tested`, frame set by frame set).
+pub const PIXELS_TESTED_ENTITY: &str = "metrics/segment/pixels_tested";
+/// 1 where a frame set's views were segmented only where the last hull can be seen (row by row),
+/// 0 where in the whole rectangle of the box carved in (the report's
+/// `counters.segmented_near_hull`, frame set by frame set).
+pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -95,6 +102,8 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     if let Some(pixels) = trace.taught {
         hullcut_viz::log_scalar(rec, TAUGHT_ENTITY, pixels as f64)?;
     }
+    hullcut_viz::log_scalar(rec, PIXELS_TESTED_ENTITY, trace.segmented.pixels as f64)?;
+    hullcut_viz::log_scalar(rec, NEAR_HULL_ENTITY, f64::from(u8::from(trace.segmented.near_hull)))?;
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;
         if let Some(rgb) = colour.rgb {

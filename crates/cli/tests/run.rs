@@ -720,10 +720,20 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
     let near = a["labelling"]["counters"]["segmented_near_hull"].as_u64().expect("segmented near the hull");
     let reached = a["labelling"]["counters"]["reached_past_hull"].as_u64().expect("reached past it");
     assert!((20..=28).contains(&near) && reached <= 2, "{}", a["labelling"]["counters"]);
+    // Fewer pixels tested than the views hold (23% of them, measured 2026-11-29): the box's
+    // rectangles, and near the hull only the rows' stretches.
+    let ds = hullcut_dataset::Dataset::open(every.join("recording")).expect("the recording opens");
+    let held: u64 = ds.rig().cameras.iter().map(|c| u64::from(c.width) * u64::from(c.height)).sum::<u64>() * 30;
+    let tested = a["labelling"]["counters"]["pixels_tested"].as_u64().expect("pixels tested");
+    assert!(tested > 0 && tested < held / 3, "{tested} of {held}: {}", a["labelling"]["counters"]);
     for (d, logged) in [(&every, 30), (&sparse, 5)] {
         let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
         let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);
         assert_eq!(labels, logged, "{}: {rows:?}", d.display());
+        // What segmentation tested, every frame set however often the images are.
+        for entity in ["/metrics/segment/pixels_tested", "/metrics/segment/near_hull"] {
+            assert_eq!(rows.get(entity).copied(), Some(30), "{entity} in {}: {rows:?}", d.display());
+        }
     }
 }
 

@@ -228,6 +228,18 @@ pub struct LabelTrace {
     /// The pixels its untrusted fit taught the colours, over its views, where it agreed with the
     /// silhouettes and taught them ([`Labelling::taught`]; `None` where it taught nothing).
     pub taught: Option<u64>,
+    /// What its segmentation tested ([`Labelling::segmented`]).
+    pub segmented: Segmented,
+}
+
+/// What one frame set's segmentation tested.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Segmented {
+    /// Whether each view was tested only where the last hull can be seen, row by row (else in
+    /// the whole rectangle of the box carved in).
+    pub near_hull: bool,
+    /// Pixels whose foreground was tested, over the views.
+    pub pixels: u64,
 }
 
 impl LabelSource {
@@ -319,6 +331,10 @@ pub struct LabelCounters {
     /// one is segmented in the box's whole rectangle).
     #[serde(default)]
     pub reached_past_hull: u64,
+    /// Pixels whose foreground was tested, over every view and frame set (the rest of each mask
+    /// is background without a test: outside the box's rectangle, or the last hull's stretches).
+    #[serde(default)]
+    pub pixels_tested: u64,
 }
 
 /// Reports written before `hand_hints` was counted gave the fit its hand hints throughout.
@@ -456,6 +472,8 @@ pub struct Labelling {
     last_agreeing: Option<(nalgebra::Point3<f64>, nalgebra::Vector3<f64>)>,
     /// The last frame set's possible shadows given back to the table (`None`: none were asked).
     shadow_on_table: Option<u64>,
+    /// What the last frame set's segmentation tested ([`Labelling::segmented`]).
+    segmented: Segmented,
     /// Weak foreground pixels confirmed in the last frame set (with the weak test only).
     weak_confirmed: Option<u64>,
     /// The pixels the last frame set's untrusted but agreeing fit taught the colours, over its
@@ -572,6 +590,7 @@ impl Labelling {
             tool_as_hand: (0.0, 0.0),
             last_agreeing: None,
             shadow_on_table: None,
+            segmented: Segmented::default(),
             taught: None,
             drawn: 0,
             since_learned: 0,
@@ -607,10 +626,15 @@ impl Labelling {
         let near_hull = workspace != self.full_workspace && self.weak.is_none();
         if let Some(blocks) = self.last_blocks.as_ref().filter(|_| near_hull) {
             let reach = 0.5 * BLOCK_M * 3f64.sqrt() + PAD_M;
+            // A camera on the MOG2 fallback tests its whole image (its model learns from every
+            // pixel): it needs no stretches.
             self.stretches = (self.rig.cameras.iter().zip(&self.windows))
-                .map(|(c, w)| {
+                .enumerate()
+                .map(|(k, (c, w))| {
                     let window = w.unwrap_or(Window::whole(c.width, c.height));
-                    crate::region::stretches(c, blocks, reach, pad, window)
+                    (self.segmenter.method(k) != Some(Method::Mog2))
+                        .then(|| crate::region::stretches(c, blocks, reach, pad, window))
+                        .flatten()
                 })
                 .collect();
         }
@@ -812,14 +836,16 @@ impl Labelling {
         let clock = Instant::now();
         self.taught = None;
         let mut fg = std::mem::take(&mut self.masks);
-        let reached = self
+        let tested = self
             .segmenter
             .segment_frame_set_stretches(set, &mut fg, &self.windows, &self.stretches)
             .with_context(|| format!("segmenting frame {frame}"))?;
         let near_hull = self.stretches.iter().any(Option::is_some);
-        let reached = reached.contains(&true);
+        let reached = tested.iter().any(|t| t.reached_past);
+        self.segmented = Segmented { near_hull, pixels: tested.iter().map(|t| t.pixels).sum() };
         self.counters.segmented_near_hull += u64::from(near_hull);
         self.counters.reached_past_hull += u64::from(near_hull && reached);
+        self.counters.pixels_tested += self.segmented.pixels;
         // Set again once this frame set's hull is carved.
         self.last_blocks = None;
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;
@@ -1329,6 +1355,12 @@ impl Labelling {
     /// where it taught nothing).
     pub fn taught(&self) -> Option<u64> {
         self.taught
+    }
+
+    /// What the last labelled frame set's segmentation tested: whether only near the last hull,
+    /// and the pixels.
+    pub fn segmented(&self) -> Segmented {
+        self.segmented
     }
 
     /// The last labelled frame set's possible shadows given back to the table as the other views

@@ -853,6 +853,7 @@ fn hull_stage(
                 shadow_on_table: labelling.shadow_on_table(),
                 weak_confirmed: labelling.weak_confirmed(),
                 taught: labelling.taught(),
+                segmented: labelling.segmented(),
             });
         }
         let occ = match labelled_hull {

@@ -401,17 +401,18 @@ impl Segmenter {
     /// Like [`Self::segment_frame_set_within`], testing in view `k` with `stretches[k]` only the
     /// columns `a..b` of each image row `y` that `stretches[k][y]` names, within its window (a
     /// row beyond it has none): a caller that knows where the objects can be more closely than
-    /// a rectangle (around the last hull's projection) saves the rest. Returns per view whether
-    /// its mask has foreground at the end of a stretch that lies inside the window (or in a row
-    /// beside a row with none): there the objects may reach past the stretches, and the caller
-    /// should test the whole window next time. The MOG2 fallback tests the whole image.
+    /// a rectangle (around the last hull's projection) saves the rest. Returns per view the
+    /// pixels tested and whether its mask has foreground at the end of a stretch that lies
+    /// inside the window (or in a row beside a row with none): there the objects may reach past
+    /// the stretches, and the caller should test the whole window next time. The MOG2 fallback
+    /// tests the whole image (its stretches are not needed).
     pub fn segment_frame_set_stretches(
         &mut self,
         set: &FrameSet,
         masks: &mut Vec<Option<GrayImage>>,
         windows: &[Option<Window>],
         stretches: &[Option<Vec<(u32, u32)>>],
-    ) -> Result<Vec<bool>, CaptureError> {
+    ) -> Result<Vec<ViewTested>, CaptureError> {
         if set.views.len() > self.cameras.len() {
             return Err(CaptureError::UnknownCamera { camera: set.views.len() - 1, cameras: self.cameras.len() });
         }
@@ -425,7 +426,7 @@ impl Segmenter {
             .map(|(k, ((cam, view), mask))| {
                 let Some(view) = view else {
                     *mask = None;
-                    return Ok(false);
+                    return Ok(ViewTested::default());
                 };
                 let (w, h) = view.image.dimensions();
                 let out = match mask {
@@ -437,6 +438,17 @@ impl Segmenter {
             })
             .collect()
     }
+}
+
+/// What segmenting one view tested ([`Segmenter::segment_frame_set_stretches`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ViewTested {
+    /// Pixels whose foreground was tested (the rest of the mask is background); 0 for a view
+    /// with no image.
+    pub pixels: u64,
+    /// Whether the mask has an object's pixel at the end of a stretch inside the window: the
+    /// objects may reach past the stretches.
+    pub reached_past: bool,
 }
 
 /// A rectangle of pixels (columns `x0..x1`, rows `y0..y1`, ends excluded) that segmentation tests
@@ -493,7 +505,7 @@ impl CameraSegmenter {
         out: &mut GrayImage,
         window: Window,
         stretches: Option<&[(u32, u32)]>,
-    ) -> Result<bool, CaptureError> {
+    ) -> Result<ViewTested, CaptureError> {
         let (w, h) = image.dimensions();
         match self.size {
             Some((ew, eh)) if (ew, eh) != (w, h) => {
@@ -515,6 +527,12 @@ impl CameraSegmenter {
         let (x0, y0) = (window.x0 as usize, window.y0 as usize);
         // The buffers hold the window; rows and columns below are the window's.
         let (w, h) = (window.x1 as usize - x0, window.y1 as usize - y0);
+        let pixels = (0..h)
+            .map(|j| {
+                let (a, b) = background::tested_columns(stretches, y0 + j, x0, w);
+                (b - a) as u64
+            })
+            .sum();
         let s = &mut self.scratch;
         for buf in [&mut s.labels, &mut s.work1, &mut s.work2] {
             buf.resize(w * h, 0);
@@ -618,7 +636,7 @@ impl CameraSegmenter {
                 }
             }
         }
-        Ok(stretches.is_some_and(|st| reaches_past(&mut out, st, h)))
+        Ok(ViewTested { pixels, reached_past: stretches.is_some_and(|st| reaches_past(&mut out, st, h)) })
     }
 }
 

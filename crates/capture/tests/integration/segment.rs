@@ -237,7 +237,8 @@ fn a_window_segments_its_pixels_as_the_whole_image_does_and_nothing_else() -> Re
 
 /// Stretches of rows test only their pixels: around each row's foreground (grown by the
 /// clean-up's reach and more) they give the whole image's mask and report nothing reaching past
-/// them; cut through the objects they report it; without stretches for a view, its window.
+/// them, and the pixels they hold as tested; cut through the objects they report it; without
+/// stretches for a view, its window.
 #[test]
 fn stretches_segment_their_pixels_and_tell_when_the_objects_reach_past_them() -> Result<()> {
     let params = SegmentParams { open_radius: 1, close_radius: 2, ..with_palette() };
@@ -271,8 +272,19 @@ fn stretches_segment_their_pixels_and_tell_when_the_objects_reach_past_them() ->
     let wide: Vec<Option<Vec<(u32, u32)>>> =
         extents.iter().enumerate().map(|(k, e)| (k != 2).then(|| around(e, margin))).collect();
     let mut masks = Vec::new();
-    let reached = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &wide)?;
+    let tested = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &wide)?;
+    let reached: Vec<bool> = tested.iter().map(|t| t.reached_past).collect();
     assert_eq!(reached, vec![false; set.views.len()], "nothing reaches past stretches around the objects");
+    // The pixels tested: each row's stretch within the image, or the whole image without them.
+    for (k, (t, view)) in tested.iter().zip(&set.views).enumerate() {
+        let (w, h) = view.as_ref().expect("present").image.dimensions();
+        let expected: u64 = match &wide[k] {
+            Some(stretches) => stretches.iter().map(|&(a, b)| u64::from(b.min(w).saturating_sub(a.min(w)))).sum(),
+            None => u64::from(w) * u64::from(h),
+        };
+        assert_eq!(t.pixels, expected, "camera {k}");
+        assert!(t.pixels > 0, "camera {k}");
+    }
     let mut compared = 0u64;
     for (k, (m, r)) in masks.iter().zip(&reference).enumerate() {
         let (m, r) = (m.as_ref().expect("present"), r.as_ref().expect("present"));
@@ -296,7 +308,8 @@ fn stretches_segment_their_pixels_and_tell_when_the_objects_reach_past_them() ->
         .iter()
         .map(|e| Some(e.iter().map(|r| r.map_or((0, 0), |(a, b)| (a.saturating_sub(margin), (a + b) / 2))).collect()))
         .collect();
-    let reached = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &halves)?;
+    let tested = stretched.segment_frame_set_stretches(&set, &mut masks, &[], &halves)?;
+    let reached: Vec<bool> = tested.iter().map(|t| t.reached_past).collect();
     assert_eq!(reached, vec![true; set.views.len()], "cut through the objects");
     Ok(())
 }

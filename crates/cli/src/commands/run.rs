@@ -83,7 +83,9 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// share of the drawn blade they call the hand's under metrics/appearance/blade_as_hand, the
 /// possible shadows given back to the table under metrics/shadows/on_table, the pixels an
 /// untrusted fit that agreed with the silhouettes taught the colours (before a trusted one did)
-/// under metrics/appearance/taught; on
+/// under metrics/appearance/taught, the pixels each frame set's segmentation tested under
+/// metrics/segment/pixels_tested and whether only near the last hull (1) or in the whole
+/// rectangle of the box carved in (0) under metrics/segment/near_hull; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -479,14 +481,17 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 /// The rerun entities a run logs when it segments (without mask files): where each frame set's
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
 /// hand's, the possible shadows given back to the table, and the pixels an untrusted fit that
-/// agreed with the silhouettes taught the colours (on the frame sets where it did).
-pub const SEGMENTING_ENTITIES: [&str; 6] = [
+/// agreed with the silhouettes taught the colours (on the frame sets where it did), and what
+/// each frame set's segmentation tested: the pixels, and whether only near the last hull.
+pub const SEGMENTING_ENTITIES: [&str; 8] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
     "metrics/appearance/blade_as_hand",
     "metrics/shadows/on_table",
     crate::logging::TAUGHT_ENTITY,
+    crate::logging::PIXELS_TESTED_ENTITY,
+    crate::logging::NEAR_HULL_ENTITY,
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

@@ -230,6 +230,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             shadow_on_table: labelling.shadow_on_table(),
             weak_confirmed: labelling.weak_confirmed(),
             taught: labelling.taught(),
+            segmented: labelling.segmented(),
         };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
@@ -258,6 +259,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     weak_confirmed: trace.weak_confirmed,
                     // Relabelling by colour teaches nothing: the frame set's first pass did.
                     taught: trace.taught,
+                    // Relabelling segments nothing again: the first pass's pixels.
+                    segmented: trace.segmented,
                 },
             ),
             None => (masks, trace),
