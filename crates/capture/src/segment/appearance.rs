@@ -11,7 +11,7 @@ use image::{GrayImage, RgbImage};
 use serde::{Deserialize, Serialize};
 
 use super::Window;
-use super::classes::{ColourClass, ColourClasses, LazyLut};
+use super::classes::{ColourClass, ColourClasses, ColourLut};
 
 /// Pixels darker than this channel sum carry no usable chromaticity and are not learned from.
 const MIN_SUM: u32 = 24;
@@ -90,7 +90,7 @@ pub struct AppearanceModel {
     /// The classes as they were at the last [`AppearanceModel::age`], compiled to judge new
     /// samples.
     #[serde(skip)]
-    gate: Option<LazyLut>,
+    gate: Option<ColourLut>,
 }
 
 impl Default for AppearanceModel {
@@ -150,7 +150,7 @@ impl AppearanceModel {
         let (x0, x1) = (win.x0 as usize, win.x1 as usize);
         let (raw, px) = (labels.as_raw(), image.as_raw());
         let stride = self.stride.max(1);
-        let mut gate = self.gate.as_mut();
+        let gate = self.gate.as_ref();
         // Only the window's rows that hold foreground, and in them only the pixels that are not
         // background (found by a scan that vectorizes), in the order of a plain scan: the sums
         // come out the same. Border pixels (no four neighbours) are never learned.
@@ -179,7 +179,7 @@ impl AppearanceModel {
                     continue;
                 }
                 let rgb = [px[3 * k], px[3 * k + 1], px[3 * k + 2]];
-                if gate.as_mut().is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
+                if gate.is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
                     continue;
                 }
                 if let Some(f) = features(rgb) {
@@ -198,7 +198,7 @@ impl AppearanceModel {
     /// [`AppearanceModel::age`] for a frame set learned from `frame_sets` frame sets after the last
     /// one (those between taught nothing): what was learned keeps `forget^frame_sets` of its weight.
     pub fn age_by(&mut self, frame_sets: u32) {
-        self.gate = self.classes().map(|c| LazyLut::confident(&c, 2.0 * GATE_LOG_RATIO));
+        self.gate = self.classes().map(|c| ColourLut::confident(&c, 2.0 * GATE_LOG_RATIO));
         let keep = self.forget.powi(frame_sets.min(i32::MAX as u32) as i32);
         for s in &mut self.sums {
             s.scale(keep);
@@ -298,7 +298,7 @@ mod tests {
                     continue;
                 }
                 let rgb = [px[3 * k], px[3 * k + 1], px[3 * k + 2]];
-                if model.gate.as_mut().is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
+                if model.gate.as_ref().is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
                     continue;
                 }
                 if let Some(f) = features(rgb) {

@@ -9,6 +9,7 @@ use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use crate::error::CaptureError;
 
@@ -303,84 +304,75 @@ impl ClassLut {
     }
 }
 
-/// [`ColourLut::confident`]'s table filled as it is read: each bin is classified on its first
-/// lookup, so that a table asked about a few thousand colours (the samples a frame set teaches)
-/// costs those, not all 262,144 bins. Lookups give what [`ColourLut::confident`]'s would.
-#[derive(Debug, Clone)]
-pub(crate) struct LazyLut {
+/// Colour classes compiled for labelling foreground pixels: a table over 6-bit-per-channel RGB
+/// (256 KiB) whose bins are classified on their first lookup, from any thread. A frame set asks
+/// about a few thousand colours, not all 262,144, and a table serves several frame sets before
+/// the colours are compiled again: classifying every bin up front took ~6 ms of a learning frame
+/// set's labelling (two tables, on the built-in scene). Lookups give what classifying each bin's
+/// centre colour gives, whichever thread asks first.
+#[derive(Debug)]
+pub struct ColourLut {
     compiled: Vec<Compiled>,
     reject: Option<f64>,
     margin: f64,
-    /// Per bin: its label, or [`LazyLut::UNSET`].
-    table: Vec<u8>,
+    /// Per bin: its label, or [`ColourLut::UNSET`].
+    table: Vec<AtomicU8>,
 }
 
-impl LazyLut {
-    /// A bin not classified yet (no label has this value: labels are 0, 1, 2 and 255).
-    const UNSET: u8 = 254;
-
-    /// The classes, colours left unknown where the best wins by less than `margin`.
-    pub(crate) fn confident(classes: &ColourClasses, margin: f64) -> Self {
-        let n = 1usize << (3 * LUT_BITS);
-        LazyLut {
-            compiled: classes.compile(),
-            reject: classes.reject_mahalanobis2,
-            margin,
-            table: vec![Self::UNSET; n],
+impl Clone for ColourLut {
+    fn clone(&self) -> Self {
+        ColourLut {
+            compiled: self.compiled.clone(),
+            reject: self.reject,
+            margin: self.margin,
+            table: self.table.iter().map(|b| AtomicU8::new(b.load(Ordering::Relaxed))).collect(),
         }
     }
-
-    /// The label of one colour (its bin's centre, classified on first use).
-    pub(crate) fn get(&mut self, rgb: [u8; 3]) -> u8 {
-        let s = 8 - LUT_BITS;
-        let [r, g, b] = rgb.map(|v| usize::from(v >> s));
-        let i = (r << (2 * LUT_BITS)) | (g << LUT_BITS) | b;
-        let Some(slot) = self.table.get_mut(i) else { return label::UNKNOWN };
-        if *slot == Self::UNSET {
-            let step = 1usize << s;
-            let c = |v: usize| f64::from((v * step + step / 2) as u8);
-            *slot = classify_compiled(&self.compiled, self.reject, self.margin, features(c(r), c(g), c(b)));
-        }
-        *slot
-    }
-}
-
-/// Colour classes compiled for labelling foreground pixels (a 256 KiB lookup table).
-#[derive(Debug, Clone)]
-pub struct ColourLut {
-    lut: ClassLut,
 }
 
 impl ColourLut {
+    /// A bin not classified yet (no label has this value: labels are 0, 1, 2 and 255).
+    const UNSET: u8 = 254;
+
     /// Compiles the classes.
     pub fn new(classes: &ColourClasses) -> Self {
-        ColourLut { lut: ClassLut::new(Some(classes), |l| l) }
+        Self::confident(classes, 0.0)
     }
 
     /// Compiles the classes, leaving [`label::UNKNOWN`] the colours whose most likely class is
     /// not at least `e^(margin/2)` times as likely as the next: a colour both classes could
     /// explain decides nothing.
     pub fn confident(classes: &ColourClasses, margin: f64) -> Self {
-        ColourLut { lut: ClassLut::with_margin(Some(classes), margin, |l| l) }
+        ColourLut {
+            compiled: classes.compile(),
+            reject: classes.reject_mahalanobis2,
+            margin,
+            table: (0..1usize << (3 * LUT_BITS)).map(|_| AtomicU8::new(Self::UNSET)).collect(),
+        }
     }
 
-    /// [`ColourLut::new`] and [`ColourLut::confident`] of the same classes, each colour's scores
-    /// computed once for both (the same tables: the margin only decides from the scores).
+    /// [`ColourLut::new`] and [`ColourLut::confident`] of the same classes.
     pub fn new_and_confident(classes: &ColourClasses, margin: f64) -> (Self, Self) {
-        let compiled = classes.compile();
-        let reject = classes.reject_mahalanobis2;
-        let (all, confident): (Vec<u8>, Vec<u8>) = ClassLut::bins()
-            .map(|[r, g, b]| {
-                let s = scores(&compiled, features(f64::from(r), f64::from(g), f64::from(b)));
-                (s.decide(reject, 0.0), s.decide(reject, margin))
-            })
-            .unzip();
-        (ColourLut { lut: ClassLut { table: all } }, ColourLut { lut: ClassLut { table: confident } })
+        (Self::new(classes), Self::confident(classes, margin))
     }
 
-    /// The label of one colour.
+    /// The label of one colour (its bin's centre, classified on the bin's first lookup).
+    #[inline]
     pub fn get(&self, rgb: [u8; 3]) -> u8 {
-        self.lut.get(rgb[0], rgb[1], rgb[2])
+        let s = 8 - LUT_BITS;
+        let [r, g, b] = rgb.map(|v| usize::from(v >> s));
+        let Some(slot) = self.table.get((r << (2 * LUT_BITS)) | (g << LUT_BITS) | b) else { return label::UNKNOWN };
+        match slot.load(Ordering::Relaxed) {
+            Self::UNSET => {
+                let step = 1usize << s;
+                let c = |v: usize| f64::from((v * step + step / 2) as u8);
+                // Threads that meet the bin unset at once store the same label.
+                let l = classify_compiled(&self.compiled, self.reject, self.margin, features(c(r), c(g), c(b)));
+                slot.store(l, Ordering::Relaxed);
+                l
+            }
+            l => l,
+        }
     }
 
     /// Gives every foreground pixel of `mask` (any non-zero value) the label of its colour in
@@ -391,7 +383,7 @@ impl ColourLut {
         }
         for (m, p) in mask.iter_mut().zip(image.as_raw().chunks_exact(3)) {
             if *m != label::BACKGROUND {
-                *m = self.lut.get(p[0], p[1], p[2]);
+                *m = self.get([p[0], p[1], p[2]]);
             }
         }
     }
@@ -401,8 +393,17 @@ impl ColourLut {
 mod tests {
     use super::*;
 
+    /// The label of the centre of `rgb`'s bin, classified directly.
+    fn at_bin_centre(classes: &ColourClasses, margin: f64, rgb: [u8; 3]) -> u8 {
+        let step = 1u8 << (8 - LUT_BITS);
+        let [r, g, b] = rgb.map(|v| f64::from((v / step) * step + step / 2));
+        classify_compiled(&classes.compile(), classes.reject_mahalanobis2, margin, features(r, g, b))
+    }
+
+    /// Every bin, twice (the second read comes from the table), at two colours in the bin, from
+    /// several threads at once: each lookup is the bin centre's class.
     #[test]
-    fn the_lazy_table_reads_as_the_compiled_one() {
+    fn the_table_reads_as_classifying_each_bins_centre_from_any_thread() {
         let shade = (0.25, 1.15);
         let classes = ColourClasses {
             classes: vec![
@@ -412,28 +413,41 @@ mod tests {
             ],
             reject_mahalanobis2: Some(11.34),
         };
-        let eager = ColourLut::confident(&classes, 3.0);
-        let mut lazy = LazyLut::confident(&classes, 3.0);
-        let mut labels = [0usize; 256];
-        // Every bin, twice (the second read comes from the table), at two colours in the bin.
+        let lut = ColourLut::confident(&classes, 3.0);
+        let expected: Vec<u8> = (0..64usize * 64 * 64)
+            .map(|i| at_bin_centre(&classes, 3.0, [(i >> 12) as u8 * 4, ((i >> 6) & 63) as u8 * 4, (i & 63) as u8 * 4]))
+            .collect();
         for pass in 0..2u8 {
-            for r in (0..=255u8).step_by(4) {
-                for g in (0..=255u8).step_by(4) {
-                    for b in (0..=255u8).step_by(4) {
-                        let rgb = [r + pass, g + 3 * pass, b + pass];
-                        let l = lazy.get(rgb);
-                        assert_eq!(l, eager.get(rgb), "{rgb:?}");
+            // Four threads, each over every bin from its own start: most bins are first met by
+            // several at once.
+            let labels: Vec<[usize; 256]> = (0..4usize)
+                .into_par_iter()
+                .map(|t| {
+                    let mut labels = [0usize; 256];
+                    for n in 0..64usize * 64 * 64 {
+                        let i = (n + t * 4099) % (64 * 64 * 64);
+                        let rgb = [
+                            (i >> 12) as u8 * 4 + pass,
+                            ((i >> 6) & 63) as u8 * 4 + 3 * pass,
+                            (i & 63) as u8 * 4 + pass,
+                        ];
+                        let l = lut.get(rgb);
+                        assert_eq!(l, expected[i], "{rgb:?}");
                         labels[usize::from(l)] += 1;
                     }
-                }
-            }
+                    labels
+                })
+                .collect();
+            let seen = [label::HAND, label::SCALPEL, label::UNKNOWN].map(|l| labels[0][usize::from(l)]);
+            assert!(seen.iter().all(|&n| n > 0), "hand, scalpel and unknown colours all read: {seen:?}");
         }
-        let seen = [label::HAND, label::SCALPEL, label::UNKNOWN].map(|l| labels[usize::from(l)]);
-        assert!(seen.iter().all(|&n| n > 0), "hand, scalpel and unknown colours all read: {seen:?}");
+        // A copy reads as the original, bins classified or not.
+        let copy = lut.clone();
+        assert_eq!(copy.get([8, 200, 90]), at_bin_centre(&classes, 3.0, [8, 200, 90]));
     }
 
     #[test]
-    fn both_tables_at_once_are_the_tables_compiled_one_by_one() {
+    fn both_tables_at_once_are_the_tables_with_and_without_the_margin() {
         let shade = (0.25, 1.15);
         for reject in [None, Some(11.34)] {
             let classes = ColourClasses {
@@ -444,14 +458,15 @@ mod tests {
                 reject_mahalanobis2: reject,
             };
             let (all, confident) = ColourLut::new_and_confident(&classes, 3.0);
-            let (one, two) = (ColourLut::new(&classes), ColourLut::confident(&classes, 3.0));
             let mut differ = 0;
             for r in (0..=255u8).step_by(4) {
                 for g in (0..=255u8).step_by(4) {
                     for b in (0..=255u8).step_by(4) {
-                        assert_eq!(all.get([r, g, b]), one.get([r, g, b]), "{r} {g} {b}");
-                        assert_eq!(confident.get([r, g, b]), two.get([r, g, b]), "{r} {g} {b}");
-                        differ += usize::from(one.get([r, g, b]) != two.get([r, g, b]));
+                        let (one, two) =
+                            (at_bin_centre(&classes, 0.0, [r, g, b]), at_bin_centre(&classes, 3.0, [r, g, b]));
+                        assert_eq!(all.get([r, g, b]), one, "{r} {g} {b}");
+                        assert_eq!(confident.get([r, g, b]), two, "{r} {g} {b}");
+                        differ += usize::from(one != two);
                     }
                 }
             }
