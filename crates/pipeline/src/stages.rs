@@ -51,7 +51,9 @@ const SLEEP_SLICE: Duration = Duration::from_millis(50);
 pub enum FrameSource {
     /// Read (decoded) from the dataset as they are needed.
     Dataset(Arc<Dataset>),
-    /// Decoded before the run ([`preload`]): reading is a copy.
+    /// Decoded before the run ([`preload`]): reading is a copy, or a move where this source
+    /// alone holds them and no later pass reads them again (a frame set read again after a move
+    /// is decoded from the dataset).
     Memory(Arc<Dataset>, Arc<Vec<Preloaded>>),
 }
 
@@ -98,14 +100,23 @@ impl FrameSource {
         }
     }
 
-    /// Frame set `frame` and its faults.
-    fn read(&self, frame: u64, with_masks: bool) -> (Option<FrameSet>, Vec<ViewFault>) {
+    /// Frame set `frame` and its faults; with `last` (no later pass reads it), a preloaded one
+    /// that this source alone holds is moved out, not copied (six 640x480 images are 5.5 MB).
+    fn read(&mut self, frame: u64, with_masks: bool, last: bool) -> (Option<FrameSet>, Vec<ViewFault>) {
         match self {
             FrameSource::Dataset(ds) => read_frame_set(ds, frame, with_masks),
-            FrameSource::Memory(ds, sets) => match sets.iter().find(|p| p.frame == frame) {
-                Some(p) => (p.set.clone(), p.faults.clone()),
-                None => read_frame_set(ds, frame, with_masks),
-            },
+            FrameSource::Memory(ds, sets) => {
+                let Some(k) = sets.iter().position(|p| p.frame == frame) else {
+                    return read_frame_set(ds, frame, with_masks);
+                };
+                match Arc::get_mut(sets).filter(|_| last) {
+                    Some(owned) => {
+                        let p = owned.swap_remove(k);
+                        (p.set, p.faults)
+                    }
+                    None => (sets[k].set.clone(), sets[k].faults.clone()),
+                }
+            }
         }
     }
 }
@@ -485,7 +496,7 @@ fn stage<T: Send + 'static>(
 /// Starts the stages.
 pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
     let Setup {
-        source,
+        mut source,
         frames,
         repeat,
         pass_span_ns,
@@ -528,7 +539,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
             let passes = Passes { frames: &frames, repeat, span_ns: pass_span_ns };
             let gate = Gate { credits: credit_rx, tx: read_tx, depth: &depth, handed: std::cell::Cell::new(0) };
             let mut outcome = ReadOutcome::default();
-            let result = read_stage(&source, &passes, use_files, &pace, &gate, &mut outcome);
+            let result = read_stage(&mut source, &passes, use_files, &pace, &gate, &mut outcome);
             // Read: handed on, or dropped by live pacing. A frame set read as a stop came, before
             // it went in, is neither: the run ended before it.
             outcome.read = gate.handed.get() + outcome.dropped;
@@ -716,14 +727,14 @@ impl Pacer {
 /// them into the stages ([`Gate`]); with live pacing
 /// keeps to their timestamps (see [`Pacer`]) and drops the oldest that found no room.
 fn read_stage(
-    source: &FrameSource,
+    source: &mut FrameSource,
     passes: &Passes<'_>,
     use_files: bool,
     pace: &Pace,
     gate: &Gate<'_>,
     outcome: &mut ReadOutcome,
 ) -> Result<(), Error> {
-    let ds = source.dataset();
+    let ds = Arc::clone(source.dataset());
     let mut pacer = Pacer::default();
     let mut pending: Option<Work> = None;
     let replays = (0..passes.repeat).flat_map(|pass| passes.frames.iter().map(move |&frame| (pass, frame)));
@@ -732,7 +743,7 @@ fn read_stage(
             break;
         }
         let started = Instant::now();
-        let (set, faults) = source.read(frame, use_files);
+        let (set, faults) = source.read(frame, use_files, pass + 1 == passes.repeat);
         if pass == 0 {
             for fault in &faults {
                 tracing::warn!("left out: {fault}");
@@ -740,7 +751,7 @@ fn read_stage(
         }
         outcome.faults.add(faults, set.is_some());
         let Some(mut set) = set else { continue };
-        set.timestamp_ns = shifted(ds, &set, pass, passes.span_ns)?;
+        set.timestamp_ns = shifted(&ds, &set, pass, passes.span_ns)?;
         let took = started.elapsed();
         if pace.realtime {
             let (wait, skipped) = pacer.wait(set.timestamp_ns, Instant::now());
@@ -998,6 +1009,48 @@ mod tests {
         assert_eq!(pacer.wait(i64::MIN, now), (Duration::ZERO, true));
         assert_eq!(pacer.wait(i64::MAX, now), (Duration::ZERO, true));
         assert_eq!(pacer.wait(i64::MIN, now), (Duration::ZERO, true));
+    }
+
+    /// A preloaded frame set is copied while another pass or another holder may read it, moved
+    /// out on the last pass where this source alone holds it, and decoded from the dataset if
+    /// read again after that: every read gives the same frame set.
+    #[test]
+    fn preloaded_frame_sets_are_moved_out_only_on_their_last_read() {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+        let ds = Arc::new(Dataset::open(root).expect("the dataset opens"));
+        let frames = ds.frame_numbers();
+        let sets = Arc::new(preload(&ds, &frames, true, &|| {}));
+        let frame = frames[2];
+        let (expected, _) = read_frame_set(&ds, frame, true);
+        let expected = expected.expect("frame set 2 reads");
+        let same = |got: &Option<FrameSet>| {
+            let got = got.as_ref().expect("a frame set");
+            got.frame == expected.frame
+                && got.views.iter().zip(&expected.views).all(|(a, b)| match (a, b) {
+                    (Some(a), Some(b)) => a.image == b.image && a.mask == b.mask,
+                    (a, b) => a.is_none() && b.is_none(),
+                })
+        };
+        let held = |source: &FrameSource| match source {
+            FrameSource::Memory(_, sets) => sets.len(),
+            FrameSource::Dataset(_) => 0,
+        };
+        // Another holder (a second run over the same frame sets): copied, even on the last pass.
+        let mut shared = FrameSource::Memory(Arc::clone(&ds), Arc::clone(&sets));
+        assert!(same(&shared.read(frame, true, true).0));
+        assert_eq!(held(&shared), frames.len());
+        drop(shared);
+        // Held alone: copied before the last pass, moved out on it, decoded again after.
+        let mut alone = FrameSource::Memory(Arc::clone(&ds), sets);
+        assert!(same(&alone.read(frame, true, false).0));
+        assert_eq!(held(&alone), frames.len());
+        assert!(same(&alone.read(frame, true, true).0));
+        assert_eq!(held(&alone), frames.len() - 1);
+        assert!(same(&alone.read(frame, true, true).0));
+        // The others are still there, whatever order the move left them in.
+        for &f in frames.iter().filter(|&&f| f != frame) {
+            assert_eq!(alone.read(f, true, false).0.map(|s| s.frame), Some(f));
+        }
     }
 
     #[test]
