@@ -730,6 +730,8 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
         let rows = hullcut_viz::rrd_timeline_rows(&d.join("run.rrd")).expect("the recording reads back");
         let labels = rows.get("/world/cams/cam0/labels").copied().unwrap_or(0);
         assert_eq!(labels, logged, "{}: {rows:?}", d.display());
+        // The hull's meshes are made for the frame sets logged, and logged with them.
+        assert_eq!(rows.get("/world/hull/hand/mesh").copied(), Some(logged), "{}: {rows:?}", d.display());
         // What segmentation tested, every frame set however often the images are.
         for entity in ["/metrics/segment/pixels_tested", "/metrics/segment/near_hull"] {
             assert_eq!(rows.get(entity).copied(), Some(30), "{entity} in {}: {rows:?}", d.display());

@@ -140,7 +140,12 @@ pub struct Setup {
     /// the frame timeline (the frame's, plus the pass times one more than the last frame's) is a
     /// multiple of this (1, the default: all; `None`: none). The others get the hull and the
     /// pose, and their masks only where they teach the colours ([`Labelling::label_with`]).
+    /// The same frame sets get the hull's surface meshes (with mask files too; the hand's
+    /// distance grid, which pushes the tissue, every frame set).
     pub masks_every: Option<u64>,
+    /// Frames of the first pass whose hull meshes the caller uses besides those `masks_every`
+    /// names (snapshots).
+    pub mesh_frames: Vec<u64>,
     /// Carving.
     pub hull: HullParams,
     /// Where carving runs.
@@ -196,6 +201,7 @@ impl Setup {
             use_files,
             labelling: None,
             masks_every: Some(1),
+            mesh_frames: Vec::new(),
             hull,
             carver,
             template,
@@ -230,6 +236,9 @@ pub struct ReadOutcome {
     /// Frame sets read but dropped by live pacing: a newer one came while they waited for room.
     pub dropped: u64,
 }
+
+/// Whether the caller uses a frame set's label masks (or hull meshes), by frame and pass.
+type Wanted = dyn Fn(u64, u64) -> bool;
 
 /// A hull label's grid and surface.
 pub type LabelGrid = (u8, &'static str, Option<DenseGrid>, Option<Mesh>);
@@ -503,6 +512,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         use_files,
         labelling,
         masks_every,
+        mesh_frames,
         hull,
         carver,
         template,
@@ -517,6 +527,8 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
     let masks_wanted = move |frame: u64, pass: u64| {
         masks_every.is_some_and(|n| frame.saturating_add(pass.saturating_mul(pass_frames)).is_multiple_of(n.max(1)))
     };
+    let meshes_wanted =
+        move |frame: u64, pass: u64| masks_wanted(frame, pass) || (pass == 0 && mesh_frames.contains(&frame));
     let in_flight = in_flight.max(1);
     let abort = Arc::new(AtomicBool::new(false));
     let depth = Arc::new(QueueDepth::default());
@@ -554,7 +566,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
             let mut region = CarveRegion::new(hull.workspace, hull.leaf_size);
             let result = hull_stage(
                 &ds,
-                (labelling.as_mut(), &masks_wanted),
+                (labelling.as_mut(), &masks_wanted, &meshes_wanted),
                 (carver, &hull, &mut region),
                 &read_rx,
                 (&hull_tx, &depth),
@@ -824,7 +836,7 @@ fn shifted(ds: &Dataset, set: &FrameSet, pass: u64, span_ns: i64) -> Result<i64,
 /// checked by the reader.
 fn hull_stage(
     ds: &Dataset,
-    (mut labelling, masks_wanted): (Option<&mut Labelling>, &dyn Fn(u64, u64) -> bool),
+    (mut labelling, masks_wanted, meshes_wanted): (Option<&mut Labelling>, &Wanted, &Wanted),
     (mut carver, params, region): (Carver, &HullParams, &mut CarveRegion),
     rx: &Receiver<Work>,
     (tx, depth): (&Sender<Work>, &QueueDepth),
@@ -886,11 +898,14 @@ fn hull_stage(
             }
         };
         let clock = Instant::now();
+        // The hand's grid pushes the tissue every frame set; the meshes (and the scalpel's grid,
+        // which only they use) are for the frame sets the caller logs or draws.
+        let meshes = meshes_wanted(frame, work.pass);
         work.grids = label::NAMED
             .iter()
             .map(|&(l, name)| {
-                let grid = DenseGrid::from_occupancy(&occ, Some(l));
-                let mesh = grid.as_ref().map(DenseGrid::surface);
+                let grid = (meshes || l == label::HAND).then(|| DenseGrid::from_occupancy(&occ, Some(l))).flatten();
+                let mesh = grid.as_ref().filter(|_| meshes).map(DenseGrid::surface);
                 (l, name, grid, mesh)
             })
             .collect();

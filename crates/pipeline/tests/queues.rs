@@ -104,3 +104,26 @@ fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// The hull's meshes (and the scalpel's grid, which only they use) are made for the frame sets
+/// the caller logs (`masks_every`, on the frame timeline across passes) and draws (`mesh_frames`,
+/// the first pass); the hand's grid, which pushes the tissue, for every frame set.
+#[test]
+fn the_hull_meshes_are_made_only_for_the_frame_sets_the_caller_uses() {
+    let mut setup = setup(Path::new(CUT_SMALL), 1, false, 2);
+    setup.masks_every = Some(4);
+    setup.mesh_frames = vec![5];
+    let (results, outcome) = run(setup, Duration::ZERO);
+    assert!(outcome.error.is_none(), "{:?}", outcome.error);
+    assert_eq!(results.len(), 18);
+    for w in &results {
+        // Nine frames a pass: pass 1's frame f is 9 + f on the timeline.
+        let wanted = (w.frame + 9 * w.pass).is_multiple_of(4) || (w.pass == 0 && w.frame == 5);
+        for (l, name, grid, mesh) in &w.grids {
+            let (pass, frame) = (w.pass, w.frame);
+            assert_eq!(mesh.is_some(), wanted, "{name} mesh, pass {pass} frame {frame}");
+            let hand = *l == hullcut_dataset::label::HAND;
+            assert_eq!(grid.is_some(), wanted || hand, "{name} grid, pass {pass} frame {frame}");
+        }
+    }
+}

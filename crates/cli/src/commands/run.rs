@@ -673,6 +673,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         Some(labelling)
     };
+    // The hull's meshes of the frames snapshotted (and of those logged: `masks_every`).
+    let mesh_frames: Vec<u64> = snapshots.as_ref().map_or_else(Vec::new, |s| s.frames().collect());
     let mut log = logger::LogThread::start(
         logger::Logger {
             rec,
@@ -696,6 +698,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         labelling,
         // The label masks of the frame sets logged with their images (the logger's `shown`).
         masks_every: Some(args.rrd_every),
+        mesh_frames,
         hull,
         carver,
         template: template.clone(),

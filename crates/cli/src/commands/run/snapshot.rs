@@ -71,6 +71,11 @@ impl Snapshots {
         self.frames.contains(&frame)
     }
 
+    /// The frames drawn, in order.
+    pub fn frames(&self) -> impl Iterator<Item = u64> + '_ {
+        self.frames.iter().copied()
+    }
+
     /// Draws one frame set.
     pub fn write(
         &mut self,
