@@ -308,7 +308,7 @@ impl ClassLut {
 /// (256 KiB) whose bins are classified on their first lookup, from any thread. A frame set asks
 /// about a few thousand colours, not all 262,144, and a table serves several frame sets before
 /// the colours are compiled again: classifying every bin up front took ~6 ms of a learning frame
-/// set's labelling (two tables, on the built-in scene). Lookups give what classifying each bin's
+/// set's labelling (three tables, on the built-in scene). Lookups give what classifying each bin's
 /// centre colour gives, whichever thread asks first.
 #[derive(Debug)]
 pub struct ColourLut {
