@@ -1721,10 +1721,44 @@ fn sharpen(sure: &ColourLut, image: &image::RgbImage, mask: &mut GrayImage, regi
 
 #[cfg(test)]
 mod tests {
-    use hullcut_capture::segment::ColourClass;
+    use hullcut_capture::segment::{BackgroundSource, ColourClass};
     use image::{Rgb, RgbImage};
 
     use super::*;
+
+    /// Near the last hull each view is tested in its rows' stretches, but a camera on the MOG2
+    /// fallback tests its whole image (its model learns from every pixel): it gets none.
+    #[test]
+    fn a_camera_on_mog2_gets_no_stretches_near_the_last_hull() {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
+        let ds = Dataset::open(root).expect("the dataset opens");
+        let tool = ds.tool().expect("tool.json reads");
+        let volume = hullcut_hull::WorkingVolume::from_rig(ds.rig(), 3, true).expect("a working volume");
+        let hull = HullParams::new(volume.aabb, 0.008);
+        let mut labelling =
+            Labelling::new(&ds, tool.as_ref(), hull, &[], LabelMethod::Both).expect("the labelling sets up");
+        // Camera 0 on MOG2; the others with the first frame set as their empty scene.
+        let set = ds.read_frame_set(0, false).expect("frame set 0 reads");
+        let sources = set
+            .views
+            .iter()
+            .enumerate()
+            .map(|(k, v)| match v {
+                Some(v) if k > 0 => BackgroundSource::EmptyScene(vec![v.image.clone()]),
+                _ => BackgroundSource::Stream,
+            })
+            .collect();
+        labelling.segmenter = Segmenter::with_sources(SegmentParams::default(), sources).expect("the segmenter");
+        assert_eq!(labelling.segmenter.method(0), Some(Method::Mog2));
+        // The last hull: one block amid the working volume, and a box around it.
+        let centre = nalgebra::center(&volume.aabb.min, &volume.aabb.max);
+        labelling.last_blocks = Some(vec![centre]);
+        let grown = nalgebra::Vector3::repeat(0.1);
+        labelling.set_workspace(hullcut_hull::Aabb { min: centre - grown, max: centre + grown });
+        assert_eq!(labelling.stretches.len(), set.views.len());
+        assert!(labelling.stretches[0].is_none(), "the MOG2 camera has stretches");
+        assert!(labelling.stretches[1..].iter().all(Option::is_some), "a camera without stretches");
+    }
 
     #[test]
     fn two_boxes_share_their_overlap_and_nothing_when_they_only_touch() {
