@@ -1209,19 +1209,24 @@ impl ToolField {
 fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64, not_hand: &[bool]) -> Occupancy {
     let to_tool = pose.inverse();
     let mut out = occ.clone();
+    let reach = |c: &hullcut_hull::Cell| margin + 0.87 * c.size + field.spacing;
     out.cells.par_chunks_mut(NEAR_TOOL_CHUNK).enumerate().for_each(|(n, cells)| {
         // The cells the tool's box leaves in reach read the grid in a pass of their own, its
-        // reads (scattered over a field of megabytes) in flight together.
-        let mut read: Vec<(usize, usize, f64)> = Vec::new();
+        // reads (scattered over a field of megabytes) in flight together; the chunk's list of
+        // them lives on the stack (no allocation per chunk, frame set after frame set).
+        let mut read = [(0usize, 0usize); NEAR_TOOL_CHUNK];
+        let mut reads = 0;
         for (k, c) in cells.iter_mut().enumerate() {
-            let reach = margin + 0.87 * c.size + field.spacing;
-            match field.lookup(&(to_tool * c.centre()), reach) {
+            match field.lookup(&(to_tool * c.centre()), reach(c)) {
                 Lookup::Decided(near) => c.scalpel = near,
-                Lookup::Node(index) => read.push((k, index, reach)),
+                Lookup::Node(index) => {
+                    read[reads] = (k, index);
+                    reads += 1;
+                }
             }
         }
-        for (k, index, reach) in read {
-            cells[k].scalpel = field.node_within(index, reach);
+        for &(k, index) in &read[..reads] {
+            cells[k].scalpel = field.node_within(index, reach(&cells[k]));
         }
         let first = n * NEAR_TOOL_CHUNK;
         for (k, c) in cells.iter_mut().enumerate() {
