@@ -604,4 +604,55 @@ mod tests {
         assert!(seen.iter().all(|&n| n > 100), "every kind of pixel tested: {seen:?}");
         Ok(())
     }
+
+    #[test]
+    fn the_exposure_estimate_is_the_median_ratio_over_the_grid_pixels_of_the_backgrounds_colour()
+    -> Result<(), CaptureError> {
+        let params = SegmentParams::default();
+        // Dark model pixels (skipped), an image smaller than a step and sizes off the grid.
+        for (seed, (w, h), base) in
+            [(1, (70, 41), [120, 110, 90]), (2, (33, 50), [20, 14, 12]), (3, (9, 7), [90, 90, 90])]
+        {
+            let empty: Vec<RgbImage> = (0..3).map(|k| noisy(w, h, seed * 10 + k, base, 12)).collect();
+            let model = BackgroundModel::from_images(0, &empty, &params)?;
+            for gain in [0.7f32, 1.0, 1.4] {
+                // The background scaled by the gain, with a band of another colour (not its
+                // chromaticity: left out of the median).
+                let calm = noisy(w, h, seed * 100, base, 3);
+                let image = RgbImage::from_fn(w, h, |x, y| {
+                    if (x + y) % 5 == 0 {
+                        image::Rgb([30, 200, 240])
+                    } else {
+                        image::Rgb(calm.get_pixel(x, y).0.map(|c| (f32::from(c) * gain).min(255.0) as u8))
+                    }
+                });
+                // The estimate written out plainly: every GAIN_STEP-th pixel of every
+                // GAIN_STEP-th row, from the model's per-pixel arrays.
+                let mut ratios = Vec::new();
+                for y in (GAIN_STEP / 2..h as usize).step_by(GAIN_STEP) {
+                    for x in (GAIN_STEP / 2..w as usize).step_by(GAIN_STEP) {
+                        let k = y * w as usize + x;
+                        let (p, e) =
+                            (image.get_pixel(x as u32, y as u32).0, model.mean.get_pixel(x as u32, y as u32).0);
+                        let es: u32 = e.iter().map(|&v| u32::from(v)).sum();
+                        let s: f32 = p.iter().map(|&v| f32::from(v)).sum();
+                        let k_s = s / es as f32;
+                        let dc: f32 = (0..3).map(|c| (f32::from(p[c]) - f32::from(e[c]) * k_s).abs()).sum();
+                        if es >= GAIN_MIN_SUM && dc <= params.chroma_tolerance as f32 * s + f32::from(model.tol3[k]) {
+                            ratios.push(k_s);
+                        }
+                    }
+                }
+                ratios.sort_by(f32::total_cmp);
+                let expected =
+                    ratios.get(ratios.len() / 2).map_or(1.0, |&m| f64::from(m).clamp(GAIN_RANGE.0, GAIN_RANGE.1));
+                let estimated = model.exposure_gain(&image, &params, &mut Vec::new());
+                assert_eq!(estimated, expected, "seed {seed}, gain {gain}");
+                if base == [120, 110, 90] {
+                    assert!((estimated - f64::from(gain)).abs() < 0.05, "gain {gain} estimated {estimated}");
+                }
+            }
+        }
+        Ok(())
+    }
 }
