@@ -61,7 +61,8 @@ use crate::volume::{MIN_VIEWS, WorkspaceArg};
 /// the scalpel's silhouettes to be uniformly fatter or thinner than the tool by up to 1.5 px: a
 /// lab's segmentation that takes in or loses the blade's blended edge); a frame whose confidence
 /// is too low (fit disagrees with the silhouettes, blade seen by
-/// too few views, too few scalpel leaves, implausible jump) is refused with a reason and the last
+/// too few views or hidden by the hand from more views than see it, too few scalpel leaves,
+/// implausible jump) is refused with a reason and the last
 /// trusted pose is held for up to 0.5 s. Without a tool.json every frame is refused. Where the
 /// dataset has true poses, the report gives normal, edge and tip errors per frame and aggregated.
 ///
