@@ -98,10 +98,15 @@ fn huber_slope(r: f64) -> f64 {
     if a <= HUBER_PX { 1.0 } else { HUBER_PX / (2.0 * HUBER_PX * a - HUBER_PX * HUBER_PX).sqrt() }
 }
 
-/// Projected vertices of one part of the tool in one view, with their twist derivatives.
+/// Projected vertices of one part of the tool in one view, with the twist derivatives of its
+/// outline's corners.
 #[derive(Default)]
 struct Outline {
     pixels: Vec<Point2<f64>>,
+    /// Per pixel, the part's point it is the projection of.
+    sources: Vec<usize>,
+    /// Per corner of the outline (`hull`'s order), its derivative; empty where the part was
+    /// projected without derivatives.
     jacobians: Vec<Twist2>,
     hull: Vec<usize>,
     vertices: Vec<Point2<f64>>,
@@ -109,8 +114,10 @@ struct Outline {
 }
 
 impl Outline {
-    /// Projects the part's points, with their twist derivatives about `pivot` when given (a
-    /// pose's cost needs none).
+    /// Projects the part's points, with the twist derivatives about `pivot` of the outline's
+    /// corners when given (a pose's cost needs none). Only the corners' derivatives are used,
+    /// so only theirs are computed: a corner's pixel from [`ViewEvidence::project_with_jacobian`]
+    /// is the one [`ViewEvidence::project`] gave (the same arithmetic).
     fn project(
         &mut self,
         points: &[Point3<f64>],
@@ -119,22 +126,26 @@ impl Outline {
         pivot: Option<&Point3<f64>>,
     ) {
         self.pixels.clear();
+        self.sources.clear();
         self.jacobians.clear();
-        for p in points {
-            match pivot {
-                Some(pivot) => {
-                    if let Some((uv, j)) = view.project_with_jacobian(&(pose * p), pivot) {
-                        self.pixels.push(uv);
-                        self.jacobians.push(j);
-                    }
-                }
-                None => self.pixels.extend(view.project(&(pose * p))),
+        for (k, p) in points.iter().enumerate() {
+            if let Some(uv) = view.project(&(pose * p)) {
+                self.pixels.push(uv);
+                self.sources.push(k);
             }
         }
         convex_hull_indices(&self.pixels, &mut self.hull);
         self.vertices.clear();
         self.vertices.extend(self.hull.iter().map(|&i| self.pixels[i]));
         self.polygon.set(&self.vertices);
+        if let Some(pivot) = pivot {
+            for &i in &self.hull {
+                let j = view
+                    .project_with_jacobian(&(pose * points[self.sources[i]]), pivot)
+                    .map_or([[0.0; 6]; 2], |(_, j)| j);
+                self.jacobians.push(j);
+            }
+        }
     }
 
     /// Signed distance of `q` to the projected part and its twist derivative (zero where the part
@@ -145,7 +156,7 @@ impl Outline {
             return Some((near.sd, [0.0; 6]));
         }
         let n = self.polygon.len();
-        let (ja, jb) = (&self.jacobians[self.hull[near.edge]], &self.jacobians[self.hull[(near.edge + 1) % n]]);
+        let (ja, jb) = (&self.jacobians[near.edge], &self.jacobians[(near.edge + 1) % n]);
         // Moving the nearest boundary point c = a + t (b - a) by dc changes sd by -normal · dc.
         let mut g = [0.0; 6];
         for (k, gk) in g.iter_mut().enumerate() {
@@ -394,5 +405,60 @@ pub(crate) fn fit(
         covered: fraction(tally.covered, tally.points),
         rms_px: if n == 0 { 0.0 } else { (tally.sum_sq / n as f64).sqrt() },
         offset_px: offset,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use hullcut_rig::{Camera, Distortion};
+    use image::GrayImage;
+    use nalgebra::Vector3;
+
+    use super::*;
+
+    /// The pointed tool's handle (hundreds of vertices) seen by a distorted camera at several
+    /// poses: the outline's corners are those of every projected vertex's hull, each with the
+    /// derivative [`ViewEvidence::project_with_jacobian`] gives its vertex, and the pixel it
+    /// gives too.
+    #[test]
+    fn the_outline_carries_each_corners_own_derivative() {
+        let geometry = hullcut_synth::Scalpel::pointed().geometry;
+        let template = Template::new(&geometry).expect("a template");
+        assert!(template.body.len() > 100, "{} body points", template.body.len());
+        let mut camera = Camera::new("c", 320, 240, 300.0, 290.0, 161.0, 118.0)
+            .looking_at(Point3::new(0.12, -0.35, 0.3), Point3::new(0.0, 0.0, 0.05), Vector3::z())
+            .expect("a camera looking at the tool");
+        camera.distortion = Distortion { k1: -0.2, k2: 0.05, p1: 4e-4, p2: -3e-4, k3: 0.0 };
+        let radius = camera.distortion.monotonic_radius();
+        let mask = GrayImage::from_pixel(320, 240, image::Luma([1]));
+        let mut checked = 0;
+        for k in 0..12 {
+            let a = f64::from(k) * 0.5;
+            let pose = Isometry3::new(
+                Vector3::new(0.01 * a.cos(), 0.01 * a.sin(), 0.05),
+                Vector3::new(0.3 * a.sin(), 0.2 * a.cos(), a),
+            );
+            let pivot = pose * template.blade_centre;
+            let points: Vec<Point3<f64>> = template.body.iter().map(|p| pose * p).collect();
+            let view = ViewEvidence::new(&camera, radius, &mask, &points, 4.0).expect("the tool in view");
+            let mut outline = Outline::default();
+            outline.project(&template.body, &view, &pose, Some(&pivot));
+            let all: Vec<(Point2<f64>, Twist2)> =
+                points.iter().filter_map(|p| view.project_with_jacobian(p, &pivot)).collect();
+            let pixels: Vec<Point2<f64>> = all.iter().map(|(uv, _)| *uv).collect();
+            assert_eq!(outline.pixels, pixels, "pose {k}: the same pixels");
+            let mut hull = Vec::new();
+            convex_hull_indices(&pixels, &mut hull);
+            assert_eq!(outline.hull, hull, "pose {k}");
+            assert_eq!(outline.jacobians.len(), hull.len());
+            for (corner, &i) in outline.jacobians.iter().zip(&hull) {
+                assert_eq!(corner, &all[i].1, "pose {k}, corner of vertex {i}");
+                checked += 1;
+            }
+            // Without derivatives, none.
+            outline.project(&template.body, &view, &pose, None);
+            assert!(outline.jacobians.is_empty() && outline.hull == hull);
+        }
+        assert!(checked > 12 * 6, "{checked} corners");
     }
 }

@@ -14,11 +14,79 @@ pub(crate) fn convex_hull(points: &[Point2<f64>]) -> Vec<Point2<f64>> {
     order.iter().map(|&i| points[i]).collect()
 }
 
+/// Point sets at least this large are first rid of the points deep inside the polygon of their
+/// extremes ([`inside_extremes`]): a projected handle's vertices, hundreds of them, were sorted
+/// whole for every pose the tool's fit tried.
+const PREFILTER_MIN: usize = 24;
+
 /// [`convex_hull`] as indices into `points`, written into `hull` (reused between calls).
 pub(crate) fn convex_hull_indices(points: &[Point2<f64>], hull: &mut Vec<usize>) {
-    hull.clear();
     let mut idx: Vec<usize> =
         (0..points.len()).filter(|&i| points[i].x.is_finite() && points[i].y.is_finite()).collect();
+    if idx.len() >= PREFILTER_MIN {
+        let deep = inside_extremes(points, &idx);
+        if !deep.is_empty() {
+            let mut k = 0;
+            idx.retain(|_| {
+                k += 1;
+                !deep[k - 1]
+            });
+        }
+    }
+    monotone_chain(points, idx, hull);
+}
+
+/// Per index of `idx`, whether its point lies inside the polygon of the points' extremes in eight
+/// directions (least and greatest x, y, x + y and x − y) by more than a rounding error's margin:
+/// that polygon's corners are points of the set, so such a point is inside their convex hull and
+/// never one of its corners (Akl and Toussaint's filter). Empty where the extremes span no area.
+fn inside_extremes(points: &[Point2<f64>], idx: &[usize]) -> Vec<bool> {
+    // Outward directions in counter-clockwise order: their extremes are the polygon's corners in
+    // that order.
+    const DIRECTIONS: [(f64, f64); 8] =
+        [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -1.0), (0.0, -1.0), (1.0, -1.0)];
+    let mut best = [(f64::NEG_INFINITY, usize::MAX); 8];
+    let mut extent = 0.0f64;
+    for &i in idx {
+        let p = points[i];
+        extent = extent.max(p.x.abs()).max(p.y.abs());
+        for (b, (dx, dy)) in best.iter_mut().zip(DIRECTIONS) {
+            let v = dx * p.x + dy * p.y;
+            if v > b.0 {
+                *b = (v, i);
+            }
+        }
+    }
+    let mut corners: Vec<Point2<f64>> = Vec::with_capacity(8);
+    for &(_, i) in &best {
+        let p = points[i];
+        if corners.last() != Some(&p) && corners.first() != Some(&p) {
+            corners.push(p);
+        }
+    }
+    if corners.len() < 3 {
+        return Vec::new();
+    }
+    // Far more than the rounding of a cross product of coordinates this large, far less than a
+    // pixel.
+    let margin = 1e-9 * (1.0 + extent);
+    let edges: Vec<(Point2<f64>, Vector2<f64>)> = (0..corners.len())
+        .filter_map(|k| {
+            let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+            let ab = b - a;
+            let len = ab.norm();
+            (len > 0.0).then(|| (a, ab / len))
+        })
+        .collect();
+    if edges.len() < 3 {
+        return Vec::new();
+    }
+    idx.iter().map(|&i| edges.iter().all(|(a, u)| u.perp(&(points[i] - a)) > margin)).collect()
+}
+
+/// Andrew's monotone chain over the points `idx` names (finite ones), into `hull`.
+fn monotone_chain(points: &[Point2<f64>], mut idx: Vec<usize>, hull: &mut Vec<usize>) {
+    hull.clear();
     idx.sort_by(|&a, &b| points[a].x.total_cmp(&points[b].x).then(points[a].y.total_cmp(&points[b].y)));
     idx.dedup_by(|a, b| points[*a] == points[*b]);
     if idx.len() < 3 {
@@ -175,6 +243,55 @@ mod tests {
         let beside = sd(2.0, 0.5);
         assert!((beside.sd - 1.0).abs() < 1e-12 && (beside.t - 0.5).abs() < 1e-12);
         assert!((sd(2.0, 2.0).sd - 2f64.sqrt()).abs() < 1e-12);
+    }
+
+    /// The hull with the points deep inside the extremes' polygon left out is the hull of every
+    /// point, corner for corner: random clouds in discs, rings and rectangles (a projected
+    /// handle's outline and inside), with repeated points, points on the extremes' edges and
+    /// collinear runs, from the prefilter's threshold up.
+    #[test]
+    fn leaving_out_the_points_inside_the_extremes_keeps_the_hull() {
+        let mut seed = 17u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut filtered = 0;
+        for round in 0..400 {
+            let n = PREFILTER_MIN + round % 300;
+            let shape = round % 4;
+            let (cx, cy, s) = (next() * 600.0, next() * 400.0, 1.0 + next() * 200.0);
+            let mut points: Vec<Point2<f64>> = (0..n)
+                .map(|_| {
+                    let (a, r) = (next() * std::f64::consts::TAU, next());
+                    let (x, y) = match shape {
+                        0 => (r.sqrt() * a.cos(), r.sqrt() * a.sin()),
+                        1 => (a.cos(), a.sin()),
+                        2 => (2.0 * r - 1.0, 0.2 * (2.0 * next() - 1.0)),
+                        _ => ((4.0 * r).round() / 4.0, (4.0 * next()).round() / 4.0),
+                    };
+                    Point2::new(cx + s * x, cy + s * y)
+                })
+                .collect();
+            // Repeats, and a point on the segment between two others.
+            points.push(points[0]);
+            points.push(points[1]);
+            let mid = Point2::from((points[2].coords + points[3].coords) * 0.5);
+            points.push(mid);
+            let mut hull = Vec::new();
+            convex_hull_indices(&points, &mut hull);
+            let mut every = Vec::new();
+            monotone_chain(&points, (0..points.len()).collect(), &mut every);
+            assert_eq!(hull, every, "round {round}, shape {shape}");
+            filtered += inside_extremes(&points, &(0..points.len()).collect::<Vec<_>>()).iter().filter(|&&d| d).count();
+        }
+        assert!(filtered > 10_000, "{filtered} points left out over the rounds");
+        // Collinear points: no area, nothing left out.
+        let line: Vec<Point2<f64>> = (0..40).map(|k| Point2::new(f64::from(k), 2.0 * f64::from(k))).collect();
+        assert!(inside_extremes(&line, &(0..40).collect::<Vec<_>>()).is_empty());
+        let mut hull = Vec::new();
+        convex_hull_indices(&line, &mut hull);
+        assert_eq!(hull, vec![0, 39]);
     }
 
     #[test]
