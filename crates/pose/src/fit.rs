@@ -114,22 +114,17 @@ struct Outline {
 }
 
 impl Outline {
-    /// Projects the part's points, with the twist derivatives about `pivot` of the outline's
-    /// corners when given (a pose's cost needs none). Only the corners' derivatives are used,
-    /// so only theirs are computed: a corner's pixel from [`ViewEvidence::project_with_jacobian`]
-    /// is the one [`ViewEvidence::project`] gave (the same arithmetic).
-    fn project(
-        &mut self,
-        points: &[Point3<f64>],
-        view: &ViewEvidence,
-        pose: &Isometry3<f64>,
-        pivot: Option<&Point3<f64>>,
-    ) {
+    /// Projects the part's points (`world`: placed by the pose, once for all views), with the
+    /// twist derivatives about `pivot` of the outline's corners when given (a pose's cost needs
+    /// none). Only the corners' derivatives are used, so only theirs are computed: a corner's
+    /// pixel from [`ViewEvidence::project_with_jacobian`] is the one [`ViewEvidence::project`]
+    /// gave (the same arithmetic).
+    fn project(&mut self, world: &[Point3<f64>], view: &ViewEvidence, pivot: Option<&Point3<f64>>) {
         self.pixels.clear();
         self.sources.clear();
         self.jacobians.clear();
-        for (k, p) in points.iter().enumerate() {
-            if let Some(uv) = view.project(&(pose * p)) {
+        for (k, p) in world.iter().enumerate() {
+            if let Some(uv) = view.project(p) {
                 self.pixels.push(uv);
                 self.sources.push(k);
             }
@@ -140,9 +135,7 @@ impl Outline {
         self.polygon.set(&self.vertices);
         if let Some(pivot) = pivot {
             for &i in &self.hull {
-                let j = view
-                    .project_with_jacobian(&(pose * points[self.sources[i]]), pivot)
-                    .map_or([[0.0; 6]; 2], |(_, j)| j);
+                let j = view.project_with_jacobian(&world[self.sources[i]], pivot).map_or([[0.0; 6]; 2], |(_, j)| j);
                 self.jacobians.push(j);
             }
         }
@@ -220,10 +213,14 @@ fn residuals_of(
     let pivot = pose * template.blade_centre;
     let mut tally = Tally::default();
     let (mut blade, mut body) = (Outline::default(), Outline::default());
+    // The template placed by the pose once, not once per view.
+    let place = |points: &[Point3<f64>]| points.iter().map(|p| pose * p).collect::<Vec<_>>();
+    let (blade_world, body_world, interior_world) =
+        (place(&template.blade), place(&template.body), place(&template.interior));
     for view in views {
         let derivatives = jacobian.is_some().then_some(&pivot);
-        blade.project(&template.blade, view, pose, derivatives);
-        body.project(&template.body, view, pose, derivatives);
+        blade.project(&blade_world, view, derivatives);
+        body.project(&body_world, view, derivatives);
         for s in &view.samples {
             let nearest = match (blade.distance(s), body.distance(s)) {
                 (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
@@ -243,7 +240,7 @@ fn residuals_of(
         // broken line or nothing, so its interior says nothing about where it is.
         let sight = (pivot - view.camera.centre()).normalize();
         let thin = (pose * template.normal).dot(&sight).abs() < EDGE_ON_SIN;
-        for (k, p) in template.interior.iter().enumerate() {
+        for (k, world) in interior_world.iter().enumerate() {
             let skip = thin && k < template.blade_interior;
             if skip {
                 out.push(0.0);
@@ -252,16 +249,13 @@ fn residuals_of(
                 }
                 continue;
             }
-            let world = pose * p;
             // Silhouettes thinner than the tool (a negative offset) leave the tool's rim that much
             // off the foreground: only the distance beyond it counts.
             let thinner = (-offset_px).max(0.0);
             let d = match jacobian.as_mut() {
-                None => {
-                    view.project(&world).map(|uv| (view.outside_foreground_with_gradient(&uv).0 - thinner).max(0.0))
-                }
+                None => view.project(world).map(|uv| (view.outside_foreground_with_gradient(&uv).0 - thinner).max(0.0)),
                 Some(j) => {
-                    let projected = view.project_with_jacobian(&world, &pivot);
+                    let projected = view.project_with_jacobian(world, &pivot);
                     let (d, g) = match projected {
                         Some((uv, jp)) => {
                             let (d, grad) = view.outside_foreground_with_gradient(&uv);
@@ -442,7 +436,7 @@ mod tests {
             let points: Vec<Point3<f64>> = template.body.iter().map(|p| pose * p).collect();
             let view = ViewEvidence::new(&camera, radius, &mask, &points, 4.0).expect("the tool in view");
             let mut outline = Outline::default();
-            outline.project(&template.body, &view, &pose, Some(&pivot));
+            outline.project(&points, &view, Some(&pivot));
             let all: Vec<(Point2<f64>, Twist2)> =
                 points.iter().filter_map(|p| view.project_with_jacobian(p, &pivot)).collect();
             let pixels: Vec<Point2<f64>> = all.iter().map(|(uv, _)| *uv).collect();
@@ -456,7 +450,7 @@ mod tests {
                 checked += 1;
             }
             // Without derivatives, none.
-            outline.project(&template.body, &view, &pose, None);
+            outline.project(&points, &view, None);
             assert!(outline.jacobians.is_empty() && outline.hull == hull);
         }
         assert!(checked > 12 * 6, "{checked} corners");

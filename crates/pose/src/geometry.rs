@@ -87,7 +87,10 @@ fn inside_extremes(points: &[Point2<f64>], idx: &[usize]) -> Vec<bool> {
 /// Andrew's monotone chain over the points `idx` names (finite ones), into `hull`.
 fn monotone_chain(points: &[Point2<f64>], mut idx: Vec<usize>, hull: &mut Vec<usize>) {
     hull.clear();
-    idx.sort_by(|&a, &b| points[a].x.total_cmp(&points[b].x).then(points[a].y.total_cmp(&points[b].y)));
+    // Ties broken by index: the order a stable sort of the ascending indices gives.
+    idx.sort_unstable_by(|&a, &b| {
+        points[a].x.total_cmp(&points[b].x).then(points[a].y.total_cmp(&points[b].y)).then(a.cmp(&b))
+    });
     idx.dedup_by(|a, b| points[*a] == points[*b]);
     if idx.len() < 3 {
         hull.extend_from_slice(&idx);
