@@ -335,6 +335,14 @@ pub struct LabelCounters {
     /// is background without a test: outside the box's rectangle, or the last hull's stretches).
     #[serde(default)]
     pub pixels_tested: u64,
+    /// Frame sets whose hull's thin parts were searched for the tool (nothing trusted from the
+    /// track: it was lost, or its prediction's fit refused).
+    #[serde(default)]
+    pub searches: u64,
+    /// Frame sets that trusted nothing from the track and were not searched: the searches before
+    /// found no trusted fit, and are paced (`hullcut_pose::LabelParams::max_search_gap`).
+    #[serde(default)]
+    pub searches_paused: u64,
 }
 
 /// Reports written before `hand_hints` was counted gave the fit its hand hints throughout.
@@ -1024,6 +1032,8 @@ impl Labelling {
         let draw = masks_wanted || learn_due || bootstrapping && self.last_agreeing.is_some();
         labeller.draw_labels(draw);
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
+        self.counters.searches += u64::from(labelled.stats.from_thin_parts);
+        self.counters.searches_paused += u64::from(labelled.stats.search_paused);
         self.drawn += u64::from(draw && labelled.estimate.fitted.is_some());
         // The shadows given back to the table are background, unless the tool is drawn there;
         // neither the labels handed out nor the colours learned take them for the hand.
@@ -1123,6 +1133,15 @@ impl Labelling {
             carve_ms,
             stats: Some(labelled.stats),
         })
+    }
+
+    /// Searches the foreground's hull for a lost tool on one frame set in at most `gap` while the
+    /// searches before found no trusted fit (1: on every frame set;
+    /// [`hullcut_pose::LabelParams::max_search_gap`]). Without tool.json, nothing changes.
+    pub fn set_search_gap(&mut self, gap: u32) {
+        if let Some(tool) = &mut self.tool {
+            tool.set_max_search_gap(gap);
+        }
     }
 
     /// Labels `set` again by the learned colours alone (`None` while none are learned, and with

@@ -88,12 +88,33 @@ pub struct LabelParams {
     /// A hand cell hides the tool where it lies this much nearer the camera than the tool's
     /// surface, metres (plus one cell).
     pub occlusion_margin_m: f64,
+    /// While searches of the hull's thin parts for the tool (the track lost, or its prediction
+    /// refused) keep finding no trusted fit, they run on fewer frame sets: after two failed in a
+    /// row on every second, after three on every fourth, and so on up to one in this many (1: on
+    /// every frame set). A search costs 20 or more fits of the tool, 100-400 ms a frame set on
+    /// two cores where the tool is not found (random:691 in random:701: the pose stage 200-265 ms
+    /// a frame set, 2.4-3 fps); the track, once a search finds it, follows the tool as before.
+    pub max_search_gap: u32,
 }
 
 impl Default for LabelParams {
     fn default() -> Self {
-        LabelParams { thin_radius_m: 0.007, band_px: 3.0, tool_margin_m: 0.002, occlusion_margin_m: 0.003 }
+        LabelParams {
+            thin_radius_m: 0.007,
+            band_px: 3.0,
+            tool_margin_m: 0.002,
+            occlusion_margin_m: 0.003,
+            max_search_gap: 4,
+        }
     }
+}
+
+/// The frame sets from one search of the hull's thin parts to the next after `failed` searches in
+/// a row found no trusted fit: 1 (every frame set) after none or one, doubling with each failure
+/// after that, at most `max` (and at least 1).
+pub(crate) fn search_gap(failed: u32, max: u32) -> u32 {
+    let doubled = 1u32.checked_shl(failed.saturating_sub(1)).unwrap_or(u32::MAX);
+    doubled.min(max).max(1)
 }
 
 /// What labelling one frame set found, and what it cost.
@@ -101,6 +122,9 @@ impl Default for LabelParams {
 pub struct LabelStats {
     /// The pose came from the hull's thin parts (no track to follow).
     pub from_thin_parts: bool,
+    /// The hull's thin parts were not searched for the tool this frame set, though nothing was
+    /// trusted from the track: the last searches found no trusted fit ([`LabelParams::max_search_gap`]).
+    pub search_paused: bool,
     /// Hull leaves taken as thin parts (when starting from them).
     pub thin_leaves: usize,
     /// Foreground pixels labelled scalpel, over all views.
@@ -247,6 +271,13 @@ pub struct ToolLabeller {
     unoccluded: bool,
     /// Whether [`ToolLabeller::label`] draws the views' labels ([`ToolLabeller::draw_labels`]).
     draw: bool,
+    /// Searches of the hull's thin parts in a row that found no trusted fit, since the first
+    /// trusted one (before it, every frame set is searched).
+    failed_searches: u32,
+    /// Whether any frame set was trusted yet.
+    trusted_once: bool,
+    /// Frame sets labelled since the last search.
+    since_search: u32,
 }
 
 impl ToolLabeller {
@@ -268,7 +299,16 @@ impl ToolLabeller {
             params,
             unoccluded: false,
             draw: true,
+            failed_searches: 0,
+            trusted_once: false,
+            since_search: 0,
         })
+    }
+
+    /// Searches the hull's thin parts for a lost tool on one frame set in at most `gap` while the
+    /// searches before found nothing ([`LabelParams::max_search_gap`]; 1: on every frame set).
+    pub fn set_max_search_gap(&mut self, gap: u32) {
+        self.params.max_search_gap = gap.max(1);
     }
 
     /// The tracker (its template and settings).
@@ -398,8 +438,16 @@ impl ToolLabeller {
             consider(probe, e, &mut best);
         }
         // From the hull's thin parts, when the track gave nothing trusted: each of the largest thin
-        // components in turn as the tool, then the evidence around the best first fit.
-        if !best.as_ref().is_some_and(|(_, e)| e.valid) {
+        // components in turn as the tool, then the evidence around the best first fit; paced while
+        // the searches before found nothing ([`LabelParams::max_search_gap`]).
+        self.since_search = self.since_search.saturating_add(1);
+        let tracked = best.as_ref().is_some_and(|(_, e)| e.valid);
+        let gap = search_gap(self.failed_searches, self.params.max_search_gap);
+        stats.search_paused = !tracked && self.since_search < gap;
+        if tracked {
+            self.failed_searches = 0;
+        } else if !stats.search_paused {
+            self.since_search = 0;
             stats.from_thin_parts = true;
             let (thin, components) = thin_parts(occ, self.params.thin_radius_m);
             stats.thin_leaves = components.iter().map(Vec::len).sum();
@@ -419,6 +467,8 @@ impl ToolLabeller {
                 let (probe, e) = fit_with(&self.tracker, &evidence);
                 consider(probe, e, &mut best);
             }
+            let found = best.as_ref().is_some_and(|(_, e)| e.valid);
+            self.failed_searches = if found || !self.trusted_once { 0 } else { self.failed_searches.saturating_add(1) };
         }
         stats.evidence_ms = evidence_ms;
         stats.fit_ms = clock.elapsed().as_secs_f64() * 1e3 - evidence_ms;
@@ -427,11 +477,21 @@ impl ToolLabeller {
                 self.tracker = tracker;
                 e
             }
+            None if stats.search_paused => self.tracker.refuse_unfitted(
+                frame,
+                timestamp_ns,
+                views.iter().flatten().count(),
+                format!(
+                    "the hull is searched for the tool on one frame set in {gap}: the last {} searches found no trusted fit",
+                    self.failed_searches
+                ),
+            ),
             None => {
                 // Nothing to fit: the tracker's own refusal (and its held pose).
                 self.tracker.update(frame, timestamp_ns, occ, &inputs(views, &[]))
             }
         };
+        self.trusted_once |= estimate.valid;
         let clock = Instant::now();
         let (masks, occupancy, tool_regions, unoccluded) = match &estimate.fitted {
             Some(fitted) if !self.draw => {
@@ -1667,6 +1727,17 @@ impl CellRun {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn searches_pace_by_doubling_gaps_up_to_the_most_allowed() {
+        let gaps: Vec<u32> = (0..7).map(|n| search_gap(n, 8)).collect();
+        assert_eq!(gaps, vec![1, 1, 2, 4, 8, 8, 8]);
+        assert_eq!(search_gap(3, 4), 4);
+        // No overflow however many failed, and never a gap of 0.
+        assert_eq!(search_gap(u32::MAX, 64), 64);
+        assert_eq!(search_gap(40, 0), 1);
+        assert!((0..100).all(|n| search_gap(n, 1) == 1));
+    }
 
     #[test]
     fn distances_are_euclidean() {

@@ -247,13 +247,7 @@ impl Tracker {
         views: &[Option<ViewInput>],
     ) -> PoseEstimate {
         let time_s = timestamp_ns as f64 * 1e-9;
-        if let Some((t, _)) = self.trusted
-            && !(time_s > t && time_s - t <= self.params.hold_s)
-        {
-            // Too long without a trusted pose (or time went backwards): start afresh.
-            self.trusted = None;
-            self.filter.reset();
-        }
+        self.expire(time_s);
         let mut diag = Diagnostics { views_used: views.iter().flatten().count(), ..Diagnostics::default() };
         let summary = summarize(occ, self.template.length);
         let fitted = match self.judge_hull(summary.as_ref()) {
@@ -289,6 +283,31 @@ impl Tracker {
             fitted: Some(raw),
             reason: None,
             diagnostics: diag,
+        }
+    }
+
+    /// Refuses the frame set at `timestamp_ns` without looking for the tool (its caller chose
+    /// not to: [`crate::ToolLabeller`] pacing its searches of the hull), for `reason`, with
+    /// `views_used` views at hand; the last trusted pose is held as [`Tracker::update`] holds it.
+    pub fn refuse_unfitted(
+        &mut self,
+        frame: u64,
+        timestamp_ns: i64,
+        views_used: usize,
+        reason: String,
+    ) -> PoseEstimate {
+        self.expire(timestamp_ns as f64 * 1e-9);
+        self.refuse(frame, timestamp_ns, 0.0, None, reason, Diagnostics { views_used, ..Diagnostics::default() })
+    }
+
+    /// Forgets the last trusted pose when it is too old for a frame set at `time_s` (or time went
+    /// backwards): the track starts afresh.
+    fn expire(&mut self, time_s: f64) {
+        if let Some((t, _)) = self.trusted
+            && !(time_s > t && time_s - t <= self.params.hold_s)
+        {
+            self.trusted = None;
+            self.filter.reset();
         }
     }
 

@@ -457,3 +457,65 @@ fn a_pose_with_nan_is_not_an_isometry_and_a_pose_is_checked_for_finiteness() {
         hullcut_pose::BladePose::new(&template, Isometry3::new(Vector3::new(f64::NAN, 0.0, 0.0), Vector3::zeros()));
     assert!(!bad.is_finite());
 }
+
+/// The geometric labeller over one frame's foreground (labels dropped, as segmentation gives it)
+/// whose tool it trusts, then thirteen frame sets with no foreground at all (the hull holds no
+/// tool to find), then the foreground again: while the searches of the hull find nothing they run
+/// on every frame set, then on every second, then every fourth; the first search that finds the
+/// tool ends the pacing. With a gap of 1 every frame set is searched.
+#[test]
+fn a_lost_tool_is_searched_for_on_fewer_frame_sets_while_the_searches_find_nothing() {
+    use hullcut_pose::{LabelParams, ToolLabeller};
+    let scene = scene(BUILTIN, SceneKind::Static, 1, 1);
+    let rig = scene.config().rig.clone();
+    let params = hull_params(&rig);
+    let seen: Vec<Option<GrayImage>> = (0..rig.cameras.len())
+        .map(|c| {
+            scene.render_view(0, c).map(|v| {
+                let mut m = v.mask;
+                m.iter_mut().filter(|p| **p != label::BACKGROUND).for_each(|p| *p = label::UNKNOWN);
+                m
+            })
+        })
+        .collect();
+    let empty: Vec<Option<GrayImage>> =
+        seen.iter().map(|m| m.as_ref().map(|m| GrayImage::new(m.width(), m.height()))).collect();
+    let run = |gap: u32| {
+        let tracker = TrackerParams { agreement: (0.82, 0.92), outline_offset: false, ..TrackerParams::default() };
+        let mut labeller =
+            ToolLabeller::new(&scene.scalpel().geometry, tracker, LabelParams::default()).expect("labeller");
+        labeller.set_max_search_gap(gap);
+        (0..18u64)
+            .map(|frame| {
+                let masks = if (1..=13).contains(&frame) { &empty } else { &seen };
+                let refs: Vec<Option<&GrayImage>> = masks.iter().map(Option::as_ref).collect();
+                let occ = carve(&silhouettes(&rig, &refs).expect("sizes"), &params).expect("carve");
+                let inputs: Vec<Option<ViewInput>> = rig
+                    .cameras
+                    .iter()
+                    .zip(masks)
+                    .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
+                    .collect();
+                // A frame set every 0.1 s: the track's hold (0.5 s) ends at frame set 6.
+                let out = labeller.label(frame, frame as i64 * 100_000_000, &occ, &[], &inputs, None);
+                (out.estimate.valid, out.stats.search_paused, out.estimate.reason)
+            })
+            .collect::<Vec<_>>()
+    };
+    let paced = run(4);
+    let valid: Vec<bool> = paced.iter().map(|s| s.0).collect();
+    let paused: Vec<u64> = (0..18).filter(|&f| paced[f as usize].1).collect();
+    assert!(valid[0], "the first frame set trusted: {:?}", paced[0].2);
+    assert!(!valid[1..=15].contains(&true), "{valid:?}");
+    // Searched on 1 and 2 (the second failure), 4 (the third), then every fourth: 8, 12, 16,
+    // which finds the tool again; 17 follows its track.
+    assert_eq!(paused, vec![3, 5, 6, 7, 9, 10, 11, 13, 14, 15], "{paced:?}");
+    assert!(valid[16] && valid[17], "{paced:?}");
+    // Past the hold, a paused frame set says why it was not searched.
+    let reason = paced[9].2.as_deref().unwrap_or_default();
+    assert!(reason.contains("one frame set in 4") && reason.contains("the last 4 searches"), "{reason}");
+    // Every frame set searched: found again as soon as the tool is back.
+    let every = run(1);
+    assert!(every.iter().all(|s| !s.1), "{every:?}");
+    assert!(every[0].0 && !every[1..14].iter().any(|s| s.0) && every[14..].iter().all(|s| s.0), "{every:?}");
+}

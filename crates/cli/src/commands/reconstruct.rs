@@ -121,6 +121,14 @@ pub struct Args {
     /// work (docs/benchmarks.md, "Weak foreground the other views confirm").
     #[arg(long)]
     confirm_weak_foreground: bool,
+    /// With segmented masks: while searches of the hull's thin parts for a lost tool find no
+    /// trusted fit, search one frame set in at most N (every frame set until two fail in a row,
+    /// then every second, every fourth...). A failed search costs 100-400 ms on two cores; 1
+    /// searches every frame set (offline work: the tool is found again up to N - 1 frame sets
+    /// sooner). The report counts both (`labelling.counters.searches`, `searches_paused`).
+    #[arg(long, value_name = "N", default_value_t = 4,
+          value_parser = clap::builder::RangedU64ValueParser::<u32>::new().range(1..=64))]
+    search_gap: u32,
     /// Views that must see a cell as background to carve it (k of N).
     #[arg(long, value_name = "K", default_value_t = 1,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
@@ -288,6 +296,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if args.confirm_weak_foreground {
             labelling.confirm_weak_foreground(&ds)?;
         }
+        labelling.set_search_gap(args.search_gap);
         Some(labelling)
     };
     let mut counters = Counters::default();

@@ -160,6 +160,14 @@ pub struct Args {
     /// work (docs/benchmarks.md, "Weak foreground the other views confirm").
     #[arg(long)]
     confirm_weak_foreground: bool,
+    /// With segmented masks: while searches of the hull's thin parts for a lost tool find no
+    /// trusted fit, search one frame set in at most N (every frame set until two fail in a row,
+    /// then every second, every fourth...). A failed search costs 100-400 ms on two cores; 1
+    /// searches every frame set (offline work: the tool is found again up to N - 1 frame sets
+    /// sooner). The report counts both (`labelling.counters.searches`, `searches_paused`).
+    #[arg(long, value_name = "N", default_value_t = 4,
+          value_parser = clap::builder::RangedU64ValueParser::<u32>::new().range(1..=64))]
+    search_gap: u32,
     /// Leaf (voxel) size of the hull, metres. With segmented masks, while the tool's track
     /// predicts it closely (the frame set before trusted, at 20 fps or more, the tool moved at most
     /// 1 cm), the hull is this fine within 1.5 cm of the predicted tool and twice as coarse
@@ -671,6 +679,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if args.confirm_weak_foreground {
             labelling.confirm_weak_foreground(&ds)?;
         }
+        labelling.set_search_gap(args.search_gap);
         Some(labelling)
     };
     // The hull's meshes of the frames snapshotted (and of those logged: `masks_every`).

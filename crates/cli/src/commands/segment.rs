@@ -83,6 +83,14 @@ pub struct Args {
     /// work (docs/benchmarks.md, "Weak foreground the other views confirm").
     #[arg(long)]
     confirm_weak_foreground: bool,
+    /// With segmented masks: while searches of the hull's thin parts for a lost tool find no
+    /// trusted fit, search one frame set in at most N (every frame set until two fail in a row,
+    /// then every second, every fourth...). A failed search costs 100-400 ms on two cores; 1
+    /// searches every frame set (offline work: the tool is found again up to N - 1 frame sets
+    /// sooner). The report counts both (`labelling.counters.searches`, `searches_paused`).
+    #[arg(long, value_name = "N", default_value_t = 4,
+          value_parser = clap::builder::RangedU64ValueParser::<u32>::new().range(1..=64))]
+    search_gap: u32,
     /// Leaf of the foreground's hull that the tool is fitted into, metres (twice it away from
     /// the tool while its track predicts it closely: see `run --help`).
     #[arg(long, value_name = "METRES", default_value_t = 0.4 / 128.0)]
@@ -151,6 +159,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if args.confirm_weak_foreground {
         labelling.confirm_weak_foreground(&ds)?;
     }
+    labelling.set_search_gap(args.search_gap);
     let mut carver = Carver::Cpu;
     let score = ds.has_masks();
     let rec = match &args.rrd {
