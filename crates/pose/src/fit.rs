@@ -429,21 +429,27 @@ mod tests {
 
     use super::*;
 
+    /// The pointed tool's template, a 320x240 camera with strong distortion 45 cm from the point
+    /// 5 cm above the origin and looking at it, and a mask all foreground.
+    fn pointed_tool_in_view() -> (Template, Camera, GrayImage) {
+        let geometry = hullcut_synth::Scalpel::pointed().geometry;
+        let template = Template::new(&geometry).expect("a template");
+        let mut camera = Camera::new("c", 320, 240, 300.0, 290.0, 161.0, 118.0)
+            .looking_at(Point3::new(0.12, -0.35, 0.3), Point3::new(0.0, 0.0, 0.05), Vector3::z())
+            .expect("a camera looking at the tool");
+        camera.distortion = Distortion { k1: -0.2, k2: 0.05, p1: 4e-4, p2: -3e-4, k3: 0.0 };
+        (template, camera, GrayImage::from_pixel(320, 240, image::Luma([1])))
+    }
+
     /// The pointed tool's handle (hundreds of vertices) seen by a distorted camera at several
     /// poses: the outline's corners are those of every projected vertex's hull, each with the
     /// derivative [`ViewEvidence::project_with_jacobian`] gives its vertex, and the pixel it
     /// gives too.
     #[test]
     fn the_outline_carries_each_corners_own_derivative() {
-        let geometry = hullcut_synth::Scalpel::pointed().geometry;
-        let template = Template::new(&geometry).expect("a template");
-        assert!(template.body.len() > 100, "{} body points", template.body.len());
-        let mut camera = Camera::new("c", 320, 240, 300.0, 290.0, 161.0, 118.0)
-            .looking_at(Point3::new(0.12, -0.35, 0.3), Point3::new(0.0, 0.0, 0.05), Vector3::z())
-            .expect("a camera looking at the tool");
-        camera.distortion = Distortion { k1: -0.2, k2: 0.05, p1: 4e-4, p2: -3e-4, k3: 0.0 };
+        let (template, camera, mask) = pointed_tool_in_view();
         let radius = camera.distortion.monotonic_radius();
-        let mask = GrayImage::from_pixel(320, 240, image::Luma([1]));
+        assert!(template.body.len() > 100, "{} body points", template.body.len());
         let mut checked = 0;
         for k in 0..12 {
             let a = f64::from(k) * 0.5;
@@ -480,14 +486,8 @@ mod tests {
     /// image, the pointed tool at twelve poses through a distorted camera.
     #[test]
     fn the_body_is_left_unmeasured_only_where_it_is_farther_than_the_blade() {
-        let geometry = hullcut_synth::Scalpel::pointed().geometry;
-        let template = Template::new(&geometry).expect("a template");
-        let mut camera = Camera::new("c", 320, 240, 300.0, 290.0, 161.0, 118.0)
-            .looking_at(Point3::new(0.12, -0.35, 0.3), Point3::new(0.0, 0.0, 0.05), Vector3::z())
-            .expect("a camera looking at the tool");
-        camera.distortion = Distortion { k1: -0.2, k2: 0.05, p1: 4e-4, p2: -3e-4, k3: 0.0 };
+        let (template, camera, mask) = pointed_tool_in_view();
         let radius = camera.distortion.monotonic_radius();
-        let mask = GrayImage::from_pixel(320, 240, image::Luma([1]));
         let (mut skipped, mut measured) = (0, 0);
         for k in 0..12 {
             let a = f64::from(k) * 0.5;
