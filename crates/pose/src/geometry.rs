@@ -15,73 +15,81 @@ pub(crate) fn convex_hull(points: &[Point2<f64>]) -> Vec<Point2<f64>> {
 }
 
 /// Point sets at least this large are first rid of the points deep inside the polygon of their
-/// extremes ([`inside_extremes`]): a projected handle's vertices, hundreds of them, were sorted
-/// whole for every pose the tool's fit tried.
+/// extremes ([`Extremes`]): a projected handle's vertices, hundreds of them, were sorted whole
+/// for every pose the tool's fit tried.
 const PREFILTER_MIN: usize = 24;
 
 /// [`convex_hull`] as indices into `points`, written into `hull` (reused between calls).
 pub(crate) fn convex_hull_indices(points: &[Point2<f64>], hull: &mut Vec<usize>) {
     let mut idx: Vec<usize> =
         (0..points.len()).filter(|&i| points[i].x.is_finite() && points[i].y.is_finite()).collect();
-    if idx.len() >= PREFILTER_MIN {
-        let deep = inside_extremes(points, &idx);
-        if !deep.is_empty() {
-            let mut k = 0;
-            idx.retain(|_| {
-                k += 1;
-                !deep[k - 1]
-            });
-        }
+    if idx.len() >= PREFILTER_MIN
+        && let Some(extremes) = Extremes::of(points, &idx)
+    {
+        idx.retain(|&i| !extremes.holds_deep(&points[i]));
     }
     monotone_chain(points, idx, hull);
 }
 
-/// Per index of `idx`, whether its point lies inside the polygon of the points' extremes in eight
-/// directions (least and greatest x, y, x + y and x − y) by more than a rounding error's margin:
-/// that polygon's corners are points of the set, so such a point is inside their convex hull and
-/// never one of its corners (Akl and Toussaint's filter). Empty where the extremes span no area.
-fn inside_extremes(points: &[Point2<f64>], idx: &[usize]) -> Vec<bool> {
-    // Outward directions in counter-clockwise order: their extremes are the polygon's corners in
-    // that order.
-    const DIRECTIONS: [(f64, f64); 8] =
-        [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -1.0), (0.0, -1.0), (1.0, -1.0)];
-    let mut best = [(f64::NEG_INFINITY, usize::MAX); 8];
-    let mut extent = 0.0f64;
-    for &i in idx {
-        let p = points[i];
-        extent = extent.max(p.x.abs()).max(p.y.abs());
-        for (b, (dx, dy)) in best.iter_mut().zip(DIRECTIONS) {
-            let v = dx * p.x + dy * p.y;
-            if v > b.0 {
-                *b = (v, i);
+/// The polygon of a point set's extremes in eight directions (least and greatest x, y, x + y and
+/// x − y), as its edges: its corners are points of the set, so a point inside it by more than a
+/// rounding error's margin is inside their convex hull and never one of its corners (Akl and
+/// Toussaint's filter). Kept on the stack: it is made for every outline the tool's fit projects.
+struct Extremes {
+    /// Each edge's start and unit direction, counter-clockwise; the first `edges` are used.
+    edges: [(Point2<f64>, Vector2<f64>); 8],
+    len: usize,
+    /// Far more than the rounding of a cross product of the points' coordinates, far less than
+    /// a pixel.
+    margin: f64,
+}
+
+impl Extremes {
+    /// The extremes' polygon of the points `idx` names (finite ones); `None` where it spans no
+    /// area.
+    fn of(points: &[Point2<f64>], idx: &[usize]) -> Option<Self> {
+        // Outward directions in counter-clockwise order: their extremes are the polygon's corners
+        // in that order.
+        const DIRECTIONS: [(f64, f64); 8] =
+            [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (-1.0, 1.0), (-1.0, 0.0), (-1.0, -1.0), (0.0, -1.0), (1.0, -1.0)];
+        let mut best = [(f64::NEG_INFINITY, Point2::origin()); 8];
+        let mut extent = 0.0f64;
+        for &i in idx {
+            let p = points[i];
+            extent = extent.max(p.x.abs()).max(p.y.abs());
+            for (b, (dx, dy)) in best.iter_mut().zip(DIRECTIONS) {
+                let v = dx * p.x + dy * p.y;
+                if v > b.0 {
+                    *b = (v, p);
+                }
             }
         }
-    }
-    let mut corners: Vec<Point2<f64>> = Vec::with_capacity(8);
-    for &(_, i) in &best {
-        let p = points[i];
-        if corners.last() != Some(&p) && corners.first() != Some(&p) {
-            corners.push(p);
+        let mut corners = [Point2::origin(); 8];
+        let mut n = 0;
+        for &(v, p) in &best {
+            if v.is_finite() && (n == 0 || (corners[n - 1] != p && corners[0] != p)) {
+                corners[n] = p;
+                n += 1;
+            }
         }
-    }
-    if corners.len() < 3 {
-        return Vec::new();
-    }
-    // Far more than the rounding of a cross product of coordinates this large, far less than a
-    // pixel.
-    let margin = 1e-9 * (1.0 + extent);
-    let edges: Vec<(Point2<f64>, Vector2<f64>)> = (0..corners.len())
-        .filter_map(|k| {
-            let (a, b) = (corners[k], corners[(k + 1) % corners.len()]);
+        let mut edges = [(Point2::origin(), Vector2::zeros()); 8];
+        let mut len = 0;
+        for k in 0..n {
+            let (a, b) = (corners[k], corners[(k + 1) % n]);
             let ab = b - a;
-            let len = ab.norm();
-            (len > 0.0).then(|| (a, ab / len))
-        })
-        .collect();
-    if edges.len() < 3 {
-        return Vec::new();
+            let l = ab.norm();
+            if l > 0.0 {
+                edges[len] = (a, ab / l);
+                len += 1;
+            }
+        }
+        (n >= 3 && len >= 3).then_some(Extremes { edges, len, margin: 1e-9 * (1.0 + extent) })
     }
-    idx.iter().map(|&i| edges.iter().all(|(a, u)| u.perp(&(points[i] - a)) > margin)).collect()
+
+    /// Whether `p` lies inside the polygon by more than the margin.
+    fn holds_deep(&self, p: &Point2<f64>) -> bool {
+        self.edges[..self.len].iter().all(|(a, u)| u.perp(&(p - a)) > self.margin)
+    }
 }
 
 /// Andrew's monotone chain over the points `idx` names (finite ones), into `hull`.
@@ -286,12 +294,13 @@ mod tests {
             let mut every = Vec::new();
             monotone_chain(&points, (0..points.len()).collect(), &mut every);
             assert_eq!(hull, every, "round {round}, shape {shape}");
-            filtered += inside_extremes(&points, &(0..points.len()).collect::<Vec<_>>()).iter().filter(|&&d| d).count();
+            let extremes = Extremes::of(&points, &(0..points.len()).collect::<Vec<_>>()).expect("an area");
+            filtered += points.iter().filter(|p| extremes.holds_deep(p)).count();
         }
         assert!(filtered > 10_000, "{filtered} points left out over the rounds");
         // Collinear points: no area, nothing left out.
         let line: Vec<Point2<f64>> = (0..40).map(|k| Point2::new(f64::from(k), 2.0 * f64::from(k))).collect();
-        assert!(inside_extremes(&line, &(0..40).collect::<Vec<_>>()).is_empty());
+        assert!(Extremes::of(&line, &(0..40).collect::<Vec<_>>()).is_none());
         let mut hull = Vec::new();
         convex_hull_indices(&line, &mut hull);
         assert_eq!(hull, vec![0, 39]);
