@@ -465,8 +465,16 @@ fn a_pose_with_nan_is_not_an_isometry_and_a_pose_is_checked_for_finiteness() {
 /// tool ends the pacing. With a gap of 1 every frame set is searched.
 #[test]
 fn a_lost_tool_is_searched_for_on_fewer_frame_sets_while_the_searches_find_nothing() {
+    // The built-in rig and tool, and eight 1280x720 cameras with the pointed blade.
+    for setup in [BUILTIN, LAB8] {
+        lost_tool_searches(setup);
+    }
+}
+
+/// [`a_lost_tool_is_searched_for_on_fewer_frame_sets_while_the_searches_find_nothing`] on one rig and tool.
+fn lost_tool_searches(setup: Setup) {
     use hullcut_pose::{LabelParams, ToolLabeller};
-    let scene = scene(BUILTIN, SceneKind::Static, 1, 1);
+    let scene = scene(setup, SceneKind::Static, 1, 1);
     let rig = scene.config().rig.clone();
     let params = hull_params(&rig);
     let seen: Vec<Option<GrayImage>> = (0..rig.cameras.len())
@@ -505,11 +513,11 @@ fn a_lost_tool_is_searched_for_on_fewer_frame_sets_while_the_searches_find_nothi
     let paced = run(4);
     let valid: Vec<bool> = paced.iter().map(|s| s.0).collect();
     let paused: Vec<u64> = (0..18).filter(|&f| paced[f as usize].1).collect();
-    assert!(valid[0], "the first frame set trusted: {:?}", paced[0].2);
+    assert!(valid[0], "{setup:?}: the first frame set trusted: {:?}", paced[0].2);
     assert!(!valid[1..=15].contains(&true), "{valid:?}");
     // Searched on 1 and 2 (the second failure), 4 (the third), then every fourth: 8, 12, 16,
     // which finds the tool again; 17 follows its track.
-    assert_eq!(paused, vec![3, 5, 6, 7, 9, 10, 11, 13, 14, 15], "{paced:?}");
+    assert_eq!(paused, vec![3, 5, 6, 7, 9, 10, 11, 13, 14, 15], "{setup:?}: {paced:?}");
     assert!(valid[16] && valid[17], "{paced:?}");
     // Past the hold, a paused frame set says why it was not searched.
     let reason = paced[9].2.as_deref().unwrap_or_default();
