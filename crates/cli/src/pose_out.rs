@@ -116,11 +116,13 @@ pub struct FrameError {
     fit_rms_px: f64,
     /// How much fatter (px, negative: thinner) than the fitted tool the scalpel silhouettes are.
     fit_offset_px: f64,
-    /// Views seeing the blade's face, edge-on, hidden by the hand, with it on background.
+    /// Views seeing the blade's face, edge-on, hidden by the hand, with it on background, with
+    /// it on the handle's colour.
     views_seen: usize,
     views_edge_on: usize,
     views_hidden: usize,
     views_on_background: usize,
+    views_handle_coloured: usize,
     scalpel_leaves: usize,
     from_hull: bool,
     iterations: usize,
@@ -212,6 +214,7 @@ impl PoseReport {
             views_edge_on: e.diagnostics.views_edge_on,
             views_hidden: e.diagnostics.views_hidden,
             views_on_background: e.diagnostics.views_on_background,
+            views_handle_coloured: e.diagnostics.views_handle_coloured,
             scalpel_leaves: e.diagnostics.scalpel_leaves,
             from_hull: e.diagnostics.from_hull,
             iterations: e.diagnostics.iterations,

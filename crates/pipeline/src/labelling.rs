@@ -1015,7 +1015,10 @@ impl Labelling {
             .cameras
             .iter()
             .zip(hinted.as_ref().unwrap_or(&fg))
-            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
+            .zip(&set.views)
+            .map(|((camera, m), v)| {
+                m.as_ref().map(|mask| ViewInput { camera, mask, image: v.as_ref().map(|v| &v.image) })
+            })
             .collect();
         let bootstrapping = self.bootstrapping();
         let colours = self.method == LabelMethod::Both;

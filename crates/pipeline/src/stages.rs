@@ -946,7 +946,10 @@ fn pose_stage(
                     .cameras
                     .iter()
                     .zip(&set.views)
-                    .map(|(camera, v)| v.as_ref().and_then(|v| v.mask.as_ref()).map(|mask| ViewInput { camera, mask }))
+                    .map(|(camera, v)| {
+                        let v = v.as_ref()?;
+                        v.mask.as_ref().map(|mask| ViewInput { camera, mask, image: Some(&v.image) })
+                    })
                     .collect();
                 tracker.update(work.frame, set.timestamp_ns, occ, &inputs)
             }

@@ -60,7 +60,7 @@ fn main() {
             .cameras
             .iter()
             .zip(&masks)
-            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
+            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask, image: None }))
             .collect();
         let out = labeller.label(f, set.timestamp_ns, &occ, &[], &inputs, None);
         let e = &out.estimate;

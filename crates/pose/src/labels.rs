@@ -724,7 +724,7 @@ fn inputs<'a>(views: &[Option<ViewInput<'a>>], masks: &'a [Option<GrayImage>]) -
     views
         .iter()
         .zip(masks)
-        .map(|(v, m)| v.zip(m.as_ref()).map(|(v, mask)| ViewInput { camera: v.camera, mask }))
+        .map(|(v, m)| v.zip(m.as_ref()).map(|(v, mask)| ViewInput { camera: v.camera, mask, image: v.image }))
         .collect()
 }
 
@@ -1936,7 +1936,7 @@ mod tests {
         let label_with = |hint: u8| {
             let mut mask = GrayImage::from_pixel(200, 200, image::Luma([label::UNKNOWN]));
             mask.put_pixel(i, j, image::Luma([hint]));
-            band_labels(ViewInput { camera: &camera, mask: &mask }, &template, &pose, 3.0, &hand, None)
+            band_labels(ViewInput { camera: &camera, mask: &mask, image: None }, &template, &pose, 3.0, &hand, None)
                 .get_pixel(i, j)
                 .0[0]
         };

@@ -33,6 +33,7 @@ mod geometry;
 mod init;
 pub mod labels;
 mod metrics;
+mod part_colours;
 mod table_shadow;
 mod template;
 mod track;

@@ -5,13 +5,14 @@
 use hullcut_dataset::label;
 use hullcut_hull::Occupancy;
 use hullcut_rig::Camera;
-use image::GrayImage;
+use image::{GrayImage, RgbImage};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::evidence::ViewEvidence;
 use crate::filter::{OneEuro, OneEuroParams};
 use crate::fit::{Fit, Offset, cost, fit, moved};
 use crate::init::{HullSummary, candidates, summarize};
+use crate::part_colours::PartColours;
 use crate::template::Template;
 
 /// Region of interest around the hull and the prediction, pixels.
@@ -23,6 +24,16 @@ const SECOND_COMPONENT: f64 = 0.15;
 pub(crate) const MANY_VIEWS: usize = 6;
 /// Starting poses kept for a full fit when starting from the hull alone.
 const STARTS_FITTED: usize = 4;
+/// The share of a blade's scalpel pixels on the handle's colours from which a view sees the
+/// handle where the fit put the blade. Of every fit the labeller tried (`run --masks segment`,
+/// temporary prints), the views of random:739 in random:743 and random:661 in random:677 (brass
+/// handles, steel blades, bare hands; both trusted throughout) had under 30% of the blade there;
+/// on random:769 in random:773 and random:757 in random:761 the shares spread from 0 to 1, and
+/// every fit with such a view on either (62 frame sets) was off by more than 5° or 5 mm.
+const HANDLE_SHARE: f64 = 0.75;
+/// A trusted fit this confident, whose blade's face that many views see, teaches the colours of
+/// the tool's parts ([`PartColours`]).
+const PARTS_LEARN: (f64, usize) = (0.9, 3);
 
 /// Settings of the tracker.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,6 +151,10 @@ pub struct ViewInput<'a> {
     pub camera: &'a Camera,
     /// Its label mask (0 background, 1 hand, 2 scalpel, 255 unknown).
     pub mask: &'a GrayImage,
+    /// Its colour image, where the caller has one (same size as the mask): the colours of the
+    /// tool's parts are learned from it under trusted fits, and a blade fitted onto the handle's
+    /// colour is not seen there. `None` leaves colour out of the judgement.
+    pub image: Option<&'a RgbImage>,
 }
 
 /// How a frame's estimate came about.
@@ -156,6 +171,9 @@ pub struct Diagnostics {
     /// Views that do not see the blade's face and have most of it on background (the masks lost
     /// the blade there, a dark blade taken for a shadow say, or the fit is off).
     pub views_on_background: usize,
+    /// Views that would see the blade's face but find most of it on the handle's colour (learned
+    /// from trusted fits, where the blade's differs): the fit has laid the blade over the handle.
+    pub views_handle_coloured: usize,
     /// Scalpel leaves in the hull's largest scalpel component.
     pub scalpel_leaves: usize,
     /// Connected components of scalpel leaves.
@@ -219,6 +237,8 @@ pub struct Tracker {
     offset_px: f64,
     /// Lens radii per view index (a root search, done once).
     radii: Vec<Option<f64>>,
+    /// The colours of the blade and of the body, learned from trusted fits.
+    parts: PartColours,
 }
 
 fn ramp(x: f64, lo: f64, hi: f64) -> f64 {
@@ -229,12 +249,27 @@ impl Tracker {
     /// A tracker for a tool.
     pub fn new(template: Template, params: TrackerParams) -> Self {
         let filter = OneEuro::new(params.filter);
-        Tracker { template, params, filter, trusted: None, offset_px: 0.0, radii: Vec::new() }
+        Tracker {
+            template,
+            params,
+            filter,
+            trusted: None,
+            offset_px: 0.0,
+            radii: Vec::new(),
+            parts: PartColours::default(),
+        }
     }
 
     /// The template.
     pub fn template(&self) -> &Template {
         &self.template
+    }
+
+    /// Whether the colours of the tool's blade and body, learned from trusted fits, differ enough
+    /// that a blade fitted onto the handle's colour is not taken as seen (only views given with
+    /// their images teach them).
+    pub fn parts_told_apart(&self) -> bool {
+        self.parts.handle().is_some()
     }
 
     /// Estimates the blade's pose in one frame set from its hull and its views (one entry per
@@ -362,11 +397,13 @@ impl Tracker {
         }
         let clock = std::time::Instant::now();
         let mut evidence = Vec::new();
+        let mut images = Vec::new();
         for (k, v) in views.iter().enumerate() {
             let Some(v) = v else { continue };
             let radius = *self.radii[k].get_or_insert_with(|| v.camera.distortion.monotonic_radius());
             if let Some(e) = ViewEvidence::new(v.camera, radius, v.mask, &around, ROI_MARGIN_PX) {
                 evidence.push(e);
+                images.push(v.image.filter(|i| i.dimensions() == v.mask.dimensions()));
             }
         }
         if evidence.is_empty() {
@@ -414,8 +451,11 @@ impl Tracker {
         diag.fit_rms_px = best.rms_px;
         diag.fit_offset_px = best.offset_px;
         diag.iterations = best.iterations;
-        self.look(&best.pose, &evidence, diag);
+        let seen = self.look(&best.pose, &evidence, &images, diag);
         let (confidence, reason) = self.confidence(time_s, &best, hull, diag);
+        if reason.is_none() && confidence >= PARTS_LEARN.0 && diag.views_seen >= PARTS_LEARN.1 {
+            self.learn_parts(&best.pose, &evidence, &images, &seen);
+        }
         Some((best, confidence, reason))
     }
 
@@ -452,25 +492,41 @@ impl Tracker {
         Some(moved(&pose, &centre, &(w * dt), &(v * dt)))
     }
 
-    /// Per-view look at the fitted blade: edge-on, hidden by the hand, on background, or seen. A
-    /// view that does not see the blade's face has it on background where most of its interior
-    /// lands on background (the masks lost it there, or the fit is off), else behind the hand.
-    fn look(&self, pose: &Isometry3<f64>, views: &[ViewEvidence], diag: &mut Diagnostics) {
+    /// Per-view look at the fitted blade: edge-on, hidden by the hand, on background, on the
+    /// handle's colour, or seen; whether each view (of `views`) sees it. A view that does not see
+    /// the blade's face has it on background where most of its interior lands on background (the
+    /// masks lost it there, or the fit is off), else behind the hand. Where the colours of the
+    /// tool's parts differ (learned from trusted fits) and the view's image is at hand, a view
+    /// where [`HANDLE_SHARE`] of the blade's scalpel pixels have the body's colours does not see
+    /// it either: the blade has been laid over the handle.
+    fn look(
+        &self,
+        pose: &Isometry3<f64>,
+        views: &[ViewEvidence],
+        images: &[Option<&RgbImage>],
+        diag: &mut Diagnostics,
+    ) -> Vec<bool> {
         let centre = pose * self.template.blade_centre;
         let normal = pose * self.template.normal;
         let sin_edge = self.params.edge_on_deg.to_radians().sin();
-        for v in views {
+        let colours = self.parts.handle();
+        let mut seen = vec![false; views.len()];
+        for ((v, image), seen) in views.iter().zip(images).zip(&mut seen) {
             let sight = (centre - v.camera.centre()).normalize();
             if normal.dot(&sight).abs() < sin_edge {
                 diag.views_edge_on += 1;
                 continue;
             }
-            let (mut inside, mut scalpel, mut background) = (0usize, 0usize, 0usize);
+            let (mut inside, mut scalpel, mut background, mut handle) = (0usize, 0usize, 0usize, 0usize);
             for p in &self.template.interior[..self.template.blade_interior] {
-                if let Some(l) = v.project(&(pose * p)).and_then(|uv| v.label_at(&uv)) {
+                let Some(uv) = v.project(&(pose * p)) else { continue };
+                if let Some(l) = v.label_at(&uv) {
                     inside += 1;
                     scalpel += usize::from(l == label::SCALPEL);
                     background += usize::from(l == label::BACKGROUND);
+                    if let (true, Some(colours), Some(image)) = (l == label::SCALPEL, &colours, image) {
+                        handle += usize::from(colours.covers(image, &uv));
+                    }
                 }
             }
             if inside == 0 || (scalpel as f64) < self.params.min_visible_fraction * inside as f64 {
@@ -479,8 +535,38 @@ impl Tracker {
                 } else {
                     diag.views_hidden += 1;
                 }
+            } else if colours.is_some() && handle as f64 >= HANDLE_SHARE * scalpel as f64 {
+                diag.views_handle_coloured += 1;
             } else {
                 diag.views_seen += 1;
+                *seen = true;
+            }
+        }
+        seen
+    }
+
+    /// Learns the colours of the tool's parts under a trusted fit: the blade's interior where a
+    /// view sees its face (on scalpel pixels), the body's interior on scalpel pixels of the same
+    /// views.
+    fn learn_parts(
+        &mut self,
+        pose: &Isometry3<f64>,
+        views: &[ViewEvidence],
+        images: &[Option<&RgbImage>],
+        seen: &[bool],
+    ) {
+        let (blade, body) = self.template.interior.split_at(self.template.blade_interior);
+        let on_scalpel = |v: &ViewEvidence, points: &[Point3<f64>]| -> Vec<nalgebra::Point2<f64>> {
+            points
+                .iter()
+                .filter_map(|p| v.project(&(pose * p)))
+                .filter(|uv| v.label_at(uv) == Some(label::SCALPEL))
+                .collect()
+        };
+        self.parts.age();
+        for ((v, image), _) in views.iter().zip(images).zip(seen).filter(|(_, s)| **s) {
+            if let Some(image) = image {
+                self.parts.learn(image, &on_scalpel(v, blade), &on_scalpel(v, body));
             }
         }
     }
@@ -504,8 +590,13 @@ impl Tracker {
                     ramp(diag.views_seen as f64, 1.0, 2.5)
                 },
                 format!(
-                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, {} on background, of {}",
-                    diag.views_seen, diag.views_edge_on, diag.views_hidden, diag.views_on_background, diag.views_used
+                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, {} on background, {} on the handle's colour, of {}",
+                    diag.views_seen,
+                    diag.views_edge_on,
+                    diag.views_hidden,
+                    diag.views_on_background,
+                    diag.views_handle_coloured,
+                    diag.views_used
                 ),
             ),
             // A blade the hand hides from more views than see it, face-on or edge-on, may have
@@ -662,7 +753,6 @@ pub fn rigid_from_matrix(m: &nalgebra::Matrix4<f64>) -> Result<Isometry3<f64>, M
 #[cfg(test)]
 mod tests {
     use hullcut_synth::{Scene, SceneConfig, SceneKind};
-    use nalgebra::Point3;
 
     use super::*;
 
@@ -718,6 +808,80 @@ mod tests {
             assert_eq!(judged(3, 1, 2, used), (1.0, None));
             assert_eq!(judged(1, 1, 1, used).0, 0.0);
         }
+    }
+
+    /// A camera that sees the standard scalpel's blade face-on at `pose`, a mask of scalpel all
+    /// over, and an image of the tool with `blade` and `body` colours (white around).
+    fn tool_painted(blade: [u8; 3], body: [u8; 3]) -> (Tracker, Isometry3<f64>, Camera, GrayImage, RgbImage) {
+        let scene = Scene::new(SceneConfig::new(SceneKind::Cut, 2, 2)).expect("scene");
+        let template = Template::new(&scene.scalpel().geometry).expect("template");
+        let pose = Isometry3::new(Vector3::new(0.01, -0.02, 0.05), Vector3::new(0.3, -0.2, 0.5));
+        let centre = pose * template.blade_centre;
+        let normal = pose * template.normal;
+        let camera = Camera::new("c", 320, 240, 300.0, 300.0, 160.0, 120.0)
+            .looking_at(centre + normal * 0.25, centre, normal.cross(&Vector3::new(0.3, 0.5, 0.8)))
+            .expect("a camera facing the blade");
+        let mask = GrayImage::from_pixel(320, 240, image::Luma([label::SCALPEL]));
+        let mut image = RgbImage::from_pixel(320, 240, image::Rgb([250, 250, 250]));
+        let radius = camera.distortion.monotonic_radius();
+        let (blade_points, body_points) = template.interior.split_at(template.blade_interior);
+        // The body first: where the two meet, the blade's colour is on top.
+        for (points, colour) in [(body_points, body), (blade_points, blade)] {
+            for p in points {
+                let uv = crate::evidence::project(&camera, radius, &(pose * p)).expect("in view");
+                for j in -2..=2 {
+                    for i in -2..=2 {
+                        let (x, y) = ((uv.x.round() as i64 + i) as u32, (uv.y.round() as i64 + j) as u32);
+                        image.put_pixel(x, y, image::Rgb(colour));
+                    }
+                }
+            }
+        }
+        (Tracker::new(template, TrackerParams::default()), pose, camera, mask, image)
+    }
+
+    /// How `tracker` looks at the blade at `pose` in one view: its diagnostics.
+    fn looked(
+        tracker: &Tracker,
+        pose: &Isometry3<f64>,
+        camera: &Camera,
+        mask: &GrayImage,
+        image: Option<&RgbImage>,
+    ) -> Diagnostics {
+        let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
+        let radius = camera.distortion.monotonic_radius();
+        let view = ViewEvidence::new(camera, radius, mask, &points, ROI_MARGIN_PX).expect("the tool in view");
+        let mut diag = Diagnostics::default();
+        tracker.look(pose, &[view], &[image], &mut diag);
+        diag
+    }
+
+    #[test]
+    fn a_blade_on_the_handles_learned_colour_is_not_seen_and_one_of_its_own_is() {
+        const GREY: [u8; 3] = [128, 130, 134];
+        const BLUE: [u8; 3] = [38, 82, 158];
+        let (mut tracker, pose, camera, mask, image) = tool_painted(GREY, BLUE);
+        let seen_only = Diagnostics { views_seen: 1, ..Diagnostics::default() };
+        // Nothing learned: colour decides nothing.
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_only);
+        let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
+        let radius = camera.distortion.monotonic_radius();
+        let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
+        tracker.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[true]);
+        assert!(tracker.parts.handle().is_some(), "a grey blade and a blue handle told apart");
+        // The blade on its own colour is seen; on the handle's (the fit laid it over the handle),
+        // it is not, and the view says why; with no image, colour decides nothing.
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_only);
+        let (_, _, _, _, all_blue) = tool_painted(BLUE, BLUE);
+        let diag = looked(&tracker, &pose, &camera, &mask, Some(&all_blue));
+        assert_eq!(diag, Diagnostics { views_handle_coloured: 1, ..Diagnostics::default() });
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None), seen_only);
+        // An all-steel tool learns nothing that decides.
+        let (mut steel, pose, camera, mask, image) = tool_painted(GREY, GREY);
+        let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
+        steel.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[true]);
+        assert!(steel.parts.handle().is_none());
+        assert_eq!(looked(&steel, &pose, &camera, &mask, Some(&all_blue)), seen_only);
     }
 
     #[test]

@@ -151,7 +151,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
                 .cameras
                 .iter()
                 .zip(&refs)
-                .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
+                .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask, image: None }))
                 .collect();
             let ts = scene.frame_timestamp(f);
             let estimate = tracker.update(f, ts, &occ, &inputs);

@@ -95,7 +95,7 @@ fn track(clip: &Clip, leaf: f64, cameras: usize, edit: impl Fn(usize, &GrayImage
             .cameras
             .iter()
             .zip(&masks)
-            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask }))
+            .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask, image: None }))
             .collect();
         let clock = Instant::now();
         let e = tracker.update(f, clip.scene.frame_timestamp(f), &occ, &inputs);

@@ -445,7 +445,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             .cameras
             .iter()
             .zip(&masks)
-            .map(|(camera, mask)| mask.map(|mask| ViewInput { camera, mask }))
+            .zip(&set.views)
+            .map(|((camera, mask), v)| mask.map(|mask| ViewInput { camera, mask, image: v.as_ref().map(|v| &v.image) }))
             .collect();
         // Segmented with the tool's geometry: the labelling's tracked fit is the pose, as in
         // `hullcut run`; with mask files, the blade is fitted to them.
