@@ -46,6 +46,30 @@ pub const PIXELS_TESTED_ENTITY: &str = "metrics/segment/pixels_tested";
 /// 0 where in the whole rectangle of the box carved in (the report's
 /// `counters.segmented_near_hull`, frame set by frame set).
 pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
+/// 1 where a frame set's foreground hull was searched for a lost tool, 0 where the search was
+/// paused (`--search-gap`); nothing where the track held the tool (the report's
+/// `labelling.counters.searches` and `searches_paused`, frame set by frame set).
+pub const HULL_SEARCHED_ENTITY: &str = "metrics/pose/hull_searched";
+/// What the views make of the fitted blade, one series per kind ([`POSE_VIEW_KINDS`]): the views
+/// that see its face, see it edge-on, have it hidden by the hand, on background, or on the
+/// handle's colours (a frame's `views_*` in the run report's `pose.per_frame`).
+pub const POSE_VIEWS_ENTITY: &str = "metrics/pose/views/KIND";
+/// The kinds of [`POSE_VIEWS_ENTITY`].
+pub const POSE_VIEW_KINDS: [&str; 5] = ["seen", "edge_on", "hidden", "on_background", "handle_coloured"];
+
+/// The series of one kind of [`POSE_VIEWS_ENTITY`].
+pub fn pose_views_entity(kind: &str) -> String {
+    format!("metrics/pose/views/{kind}")
+}
+
+/// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]).
+pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics) -> anyhow::Result<()> {
+    let counts = [d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background, d.views_handle_coloured];
+    for (kind, n) in POSE_VIEW_KINDS.iter().zip(counts) {
+        hullcut_viz::log_scalar(rec, &pose_views_entity(kind), n as f64)?;
+    }
+    Ok(())
+}
 
 /// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
@@ -104,6 +128,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     }
     hullcut_viz::log_scalar(rec, PIXELS_TESTED_ENTITY, trace.segmented.pixels as f64)?;
     hullcut_viz::log_scalar(rec, NEAR_HULL_ENTITY, f64::from(u8::from(trace.segmented.near_hull)))?;
+    if let Some(searched) = trace.hull_search {
+        hullcut_viz::log_scalar(rec, HULL_SEARCHED_ENTITY, f64::from(u8::from(searched)))?;
+    }
     for colour in &trace.learned {
         hullcut_viz::log_scalar(rec, &appearance_pixels_entity(&colour.label), colour.pixels)?;
         if let Some(rgb) = colour.rgb {

@@ -405,6 +405,7 @@ fn the_recording_holds_every_entity_of_the_design_tree() {
         "/world/tool/truth/",
         "/metrics/time/",
         "/metrics/accuracy/",
+        "/metrics/pose/views/",
     ] {
         assert!(entities.iter().any(|e| e.starts_with(prefix)), "nothing under {prefix} in {entities:?}");
     }
@@ -655,6 +656,15 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     // The frame sets whose untrusted fit taught the colours are marked, as many as counted.
     let taught = r["labelling"]["counters"]["bootstrapped"].as_u64().expect("bootstrapped");
     assert_eq!(rows_of("/metrics/appearance/taught"), taught as usize, "{rows:?}");
+    // What the views made of every frame set's fitted blade, and each search of the hull for a
+    // lost tool (or its pause), as the report counts them.
+    for kind in ["seen", "edge_on", "hidden", "on_background", "handle_coloured"] {
+        assert_eq!(rows_of(&format!("/metrics/pose/views/{kind}")), 24, "{kind}: {rows:?}");
+    }
+    let counters = &r["labelling"]["counters"];
+    let searches = ["searches", "searches_paused"].map(|k| counters[k].as_u64().expect("searches counted"));
+    assert!(searches[0] > 0, "{counters}");
+    assert_eq!(rows_of("/metrics/pose/hull_searched") as u64, searches[0] + searches[1], "{rows:?}");
 }
 
 /// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a

@@ -230,6 +230,8 @@ pub struct LabelTrace {
     pub taught: Option<u64>,
     /// What its segmentation tested ([`Labelling::segmented`]).
     pub segmented: Segmented,
+    /// Whether the foreground's hull was searched for a lost tool in it ([`Labelled::hull_search`]).
+    pub hull_search: Option<bool>,
 }
 
 /// What one frame set's segmentation tested.
@@ -404,6 +406,23 @@ pub struct Labelled {
     pub carve_ms: f64,
     /// The geometric labeller's counters and timings.
     pub stats: Option<LabelStats>,
+}
+
+impl Labelled {
+    /// Whether the foreground's hull was searched for the tool (`Some(true)`) or the search was
+    /// paused while the searches before found nothing (`Some(false)`,
+    /// [`Labelling::set_search_gap`]); `None` where no search was due (the track's prediction was
+    /// trusted) or there is no tool.
+    pub fn hull_search(&self) -> Option<bool> {
+        let stats = self.stats.as_ref()?;
+        if stats.from_thin_parts {
+            Some(true)
+        } else if stats.search_paused {
+            Some(false)
+        } else {
+            None
+        }
+    }
 }
 
 /// What one view's foreground mask holds.

@@ -861,6 +861,7 @@ fn hull_stage(
             work.times.segment.push(clock.elapsed().saturating_sub(carve + fit.unwrap_or_default()));
             work.times.carve.push(carve);
             work.times.pose.extend(fit);
+            let hull_search = labelled.hull_search();
             for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
                 if let Some(view) = view {
                     view.mask = mask;
@@ -877,6 +878,7 @@ fn hull_stage(
                 weak_confirmed: labelling.weak_confirmed(),
                 taught: labelling.taught(),
                 segmented: labelling.segmented(),
+                hull_search,
             });
         }
         let occ = match labelled_hull {

@@ -469,7 +469,7 @@ const INDEXED_FRAME_SETS: u64 = 3600;
 pub(crate) const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
 
 /// The rerun entities a run logs (DESIGN's tree).
-pub const ENTITIES: [&str; 13] = [
+pub const ENTITIES: [&str; 14] = [
     "world/cams/NAME",
     "world/cams/NAME/image",
     "world/cams/NAME/labels",
@@ -481,6 +481,7 @@ pub const ENTITIES: [&str; 13] = [
     "world/tissue/cut",
     "metrics/time/STAGE",
     "metrics/accuracy/NAME",
+    crate::logging::POSE_VIEWS_ENTITY,
     "world",
     "world/workspace",
 ];
@@ -492,8 +493,9 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
 /// hand's, the possible shadows given back to the table, and the pixels an untrusted fit that
 /// agreed with the silhouettes taught the colours (on the frame sets where it did), and what
-/// each frame set's segmentation tested: the pixels, and whether only near the last hull.
-pub const SEGMENTING_ENTITIES: [&str; 8] = [
+/// each frame set's segmentation tested: the pixels, and whether only near the last hull; and
+/// whether the foreground's hull was searched for a lost tool (or the search paused).
+pub const SEGMENTING_ENTITIES: [&str; 9] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
@@ -502,6 +504,7 @@ pub const SEGMENTING_ENTITIES: [&str; 8] = [
     crate::logging::TAUGHT_ENTITY,
     crate::logging::PIXELS_TESTED_ENTITY,
     crate::logging::NEAR_HULL_ENTITY,
+    crate::logging::HULL_SEARCHED_ENTITY,
 ];
 
 pub fn run(args: &Args) -> anyhow::Result<()> {

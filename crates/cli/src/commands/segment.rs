@@ -242,6 +242,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             weak_confirmed: labelling.weak_confirmed(),
             taught: labelling.taught(),
             segmented: labelling.segmented(),
+            hull_search: labelled.hull_search(),
         };
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
@@ -272,6 +273,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     taught: trace.taught,
                     // Relabelling segments nothing again: the first pass's pixels.
                     segmented: trace.segmented,
+                    // Nor searches the hull again.
+                    hull_search: trace.hull_search,
                 },
             ),
             None => (masks, trace),
