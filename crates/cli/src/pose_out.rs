@@ -182,8 +182,7 @@ impl PoseReport {
         self.valid_frames += usize::from(e.valid);
         self.held_frames += usize::from(e.held);
         if let Some(r) = &e.reason {
-            // Reasons with numbers vary frame to frame; count them by their words before the first '('.
-            let key = r.split(" (").next().unwrap_or(r).to_owned();
+            let key = reason_kind(r).to_owned();
             match self.reasons.iter_mut().find(|(k, _)| *k == key) {
                 Some((_, n)) => *n += 1,
                 None => self.reasons.push((key, 1)),
@@ -249,6 +248,17 @@ impl PoseReport {
     }
 }
 
+/// The kind of a refusal's reason: its words before the first parenthesis or number (the numbers
+/// vary frame to frame: "the blade's face is seen by 1 view(s): 2 edge-on, ..." and "... by 2
+/// view(s): ..." are one kind).
+fn reason_kind(reason: &str) -> &str {
+    let end = reason
+        .char_indices()
+        .find(|&(i, c)| c.is_ascii_digit() || reason[i..].starts_with(" ("))
+        .map_or(reason.len(), |(i, _)| i);
+    reason[..end].trim_end_matches([' ', ':', ','])
+}
+
 /// Logs a blade pose under `world/tool/<which>`: the plane as a small quad, the cutting edge as a
 /// line strip, the tip as a point.
 pub fn log_blade(rec: &RecordingStream, which: &str, pose: &BladePose) -> anyhow::Result<()> {
@@ -275,3 +285,57 @@ pub fn log_blade(rec: &RecordingStream, which: &str, pose: &BladePose) -> anyhow
 }
 
 pub use hullcut_pipeline::no_tool_estimate;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_are_counted_by_their_words_before_any_number_or_parenthesis() {
+        let seen = |n: usize| {
+            format!(
+                "the blade's face is seen by {n} view(s): 1 edge-on, 2 hidden by the hand, 0 on background, 0 on the handle's colour, of 5"
+            )
+        };
+        assert_eq!(reason_kind(&seen(1)), "the blade's face is seen by");
+        assert_eq!(reason_kind(&seen(1)), reason_kind(&seen(2)));
+        for (reason, kind) in [
+            (
+                "the fitted tool disagrees with the silhouettes (explains 54% of the scalpel pixels, 81% of it lands on foreground)",
+                "the fitted tool disagrees with the silhouettes",
+            ),
+            (
+                "the blade is hidden by the hand from more views (4) than see it (3) or see it edge-on (0)",
+                "the blade is hidden by the hand from more views",
+            ),
+            (
+                "the hull is searched for the tool on one frame set in 4: the last 3 searches found no trusted fit",
+                "the hull is searched for the tool on one frame set in",
+            ),
+            ("no view sees the scalpel's region", "no view sees the scalpel's region"),
+            ("", ""),
+        ] {
+            assert_eq!(reason_kind(reason), kind, "{reason}");
+        }
+    }
+
+    #[test]
+    fn a_reports_refusals_of_one_kind_are_counted_together() {
+        let mut report = PoseReport::new(true);
+        for (frame, seen) in [(0, 1), (1, 2), (2, 1)] {
+            let e = PoseEstimate {
+                frame,
+                timestamp_ns: 0,
+                valid: false,
+                held: false,
+                confidence: 0.0,
+                pose: None,
+                fitted: None,
+                reason: Some(format!("the blade's face is seen by {seen} view(s): 0 edge-on, of 5")),
+                diagnostics: hullcut_pose::Diagnostics::default(),
+            };
+            report.push(&e, None, None);
+        }
+        assert_eq!(report.reasons, vec![("the blade's face is seen by".to_owned(), 3)]);
+    }
+}
