@@ -106,13 +106,16 @@ fn estimate(
 ) -> PoseEstimate {
     let refs: Vec<Option<&GrayImage>> = masks.iter().map(Option::as_ref).collect();
     let occ = carve(&silhouettes(rig, &refs).expect("sizes"), params).expect("carve");
-    let inputs: Vec<Option<ViewInput>> = rig
-        .cameras
+    tracker.update(frame, timestamp_ns, &occ, &mask_inputs(rig, masks))
+}
+
+/// Each camera's view with its mask (no image): what the tracker is given.
+fn mask_inputs<'a>(rig: &'a hullcut_rig::Rig, masks: &'a [Option<GrayImage>]) -> Vec<Option<ViewInput<'a>>> {
+    rig.cameras
         .iter()
         .zip(masks)
         .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask, image: None }))
-        .collect();
-    tracker.update(frame, timestamp_ns, &occ, &inputs)
+        .collect()
 }
 
 /// Mean, 95th percentile and maximum.
@@ -550,12 +553,7 @@ fn lost_tool_searches(setup: Setup) {
                 let masks = if (1..=13).contains(&frame) { &empty } else { &seen };
                 let refs: Vec<Option<&GrayImage>> = masks.iter().map(Option::as_ref).collect();
                 let occ = carve(&silhouettes(&rig, &refs).expect("sizes"), &params).expect("carve");
-                let inputs: Vec<Option<ViewInput>> = rig
-                    .cameras
-                    .iter()
-                    .zip(masks)
-                    .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask, image: None }))
-                    .collect();
+                let inputs = mask_inputs(&rig, masks);
                 // A frame set every 0.1 s: the track's hold (0.5 s) ends at frame set 6.
                 let out = labeller.label(frame, frame as i64 * 100_000_000, &occ, &[], &inputs, None);
                 (out.estimate.valid, out.stats.search_paused, out.estimate.reason)
