@@ -167,6 +167,12 @@ pub struct PoseReport {
     trusted_wrong: usize,
     /// Refused frames whose own fit was within 5° and 5 mm (refused needlessly).
     refused_right: usize,
+    /// Frames whose fit was judged with the colours of the tool's blade and handle told apart.
+    #[serde(default)]
+    parts_told_apart_frames: usize,
+    /// Frames where some view found the fitted blade on the handle's colours.
+    #[serde(default)]
+    handle_coloured_frames: usize,
     per_frame: Vec<FrameError>,
 }
 
@@ -181,6 +187,8 @@ impl PoseReport {
         self.frames += 1;
         self.valid_frames += usize::from(e.valid);
         self.held_frames += usize::from(e.held);
+        self.parts_told_apart_frames += usize::from(e.diagnostics.parts_told_apart);
+        self.handle_coloured_frames += usize::from(e.diagnostics.views_handle_coloured > 0);
         if let Some(r) = &e.reason {
             let key = reason_kind(r).to_owned();
             match self.reasons.iter_mut().find(|(k, _)| *k == key) {
@@ -337,5 +345,33 @@ mod tests {
             report.push(&e, None, None);
         }
         assert_eq!(report.reasons, vec![("the blade's face is seen by".to_owned(), 3)]);
+        assert_eq!((report.parts_told_apart_frames, report.handle_coloured_frames), (0, 0));
+    }
+
+    #[test]
+    fn frames_judged_with_the_parts_told_apart_and_those_on_the_handles_colours_are_counted() {
+        let mut report = PoseReport::new(true);
+        for (frame, told, handle) in [(0, false, 0), (1, true, 0), (2, true, 2), (3, true, 1)] {
+            let e = PoseEstimate {
+                frame,
+                timestamp_ns: 0,
+                valid: handle == 0,
+                held: false,
+                confidence: 0.0,
+                pose: None,
+                fitted: None,
+                reason: None,
+                diagnostics: hullcut_pose::Diagnostics {
+                    parts_told_apart: told,
+                    views_handle_coloured: handle,
+                    ..hullcut_pose::Diagnostics::default()
+                },
+            };
+            report.push(&e, None, None);
+        }
+        assert_eq!((report.parts_told_apart_frames, report.handle_coloured_frames), (3, 2));
+        let json = serde_json::to_value(&report).expect("serializes");
+        assert_eq!(json["parts_told_apart_frames"], 3);
+        assert_eq!(json["handle_coloured_frames"], 2);
     }
 }

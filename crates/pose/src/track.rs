@@ -174,6 +174,10 @@ pub struct Diagnostics {
     /// Views that would see the blade's face but find most of it on the handle's colour (learned
     /// from trusted fits, where the blade's differs): the fit has laid the blade over the handle.
     pub views_handle_coloured: usize,
+    /// Whether the colours of the tool's blade and handle, learned from trusted fits, were told
+    /// apart when the fit was judged (else colour decided nothing: too little learned yet, or
+    /// parts alike).
+    pub parts_told_apart: bool,
     /// Scalpel leaves in the hull's largest scalpel component.
     pub scalpel_leaves: usize,
     /// Connected components of scalpel leaves.
@@ -510,6 +514,7 @@ impl Tracker {
         let normal = pose * self.template.normal;
         let sin_edge = self.params.edge_on_deg.to_radians().sin();
         let colours = self.parts.handle();
+        diag.parts_told_apart = colours.is_some();
         let mut seen = vec![false; views.len()];
         for ((v, image), seen) in views.iter().zip(images).zip(&mut seen) {
             let sight = (centre - v.camera.centre()).normalize();
@@ -862,6 +867,7 @@ mod tests {
         const BLUE: [u8; 3] = [38, 82, 158];
         let (mut tracker, pose, camera, mask, image) = tool_painted(GREY, BLUE);
         let seen_only = Diagnostics { views_seen: 1, ..Diagnostics::default() };
+        let seen_told = Diagnostics { parts_told_apart: true, ..seen_only.clone() };
         // Nothing learned: colour decides nothing.
         assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_only);
         let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
@@ -871,11 +877,11 @@ mod tests {
         assert!(tracker.parts.handle().is_some(), "a grey blade and a blue handle told apart");
         // The blade on its own colour is seen; on the handle's (the fit laid it over the handle),
         // it is not, and the view says why; with no image, colour decides nothing.
-        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_only);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_told);
         let (_, _, _, _, all_blue) = tool_painted(BLUE, BLUE);
         let diag = looked(&tracker, &pose, &camera, &mask, Some(&all_blue));
-        assert_eq!(diag, Diagnostics { views_handle_coloured: 1, ..Diagnostics::default() });
-        assert_eq!(looked(&tracker, &pose, &camera, &mask, None), seen_only);
+        assert_eq!(diag, Diagnostics { views_handle_coloured: 1, parts_told_apart: true, ..Diagnostics::default() });
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None), seen_told);
         // An all-steel tool learns nothing that decides.
         let (mut steel, pose, camera, mask, image) = tool_painted(GREY, GREY);
         let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");

@@ -184,6 +184,7 @@ fn the_images_of_a_tool_whose_blade_and_handle_differ_change_no_right_fit() {
             Tracker::new(template, TrackerParams::default()),
         );
         let params = hull_params(&rig);
+        let mut told_when_judged = 0;
         for f in 30..42 {
             let views: Vec<_> = (0..rig.cameras.len()).map(|c| scene.render_view(f, c)).collect();
             let masks: Vec<Option<&GrayImage>> = views.iter().map(|v| v.as_ref().map(|v| &v.mask)).collect();
@@ -203,10 +204,13 @@ fn the_images_of_a_tool_whose_blade_and_handle_differ_change_no_right_fit() {
             assert_eq!(b.diagnostics.views_handle_coloured, 0, "{name}, frame {f}: {:?}", b.diagnostics);
             assert_eq!((a.valid, &a.pose, &a.reason), (b.valid, &b.pose, &b.reason), "{name}, frame {f}");
             assert!(b.valid, "{name}, frame {f}: {:?}", b.reason);
+            assert!(!a.diagnostics.parts_told_apart, "{name}, frame {f}: no images, no colours");
+            told_when_judged += usize::from(b.diagnostics.parts_told_apart);
         }
         assert!(!plain.parts_told_apart(), "{name}: no images, nothing learned");
         if told_apart {
             assert!(coloured.parts_told_apart(), "{name}: the blade's and the handle's colours told apart");
+            assert!(told_when_judged > 0, "{name}: the judged fits knew the parts apart");
         }
     }
 }
