@@ -52,7 +52,8 @@ pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
 pub const HULL_SEARCHED_ENTITY: &str = "metrics/pose/hull_searched";
 /// What the views make of the fitted blade, one series per kind ([`POSE_VIEW_KINDS`]): the views
 /// that see its face, see it edge-on, have it hidden by the hand, on background, or on the
-/// handle's colours (a frame's `views_*` in the run report's `pose.per_frame`).
+/// handle's colours (a frame's `views_*` in the run report's `pose.per_frame`); all 0 where
+/// nothing was fitted (the refusal's reason says why).
 pub const POSE_VIEWS_ENTITY: &str = "metrics/pose/views/KIND";
 /// The kinds of [`POSE_VIEWS_ENTITY`].
 pub const POSE_VIEW_KINDS: [&str; 5] = ["seen", "edge_on", "hidden", "on_background", "handle_coloured"];

@@ -298,6 +298,26 @@ pub use hullcut_pipeline::no_tool_estimate;
 mod tests {
     use super::*;
 
+    /// A frame's estimate with nothing fitted: `valid`, its refusal's `reason`, its `diagnostics`.
+    fn estimate(
+        frame: u64,
+        valid: bool,
+        reason: Option<String>,
+        diagnostics: hullcut_pose::Diagnostics,
+    ) -> PoseEstimate {
+        PoseEstimate {
+            frame,
+            timestamp_ns: 0,
+            valid,
+            held: false,
+            confidence: 0.0,
+            pose: None,
+            fitted: None,
+            reason,
+            diagnostics,
+        }
+    }
+
     #[test]
     fn reasons_are_counted_by_their_words_before_any_number_or_parenthesis() {
         let seen = |n: usize| {
@@ -331,18 +351,8 @@ mod tests {
     fn a_reports_refusals_of_one_kind_are_counted_together() {
         let mut report = PoseReport::new(true);
         for (frame, seen) in [(0, 1), (1, 2), (2, 1)] {
-            let e = PoseEstimate {
-                frame,
-                timestamp_ns: 0,
-                valid: false,
-                held: false,
-                confidence: 0.0,
-                pose: None,
-                fitted: None,
-                reason: Some(format!("the blade's face is seen by {seen} view(s): 0 edge-on, of 5")),
-                diagnostics: hullcut_pose::Diagnostics::default(),
-            };
-            report.push(&e, None, None);
+            let reason = format!("the blade's face is seen by {seen} view(s): 0 edge-on, of 5");
+            report.push(&estimate(frame, false, Some(reason), hullcut_pose::Diagnostics::default()), None, None);
         }
         assert_eq!(report.reasons, vec![("the blade's face is seen by".to_owned(), 3)]);
         assert_eq!((report.parts_told_apart_frames, report.handle_coloured_frames), (0, 0));
@@ -352,22 +362,12 @@ mod tests {
     fn frames_judged_with_the_parts_told_apart_and_those_on_the_handles_colours_are_counted() {
         let mut report = PoseReport::new(true);
         for (frame, told, handle) in [(0, false, 0), (1, true, 0), (2, true, 2), (3, true, 1)] {
-            let e = PoseEstimate {
-                frame,
-                timestamp_ns: 0,
-                valid: handle == 0,
-                held: false,
-                confidence: 0.0,
-                pose: None,
-                fitted: None,
-                reason: None,
-                diagnostics: hullcut_pose::Diagnostics {
-                    parts_told_apart: told,
-                    views_handle_coloured: handle,
-                    ..hullcut_pose::Diagnostics::default()
-                },
+            let diagnostics = hullcut_pose::Diagnostics {
+                parts_told_apart: told,
+                views_handle_coloured: handle,
+                ..hullcut_pose::Diagnostics::default()
             };
-            report.push(&e, None, None);
+            report.push(&estimate(frame, handle == 0, None, diagnostics), None, None);
         }
         assert_eq!((report.parts_told_apart_frames, report.handle_coloured_frames), (3, 2));
         let json = serde_json::to_value(&report).expect("serializes");

@@ -38,10 +38,11 @@ const TYPICAL: f32 = 0.9;
 /// The share of the blade's colours outside the body's typical ones from which the parts are told
 /// apart. The blade's pixels under a trusted fit take in some of what lies around it (its base
 /// meets the handle; a blade a few pixels wide is read with its neighbours): measured over the
-/// `run --masks segment` of six recordings (temporary prints), 68-85% on random:769 in random:773
-/// (grey blade, blue handle), 75% on random:757 in random:761, 92-98% on random:739 in random:743
-/// and random:661 in random:677 (brass handles), but 20-21% on the built-in scene (a
-/// steel handle, a polished blade, over a green drape) and 1-4% on random:821 in random:823
+/// fits judged in the `run --masks segment` of six recordings (temporary prints), up to 85% on
+/// random:769 in random:773 (grey blade, blue handle; median 68%, the fits before anything was
+/// learned included), 75% on random:757 in random:761, up to 96% and 98% on random:739 in
+/// random:743 and random:661 in random:677 (brass handles), but at most 21% on the built-in scene
+/// (a steel handle, a polished blade, over a green drape) and 4% on random:821 in random:823
 /// (steel handle, pointed steel blade), which must not be told apart.
 const MIN_BLADE_APART: f32 = 0.5;
 /// Half-width of the square of pixels read around each projected point.

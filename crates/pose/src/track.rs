@@ -171,8 +171,9 @@ pub struct Diagnostics {
     /// Views that do not see the blade's face and have most of it on background (the masks lost
     /// the blade there, a dark blade taken for a shadow say, or the fit is off).
     pub views_on_background: usize,
-    /// Views that would see the blade's face but find most of it on the handle's colour (learned
-    /// from trusted fits, where the blade's differs): the fit has laid the blade over the handle.
+    /// Views that would see the blade's face but find three quarters of its scalpel pixels on the
+    /// handle's colours ([`HANDLE_SHARE`]; learned from trusted fits, where the blade's differ):
+    /// the fit has laid the blade over the handle.
     pub views_handle_coloured: usize,
     /// Whether the colours of the tool's blade and handle, learned from trusted fits, were told
     /// apart when the fit was judged (else colour decided nothing: too little learned yet, or
