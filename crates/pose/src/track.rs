@@ -172,7 +172,7 @@ pub struct Diagnostics {
     /// the blade there, a dark blade taken for a shadow say, or the fit is off).
     pub views_on_background: usize,
     /// Views that would see the blade's face but find three quarters of its scalpel pixels on the
-    /// handle's colours ([`HANDLE_SHARE`]; learned from trusted fits, where the blade's differ):
+    /// handle's colours (learned from trusted fits, where the blade's differ):
     /// the fit has laid the blade over the handle.
     pub views_handle_coloured: usize,
     /// Whether the colours of the tool's blade and handle, learned from trusted fits, were told
