@@ -897,7 +897,8 @@ fn reconstruct_writes_one_pose_line_per_frame_as_the_contract_says() {
             .map(str::to_owned)
     };
     let mut with_report: Vec<String> = args(dataset).to_vec();
-    with_report.extend(["--report".to_owned(), path(&report)]);
+    let rrd = dir.path().join("rec.rrd");
+    with_report.extend(["--report".to_owned(), path(&report), "--rrd".to_owned(), path(&rrd)]);
     let o = hullcut(&with_report.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", stderr(&o));
     let lines = pose_lines(&out);
@@ -927,6 +928,12 @@ fn reconstruct_writes_one_pose_line_per_frame_as_the_contract_says() {
     assert!(p["normal_deg"]["mean"].as_f64().expect("normal error") < 2.5, "{p}");
     assert_eq!(p["per_frame"].as_array().expect("per frame").len(), 9);
     assert!(r["timings"]["pose"]["count"].as_u64() == Some(9));
+    // What the views made of each frame's fitted blade is logged, as `run` logs it.
+    let rows = hullcut_viz::rrd_timeline_rows(&rrd).expect("the recording reads back");
+    for kind in ["seen", "edge_on", "hidden", "on_background", "handle_coloured"] {
+        let entity = format!("/metrics/pose/views/{kind}");
+        assert_eq!(rows.get(&entity).copied(), Some(9), "{entity}: {rows:?}");
+    }
 
     // Without tool.json every frame is refused with its reason, and no pose fields are written.
     let bare = dir.path().join("bare");
