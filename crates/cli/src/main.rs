@@ -11,6 +11,7 @@ mod pose_out;
 mod progress;
 mod report;
 mod volume;
+mod weak;
 
 use hullcut_pipeline::{backend, labelling};
 

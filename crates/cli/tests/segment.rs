@@ -423,4 +423,15 @@ fn weak_foreground_the_other_views_confirm_fills_a_glove_of_the_tables_colour() 
     assert!(logged > 0 && rows.get("/metrics/foreground/weak_confirmed") == Some(&logged), "{rows:?}");
     let rows = hullcut_viz::rrd_timeline_rows(&plain_rrd).expect("the recording reads back");
     assert!(!rows.contains_key("/metrics/foreground/weak_confirmed"), "{rows:?}");
+    // Run only once the tool's track is lost, which four frame sets cannot show (six refusals in
+    // thirty), it never runs: the labels are the plain run's, and the report says why.
+    let waiting = segment(&ds, &["--weak-foreground", "track-lost"]);
+    let l2 = &waiting["labelling"];
+    assert_eq!(
+        (l1["weak_foreground_when"].as_str(), l2["weak_foreground_when"].as_str()),
+        (Some("always"), Some("track_lost"))
+    );
+    assert!(l0["weak_foreground_when"].is_null() && l2["weak_foreground_from"].is_null(), "{l0} {l2}");
+    assert_eq!(l2["counters"], l0["counters"], "{l2}");
+    assert_eq!(iou(&waiting, "foreground"), before);
 }

@@ -352,6 +352,48 @@ fn yes() -> bool {
     true
 }
 
+/// When the weak foreground test runs ([`Labelling::confirm_weak_foreground_when`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WeakWhen {
+    /// On every frame set.
+    Always,
+    /// From the frame set after the tool's track was lost on.
+    TrackLost,
+}
+
+/// Frame sets over which [`WeakWhen::TrackLost`] counts the track's refusals.
+pub const LOST_WINDOW: usize = 30;
+
+/// Refused frame sets within [`LOST_WINDOW`] that count the track as lost: a fifth.
+pub const LOST_REFUSED: usize = 6;
+
+/// The tool's track over the last [`LOST_WINDOW`] frame sets, for [`WeakWhen::TrackLost`].
+#[derive(Debug, Clone, Default)]
+struct LostTrack {
+    /// Refused (true) or trusted, oldest first.
+    recent: std::collections::VecDeque<bool>,
+    /// The frame set from which on the track counts as lost (set once, for good).
+    since: Option<u64>,
+}
+
+impl LostTrack {
+    /// Records frame set `frame`'s fit: the track is lost, from the next frame set on, once
+    /// [`LOST_REFUSED`] of the last [`LOST_WINDOW`] were refused.
+    fn record(&mut self, frame: u64, trusted: bool) {
+        if self.since.is_some() {
+            return;
+        }
+        if self.recent.len() == LOST_WINDOW {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(!trusted);
+        if self.recent.iter().filter(|&&r| r).count() >= LOST_REFUSED {
+            self.since = Some(frame.saturating_add(1));
+        }
+    }
+}
+
 /// What the labelling of a run did, for its report.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LabellingReport {
@@ -365,10 +407,16 @@ pub struct LabellingReport {
     pub tool: bool,
     /// Frames whose masks/ seeded the colours (`--label-frames`).
     pub label_frames: Vec<u64>,
-    /// Whether weak foreground the other views confirm became foreground
+    /// Whether weak foreground the other views confirm may become foreground
     /// (`--confirm-weak-foreground`; `counters.weak_confirmed` counts it).
     #[serde(default)]
     pub confirm_weak_foreground: bool,
+    /// When the weak foreground test runs (`always`, `track_lost`); `None` without it.
+    #[serde(default)]
+    pub weak_foreground_when: Option<WeakWhen>,
+    /// With `track_lost`: the frame set from which on it ran (`None`: the track was never lost).
+    #[serde(default)]
+    pub weak_foreground_from: Option<u64>,
     /// Counts per label source.
     pub counters: LabelCounters,
     /// The learned colours that label by colour and give the tool's fit its hints (learned from
@@ -462,6 +510,11 @@ pub struct Labelling {
     segmenter: Segmenter,
     /// The weak foreground test ([`Labelling::confirm_weak_foreground`]).
     weak: Option<Segmenter>,
+    /// When the weak foreground test runs, once set up.
+    weak_when: WeakWhen,
+    /// The tool's track over the last frame sets, refused or not, while the weak test waits for
+    /// it to be lost ([`WeakWhen::TrackLost`]).
+    lost: LostTrack,
     /// Where the weak foreground's hull is carved: around the last frame set's hull, as the main
     /// job's loop carves ([`CarveRegion`]).
     weak_region: Option<CarveRegion>,
@@ -601,6 +654,8 @@ impl Labelling {
             method,
             segmenter,
             weak: None,
+            weak_when: WeakWhen::Always,
+            lost: LostTrack::default(),
             weak_region: None,
             windows: Vec::new(),
             stretches: Vec::new(),
@@ -650,7 +705,7 @@ impl Labelling {
         self.stretches.clear();
         // The weak test, which sees the whole rectangle, would take what the stretches leave out
         // for weak foreground.
-        let near_hull = workspace != self.full_workspace && self.weak.is_none();
+        let near_hull = workspace != self.full_workspace && !self.weak_runs();
         if let Some(blocks) = self.last_blocks.as_ref().filter(|_| near_hull) {
             let reach = 0.5 * BLOCK_M * 3f64.sqrt() + PAD_M;
             // A camera on the MOG2 fallback tests its whole image (its model learns from every
@@ -717,6 +772,22 @@ impl Labelling {
     /// set: for offline segmentation of a recording whose hand or glove is of the table's or the
     /// backdrop's colour (docs/benchmarks.md, "Weak foreground the other views confirm").
     pub fn confirm_weak_foreground(&mut self, ds: &Dataset) -> Result<(), Error> {
+        self.confirm_weak_foreground_when(ds, WeakWhen::Always)
+    }
+
+    /// Whether the weak foreground test runs on the next frame set: set up, and always or once
+    /// the track is lost.
+    fn weak_runs(&self) -> bool {
+        self.weak.is_some() && (self.weak_when == WeakWhen::Always || self.lost.since.is_some())
+    }
+
+    /// [`Labelling::confirm_weak_foreground`], on every frame set (`WeakWhen::Always`) or from
+    /// the frame set after the tool's track was refused in [`LOST_REFUSED`] of the last
+    /// [`LOST_WINDOW`] frame sets on (`WeakWhen::TrackLost`; without tool.json, never): the
+    /// second test and its carving are paid where the foreground alone loses the tool (a grey
+    /// blade over a grey table), not on every recording.
+    pub fn confirm_weak_foreground_when(&mut self, ds: &Dataset, when: WeakWhen) -> Result<(), Error> {
+        self.weak_when = when;
         let p = self.segmenter.params();
         let weak = SegmentParams {
             brightness_tolerance: p.brightness_tolerance * WEAK_SCALE,
@@ -740,6 +811,9 @@ impl Labelling {
     fn fill_weak(&mut self, set: &FrameSet, carver: &mut Carver, fg: &mut [Option<GrayImage>]) -> Result<(), Error> {
         self.weak_confirmed = None;
         self.weak_pixels.iter_mut().for_each(Vec::clear);
+        if !self.weak_runs() {
+            return Ok(());
+        }
         let Some(weak) = &mut self.weak else { return Ok(()) };
         self.weak_confirmed = Some(0);
         let mut loose = std::mem::take(&mut self.loose);
@@ -1062,6 +1136,9 @@ impl Labelling {
         to_background(&mut labelled.masks, &given_back, true);
         let estimate = labelled.estimate;
         let trusted = estimate.valid && estimate.fitted.is_some();
+        if self.weak.is_some() && self.weak_when == WeakWhen::TrackLost {
+            self.lost.record(frame, trusted);
+        }
         let learns = learn_due && trusted && estimate.confidence >= LEARN_CONFIDENCE;
         let agreement = estimate.diagnostics.explained.min(estimate.diagnostics.covered);
         // An untrusted fit that agrees with the silhouettes, and whether the one of the frame set
@@ -1493,6 +1570,11 @@ impl Labelling {
             tool: self.tool.is_some(),
             label_frames: self.label_frames.clone(),
             confirm_weak_foreground: self.weak.is_some(),
+            weak_foreground_when: self.weak.as_ref().map(|_| self.weak_when),
+            weak_foreground_from: match self.weak_when {
+                WeakWhen::Always => None,
+                WeakWhen::TrackLost => self.lost.since,
+            },
             counters: self.counters.clone(),
             appearance: self.appearance.summary(),
             sharpening_appearance: self.sharpening.summary(),
@@ -1799,6 +1881,24 @@ mod tests {
         assert_eq!(labelling.stretches.len(), set.views.len());
         assert!(labelling.stretches[0].is_none(), "the MOG2 camera has stretches");
         assert!(labelling.stretches[1..].iter().all(Option::is_some), "a camera without stretches");
+    }
+
+    #[test]
+    fn the_track_counts_as_lost_from_the_frame_set_after_a_fifth_of_the_last_thirty_were_refused() {
+        // Refusals further apart than the window never add up.
+        let mut lost = LostTrack::default();
+        for frame in 0..300u64 {
+            lost.record(frame, frame % (LOST_WINDOW as u64 / (LOST_REFUSED as u64 - 1) + 1) != 0);
+        }
+        assert_eq!(lost.since, None);
+        // The sixth refusal within thirty frame sets loses it, from the next one on, for good.
+        let mut lost = LostTrack::default();
+        for frame in 0..40u64 {
+            lost.record(frame, !(10..10 + LOST_REFUSED as u64).contains(&frame));
+        }
+        assert_eq!(lost.since, Some(10 + LOST_REFUSED as u64));
+        lost.record(40, true);
+        assert_eq!(lost.since, Some(10 + LOST_REFUSED as u64));
     }
 
     #[test]

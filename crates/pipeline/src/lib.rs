@@ -31,7 +31,7 @@ pub mod tissue;
 
 pub use backend::{Backend, Carver, GpuHandle};
 pub use error::Error;
-pub use labelling::{LabelMethod, LabelSource, LabelTrace, Labelling, LabellingReport, Segmented};
+pub use labelling::{LabelMethod, LabelSource, LabelTrace, Labelling, LabellingReport, Segmented, WeakWhen};
 pub use read::{Faults, ViewFault};
 pub use stages::{
     FrameSource, LabelGrid, MAX_ADVANCE_S, MAX_REALTIME_GAP_S, Outcome, Pipeline, ReadOutcome, Setup, StageTimes, Work,

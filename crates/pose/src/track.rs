@@ -893,19 +893,9 @@ mod tests {
         (Tracker::new(template, TrackerParams::default()), pose, camera, mask, image)
     }
 
-    /// How `tracker` looks at the blade at `pose` in one view: its diagnostics.
+    /// How `tracker` looks at the blade at `pose` in one view, on a rig of five views, the view
+    /// having seen the blade's face in the last trusted fit or not: its diagnostics.
     fn looked(
-        tracker: &Tracker,
-        pose: &Isometry3<f64>,
-        camera: &Camera,
-        mask: &GrayImage,
-        image: Option<&RgbImage>,
-    ) -> Diagnostics {
-        looked_after(tracker, pose, camera, mask, image, false)
-    }
-
-    /// [`looked`], the view having seen the blade's face in the last trusted fit or not.
-    fn looked_after(
         tracker: &Tracker,
         pose: &Isometry3<f64>,
         camera: &Camera,
@@ -953,8 +943,8 @@ mod tests {
         let between = 0.5 * (params.kept_visible_fraction + params.min_visible_fraction);
         let (mask, share) = covered(between);
         assert!(share >= params.kept_visible_fraction && share < params.min_visible_fraction, "{share}");
-        assert_eq!(looked_after(&tracker, &pose, &camera, &mask, None, false), hidden);
-        assert_eq!(looked_after(&tracker, &pose, &camera, &mask, None, true), seen);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None, false), hidden);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None, true), seen);
         // On a rig of six views or more, where one view fewer does not refuse the fit, the bound
         // stays.
         let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
@@ -964,7 +954,7 @@ mod tests {
         assert_eq!(many, Diagnostics { views_used: MANY_VIEWS, ..hidden.clone() });
         let (mask, share) = covered(params.kept_visible_fraction - 0.05);
         assert!(share < params.kept_visible_fraction, "{share}");
-        assert_eq!(looked_after(&tracker, &pose, &camera, &mask, None, true), hidden);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None, true), hidden);
         // Only the track's own fit keeps what the views saw, not one from the hull's candidates;
         // it is forgotten with the track.
         tracker.trusted = Some((0.0, pose));
@@ -985,7 +975,7 @@ mod tests {
         let seen_only = Diagnostics { views_seen: 1, ..Diagnostics::default() };
         let seen_told = Diagnostics { parts_told_apart: true, ..seen_only.clone() };
         // Nothing learned: colour decides nothing.
-        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_only);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image), false), seen_only);
         let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
         let radius = camera.distortion.monotonic_radius();
         let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
@@ -993,17 +983,17 @@ mod tests {
         assert!(tracker.parts.handle().is_some(), "a grey blade and a blue handle told apart");
         // The blade on its own colour is seen; on the handle's (the fit laid it over the handle),
         // it is not, and the view says why; with no image, colour decides nothing.
-        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image)), seen_told);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, Some(&image), false), seen_told);
         let (_, _, _, _, all_blue) = tool_painted(BLUE, BLUE);
-        let diag = looked(&tracker, &pose, &camera, &mask, Some(&all_blue));
+        let diag = looked(&tracker, &pose, &camera, &mask, Some(&all_blue), false);
         assert_eq!(diag, Diagnostics { views_handle_coloured: 1, parts_told_apart: true, ..Diagnostics::default() });
-        assert_eq!(looked(&tracker, &pose, &camera, &mask, None), seen_told);
+        assert_eq!(looked(&tracker, &pose, &camera, &mask, None, false), seen_told);
         // An all-steel tool learns nothing that decides.
         let (mut steel, pose, camera, mask, image) = tool_painted(GREY, GREY);
         let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
         steel.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[true]);
         assert!(steel.parts.handle().is_none());
-        assert_eq!(looked(&steel, &pose, &camera, &mask, Some(&all_blue)), seen_only);
+        assert_eq!(looked(&steel, &pose, &camera, &mask, Some(&all_blue), false), seen_only);
     }
 
     #[test]

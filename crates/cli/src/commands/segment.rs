@@ -16,6 +16,7 @@ use crate::logging::CameraLogger;
 use crate::progress::bar;
 use crate::report::{Provenance, SCHEMA_VERSION, StageTiming, write_json};
 use crate::volume::{MIN_VIEWS, WorkspaceArg};
+use crate::weak::WeakArg;
 
 /// Segment a dataset's images into label masks (0 background, 1 hand, 2 scalpel) and score them.
 ///
@@ -76,11 +77,17 @@ pub struct Args {
     /// colour (the colours of --label-frames alone; tool.json ignored).
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = LabelMethod::Both)]
     labels: LabelMethod,
-    /// A pixel the foreground test calls background but that differs from
-    /// it by half its tolerances becomes foreground where the other views' hull covers it (a hand
-    /// or glove of the table's colour). Costs a second foreground test and a carving that keeps
-    /// what one view alone refutes, every frame set: some 30 ms on six 640x480 views, for offline
-    /// work (docs/benchmarks.md, "Weak foreground the other views confirm").
+    /// When a pixel the foreground test calls background, but that differs from it by half
+    /// its tolerances, becomes foreground where the other views' hull covers it (a hand or glove of
+    /// the table's colour, a grey blade over a grey table): `never`, `always`, or `track-lost`,
+    /// from the frame set after the tool's track was refused in 6 of the last 30 frame sets on (the
+    /// report's `labelling.weak_foreground_from` says where). It costs a second foreground test
+    /// and a carving that keeps what one view alone refutes: some 30 ms a frame set on six 640x480
+    /// views. It brings some recordings' lost tracks back and loses others (docs/benchmarks.md,
+    /// "Weak foreground once the track is lost"), so it is not on by default.
+    #[arg(long, value_enum, value_name = "WHEN", default_value_t = WeakArg::Never)]
+    weak_foreground: WeakArg,
+    /// The same as `--weak-foreground always`.
     #[arg(long)]
     confirm_weak_foreground: bool,
     /// With segmented masks: while searches of the hull's thin parts for a lost tool find no
@@ -158,9 +165,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hullcut_hull::HullParams { min_views: MIN_VIEWS, ..hullcut_hull::HullParams::new(volume.aabb, args.voxel) };
     let tool = ds.tool()?;
     let mut labelling = Labelling::new(&ds, tool.as_ref(), hull.clone(), &args.label_frames, args.labels)?;
-    if args.confirm_weak_foreground {
-        labelling.confirm_weak_foreground(&ds)?;
-    }
+    crate::weak::set_up(&mut labelling, &ds, args.weak_foreground, args.confirm_weak_foreground)?;
     labelling.set_search_gap(args.search_gap);
     let mut carver = Carver::Cpu;
     let score = ds.has_masks();
