@@ -239,6 +239,11 @@ impl PoseReport {
         self.tip_mm = Spread::of(&collect(|x| x.tip_mm));
     }
 
+    /// Frames refused (not trusted) and frames judged.
+    pub(crate) fn refused_of(&self) -> (usize, usize) {
+        (self.frames.saturating_sub(self.valid_frames), self.frames)
+    }
+
     /// A line for the terminal.
     pub fn summary(&self) -> String {
         let mut s =

@@ -493,6 +493,20 @@ pub const ENTITIES: [&str; 14] = [
     "world/workspace",
 ];
 
+/// A segmented run with a tool (`tool`) that refused it in `refused` of `frames` frame sets, a
+/// fifth or more, without the weak foreground test (`weak`): a line that names
+/// `--weak-foreground track-lost`, which may bring the lost track back (a blade or glove of the
+/// table's colour), or may not (docs/benchmarks.md).
+fn weak_hint(tool: bool, weak: bool, (refused, frames): (usize, usize)) -> Option<String> {
+    (tool && !weak && frames > 0 && 5 * refused >= frames).then(|| {
+        format!(
+            "hint: the tool was refused in {refused} of {frames} frame sets; where the foreground misses a blade or \
+             glove of the table's colour, --weak-foreground track-lost lets the other views confirm its faint pixels \
+             once the track is lost (docs/benchmarks.md, \"Weak foreground once the track is lost\")"
+        )
+    })
+}
+
 /// Where the weak foreground test ran (`--weak-foreground`), also the weak foreground confirmed in
 /// each frame set.
 pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
@@ -854,6 +868,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hullcut_pipeline::budget::summary(&budget)
     );
     println!("{}", pose_report.summary());
+    if let Some(hint) = outcome
+        .labelling
+        .as_ref()
+        .and_then(|l| weak_hint(l.tool, l.weak_foreground_when.is_some(), pose_report.refused_of()))
+    {
+        println!("{hint}");
+    }
     let pieces_at_end = sim.map(hullcut_sim::CutSim::piece_states);
     if let Some(sim) = sim {
         let topology = sim.topology();
@@ -1055,5 +1076,20 @@ fn non_negative(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("`{}` is not a length in metres, 0 or more", crate::report::shorten(s, 80))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::weak_hint;
+
+    #[test]
+    fn the_weak_foreground_is_hinted_where_a_fifth_of_the_frame_sets_refused_the_tool_without_it() {
+        let hint = weak_hint(true, false, (30, 150)).expect("a fifth refused: a hint");
+        assert!(hint.contains("refused in 30 of 150") && hint.contains("--weak-foreground track-lost"), "{hint}");
+        assert_eq!(weak_hint(true, false, (29, 150)), None, "less than a fifth");
+        assert_eq!(weak_hint(true, true, (150, 150)), None, "the test was asked for");
+        assert_eq!(weak_hint(false, false, (150, 150)), None, "no tool to refuse");
+        assert_eq!(weak_hint(true, false, (0, 0)), None, "nothing judged");
     }
 }
