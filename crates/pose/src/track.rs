@@ -336,7 +336,8 @@ impl Tracker {
         let filtered = Isometry3::from_parts(Translation3::from(p.coords - r * self.template.blade_centre.coords), r);
         self.trusted = Some((time_s, filtered));
         self.offset_px = fitted.offset_px;
-        self.seen_last = std::mem::take(&mut self.seen_now);
+        // Swapped, not moved: the next fit refills `seen_now` in place.
+        std::mem::swap(&mut self.seen_last, &mut self.seen_now);
         PoseEstimate {
             frame,
             timestamp_ns,
@@ -485,7 +486,8 @@ impl Tracker {
         diag.iterations = best.iterations;
         let seen_before = self.kept_sight(&indices, diag.from_hull);
         let seen = self.look(&best.pose, &evidence, &images, &seen_before, diag);
-        self.seen_now = vec![false; views.len()];
+        self.seen_now.clear();
+        self.seen_now.resize(views.len(), false);
         for (&k, &s) in indices.iter().zip(&seen) {
             self.seen_now[k] = s;
         }
