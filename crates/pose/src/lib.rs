@@ -47,8 +47,8 @@ pub use metrics::{PoseError, pose_error};
 pub use table_shadow::{SHADE_TOLERANCE, Shading, TableShadows};
 pub use template::{Template, check_tool};
 pub use track::{
-    BladePose, Diagnostics, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Tracker, TrackerParams, ViewInput,
-    isometry_from_matrix, rigid_from_matrix,
+    BladePose, Diagnostics, MANY_VIEWS, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Sight, Tracker,
+    TrackerParams, ViewInput, isometry_from_matrix, rigid_from_matrix,
 };
 
 /// Why a pose estimator could not be set up.

@@ -21,7 +21,7 @@ const ROI_MARGIN_PX: f64 = 12.0;
 /// hand hides much of a held scalpel, so a loose one can be several times larger).
 const SECOND_COMPONENT: f64 = 0.15;
 /// Views with a mask from which [`TrackerParams::min_views_seen_few`] no longer applies.
-pub(crate) const MANY_VIEWS: usize = 6;
+pub const MANY_VIEWS: usize = 6;
 /// Starting poses kept for a full fit when starting from the hull alone.
 const STARTS_FITTED: usize = 4;
 /// The share of a blade's scalpel pixels on the handle's colours from which a view sees the
@@ -173,6 +173,21 @@ pub struct ViewInput<'a> {
     pub image: Option<&'a RgbImage>,
 }
 
+/// How one view saw the fitted blade ([`Diagnostics::sight`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sight {
+    /// Its face: enough of the blade on scalpel pixels.
+    Seen,
+    /// Within [`TrackerParams::edge_on_deg`] of edge-on.
+    EdgeOn,
+    /// Hidden by the hand (too little of it on scalpel pixels, most of it on the foreground).
+    Hidden,
+    /// Most of it on the background (the masks lost the blade there, or the fit is off).
+    OnBackground,
+    /// On scalpel pixels of the handle's learned colours (the fit laid it over the handle).
+    HandleColoured,
+}
+
 /// How a frame's estimate came about.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Diagnostics {
@@ -191,6 +206,9 @@ pub struct Diagnostics {
     /// handle's colours (learned from trusted fits, where the blade's differ):
     /// the fit has laid the blade over the handle.
     pub views_handle_coloured: usize,
+    /// Per view given (in their order), how it saw the kept fit's blade; `None` where the view
+    /// gave no evidence (no mask, or the tool out of it). Empty where nothing was fitted.
+    pub sight: Vec<Option<Sight>>,
     /// Whether the colours of the tool's blade and handle, learned from trusted fits, were told
     /// apart when the fit was judged (else colour decided nothing: too little learned yet, or
     /// parts alike).
@@ -485,11 +503,15 @@ impl Tracker {
         diag.fit_offset_px = best.offset_px;
         diag.iterations = best.iterations;
         let seen_before = self.kept_sight(&indices, diag.from_hull);
-        let seen = self.look(&best.pose, &evidence, &images, &seen_before, diag);
+        let sights = self.look(&best.pose, &evidence, &images, &seen_before, diag);
+        let seen: Vec<bool> = sights.iter().map(|&s| s == Sight::Seen).collect();
         self.seen_now.clear();
         self.seen_now.resize(views.len(), false);
-        for (&k, &s) in indices.iter().zip(&seen) {
+        diag.sight.clear();
+        diag.sight.resize(views.len(), None);
+        for ((&k, &s), &sight) in indices.iter().zip(&seen).zip(&sights) {
             self.seen_now[k] = s;
+            diag.sight[k] = Some(sight);
         }
         let (confidence, reason) = self.confidence(time_s, &best, hull, diag);
         if reason.is_none() && confidence >= PARTS_LEARN.0 && diag.views_seen >= PARTS_LEARN.1 {
@@ -539,14 +561,15 @@ impl Tracker {
     }
 
     /// Per-view look at the fitted blade: edge-on, hidden by the hand, on background, on the
-    /// handle's colour, or seen; whether each view (of `views`) sees it. A view that does not see
-    /// the blade's face has it on background where most of its interior lands on background (the
-    /// masks lost it there, or the fit is off), else behind the hand. Where the colours of the
-    /// tool's parts differ (learned from trusted fits) and the view's image is at hand, a view
-    /// where [`HANDLE_SHARE`] of the blade's scalpel pixels have the body's colours does not see
-    /// it either: the blade has been laid over the handle. A view whose `seen_before` is set saw
-    /// the blade's face in the last trusted fit: on a rig of fewer than six views it needs only
-    /// [`TrackerParams::kept_visible_fraction`] of the blade on scalpel pixels.
+    /// handle's colour, or seen; how each view (of `views`) sees it, counted in `diag`. A view
+    /// that does not see the blade's face has it on background where most of its interior lands
+    /// on background (the masks lost it there, or the fit is off), else behind the hand. Where the
+    /// colours of the tool's parts differ (learned from trusted fits) and the view's image is at
+    /// hand, a view where [`HANDLE_SHARE`] of the blade's scalpel pixels have the body's colours
+    /// does not see it either: the blade has been laid over the handle. A view whose
+    /// `seen_before` is set saw the blade's face in the last trusted fit: on a rig of fewer than
+    /// six views it needs only [`TrackerParams::kept_visible_fraction`] of the blade on scalpel
+    /// pixels.
     fn look(
         &self,
         pose: &Isometry3<f64>,
@@ -554,50 +577,53 @@ impl Tracker {
         images: &[Option<&RgbImage>],
         seen_before: &[bool],
         diag: &mut Diagnostics,
-    ) -> Vec<bool> {
+    ) -> Vec<Sight> {
         let centre = pose * self.template.blade_centre;
         let normal = pose * self.template.normal;
         let sin_edge = self.params.edge_on_deg.to_radians().sin();
         let colours = self.parts.handle();
         diag.parts_told_apart = colours.is_some();
-        let mut seen = vec![false; views.len()];
-        for (((v, image), seen), &before) in views.iter().zip(images).zip(&mut seen).zip(seen_before) {
-            let sight = (centre - v.camera.centre()).normalize();
-            if normal.dot(&sight).abs() < sin_edge {
-                diag.views_edge_on += 1;
-                continue;
-            }
-            let (mut inside, mut scalpel, mut background, mut handle) = (0usize, 0usize, 0usize, 0usize);
-            for p in &self.template.interior[..self.template.blade_interior] {
-                let Some(uv) = v.project(&(pose * p)) else { continue };
-                if let Some(l) = v.label_at(&uv) {
-                    inside += 1;
-                    scalpel += usize::from(l == label::SCALPEL);
-                    background += usize::from(l == label::BACKGROUND);
-                    if let (true, Some(colours), Some(image)) = (l == label::SCALPEL, &colours, image) {
-                        handle += usize::from(colours.covers(image, &uv));
+        let mut sights = Vec::with_capacity(views.len());
+        for ((v, image), &before) in views.iter().zip(images).zip(seen_before) {
+            let line_of_sight = (centre - v.camera.centre()).normalize();
+            let sight = if normal.dot(&line_of_sight).abs() < sin_edge {
+                Sight::EdgeOn
+            } else {
+                let (mut inside, mut scalpel, mut background, mut handle) = (0usize, 0usize, 0usize, 0usize);
+                for p in &self.template.interior[..self.template.blade_interior] {
+                    let Some(uv) = v.project(&(pose * p)) else { continue };
+                    if let Some(l) = v.label_at(&uv) {
+                        inside += 1;
+                        scalpel += usize::from(l == label::SCALPEL);
+                        background += usize::from(l == label::BACKGROUND);
+                        if let (true, Some(colours), Some(image)) = (l == label::SCALPEL, &colours, image) {
+                            handle += usize::from(colours.covers(image, &uv));
+                        }
                     }
                 }
-            }
-            let visible = if before && diag.views_used < MANY_VIEWS {
-                self.params.kept_visible_fraction
-            } else {
-                self.params.min_visible_fraction
-            };
-            if inside == 0 || (scalpel as f64) < visible * inside as f64 {
-                if 2 * background > inside {
-                    diag.views_on_background += 1;
+                let visible = if before && diag.views_used < MANY_VIEWS {
+                    self.params.kept_visible_fraction
                 } else {
-                    diag.views_hidden += 1;
+                    self.params.min_visible_fraction
+                };
+                if inside == 0 || (scalpel as f64) < visible * inside as f64 {
+                    if 2 * background > inside { Sight::OnBackground } else { Sight::Hidden }
+                } else if colours.is_some() && handle as f64 >= HANDLE_SHARE * scalpel as f64 {
+                    Sight::HandleColoured
+                } else {
+                    Sight::Seen
                 }
-            } else if colours.is_some() && handle as f64 >= HANDLE_SHARE * scalpel as f64 {
-                diag.views_handle_coloured += 1;
-            } else {
-                diag.views_seen += 1;
-                *seen = true;
+            };
+            match sight {
+                Sight::Seen => diag.views_seen += 1,
+                Sight::EdgeOn => diag.views_edge_on += 1,
+                Sight::Hidden => diag.views_hidden += 1,
+                Sight::OnBackground => diag.views_on_background += 1,
+                Sight::HandleColoured => diag.views_handle_coloured += 1,
             }
+            sights.push(sight);
         }
-        seen
+        sights
     }
 
     /// Learns the colours of the tool's parts under a trusted fit: the blade's interior where a

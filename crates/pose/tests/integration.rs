@@ -3,7 +3,7 @@
 use hullcut_dataset::{ToolGeometry, label};
 use hullcut_hull::{HullParams, WorkingVolume, carve, silhouettes};
 use hullcut_pose::{
-    PoseError, PoseEstimate, Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error,
+    PoseError, PoseEstimate, Sight, Template, Tracker, TrackerParams, ViewInput, isometry_from_matrix, pose_error,
 };
 use hullcut_rig::RigPreset;
 use hullcut_synth::{Appearance, CameraRenderer, Light, Part, Scene, SceneConfig, SceneKind, ToolKind};
@@ -578,4 +578,48 @@ fn lost_tool_searches(setup: Setup) {
     let every = run(1);
     assert!(every.iter().all(|s| !s.1), "{every:?}");
     assert!(every[0].0 && !every[1..14].iter().any(|s| s.0) && every[14..].iter().all(|s| s.0), "{every:?}");
+}
+
+/// Each view's sight of the fitted blade is given by its place in the rig, a view without a mask
+/// has none, and the sights add up to the counts of each kind; on two rigs.
+#[test]
+fn each_views_sight_of_the_blade_is_given_by_its_place_in_the_rig() {
+    for (name, setup) in [("built-in rig", BUILTIN), ("random:5", RANDOM)] {
+        let scene = scene(setup, SceneKind::Cut, 3, 42);
+        let rig = scene.config().rig.clone();
+        let template = Template::new(&scene.scalpel().geometry).expect("template");
+        let mut tracker = Tracker::new(template, TrackerParams::default());
+        let params = hull_params(&rig);
+        // The second camera gives no mask.
+        let missing = 1;
+        let mut judged = 0;
+        for f in 30..36 {
+            let views: Vec<_> =
+                (0..rig.cameras.len()).map(|c| scene.render_view(f, c).filter(|_| c != missing)).collect();
+            let masks: Vec<Option<&GrayImage>> = views.iter().map(|v| v.as_ref().map(|v| &v.mask)).collect();
+            let occ = carve(&silhouettes(&rig, &masks).expect("sizes"), &params).expect("carve");
+            let inputs: Vec<Option<ViewInput>> = rig
+                .cameras
+                .iter()
+                .zip(&views)
+                .map(|(camera, v)| v.as_ref().map(|v| ViewInput { camera, mask: &v.mask, image: Some(&v.image) }))
+                .collect();
+            let e = tracker.update(f, scene.frame_timestamp(f), &occ, &inputs);
+            let d = &e.diagnostics;
+            if e.fitted.is_none() {
+                continue;
+            }
+            judged += 1;
+            assert_eq!(d.sight.len(), rig.cameras.len(), "{name}, frame {f}");
+            assert_eq!(d.sight[missing], None, "{name}, frame {f}: no mask, no sight");
+            let count = |kind: Sight| d.sight.iter().filter(|s| **s == Some(kind)).count();
+            assert_eq!(
+                [Sight::Seen, Sight::EdgeOn, Sight::Hidden, Sight::OnBackground, Sight::HandleColoured].map(count),
+                [d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background, d.views_handle_coloured],
+                "{name}, frame {f}: {d:?}"
+            );
+            assert!(d.views_seen >= 2, "{name}, frame {f}: truth masks, the blade's face seen: {d:?}");
+        }
+        assert!(judged >= 5, "{name}: {judged} of 6 frames fitted");
+    }
 }

@@ -340,7 +340,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut tracker = template.clone().map(|t| Tracker::new(t, tracking));
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut pose_writer = PoseWriter::create(&args.out.join("poses.jsonl"))?;
-    let mut pose_report = PoseReport::new(template.is_some());
+    let camera_names = ds.rig().cameras.iter().map(|c| c.name.clone());
+    let mut pose_report = PoseReport::new(template.is_some()).with_cameras(camera_names);
     let rec = match &args.rrd {
         Some(path) => {
             let rec = hullcut_viz::open_recording("hullcut-reconstruct", &hullcut_viz::Sink::File(path.clone()))?;
@@ -609,6 +610,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         );
     }
     println!("{}", pose_report.summary());
+    for line in [pose_report.sight_summary(), pose_report.rig_hint()].into_iter().flatten() {
+        println!("{line}");
+    }
     disagreement.finish();
     if let Some(line) = disagreement.summary() {
         println!("{line}");

@@ -748,7 +748,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut memory = Vec::new();
     let mut next_sample = MEMORY_SAMPLE;
     let mut counters = Counters { truth_poses_refused: truth_refused, ..Counters::default() };
-    let mut pose_report = PoseReport::new(template.is_some());
+    let camera_names = ds.rig().cameras.iter().map(|c| c.name.clone());
+    let mut pose_report = PoseReport::new(template.is_some()).with_cameras(camera_names);
     let mut times = StageTimes::default();
     let (mut latency, mut admission) = (Vec::new(), Vec::new());
     let mut tled_cells: Vec<usize> = Vec::new();
@@ -868,6 +869,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         hullcut_pipeline::budget::summary(&budget)
     );
     println!("{}", pose_report.summary());
+    for line in [pose_report.sight_summary(), pose_report.rig_hint()].into_iter().flatten() {
+        println!("{line}");
+    }
     if let Some(hint) = outcome
         .labelling
         .as_ref()
