@@ -63,11 +63,29 @@ pub fn pose_views_entity(kind: &str) -> String {
     format!("metrics/pose/views/{kind}")
 }
 
-/// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]).
-pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics) -> anyhow::Result<()> {
+/// Per camera, 1 where it saw the fitted blade's face, 0 where it saw the blade otherwise
+/// (edge-on, hidden by the hand, on background, on the handle's colours), nothing where it gave
+/// no evidence (no mask, the tool out of its view, nothing fitted): when each camera loses the
+/// blade (a frame's `Diagnostics::sight`; the run report's `pose.per_camera` sums it).
+pub const POSE_SIGHT_ENTITY: &str = "metrics/pose/sight/CAM";
+
+/// The series of one camera of [`POSE_SIGHT_ENTITY`].
+pub fn pose_sight_entity(camera: &str) -> String {
+    format!("metrics/pose/sight/{camera}")
+}
+
+/// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]) and what each
+/// of `rig`'s cameras did ([`POSE_SIGHT_ENTITY`]).
+pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics, rig: &Rig) -> anyhow::Result<()> {
     let counts = [d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background, d.views_handle_coloured];
     for (kind, n) in POSE_VIEW_KINDS.iter().zip(counts) {
         hullcut_viz::log_scalar(rec, &pose_views_entity(kind), n as f64)?;
+    }
+    for (camera, sight) in rig.cameras.iter().zip(&d.sight) {
+        if let Some(sight) = sight {
+            let seen = f64::from(u8::from(*sight == hullcut_pose::Sight::Seen));
+            hullcut_viz::log_scalar(rec, &pose_sight_entity(&camera.name), seen)?;
+        }
     }
     Ok(())
 }

@@ -934,6 +934,16 @@ fn reconstruct_writes_one_pose_line_per_frame_as_the_contract_says() {
         let entity = format!("/metrics/pose/views/{kind}");
         assert_eq!(rows.get(&entity).copied(), Some(9), "{entity}: {rows:?}");
     }
+    // And each camera's sight of it: a row for every fit the report counts it as judging.
+    let cameras = p["per_camera"].as_array().expect("per camera");
+    assert!(cameras.len() >= 4, "{p}");
+    for c in cameras {
+        let name = c["camera"].as_str().expect("a camera's name");
+        let judged = c["judged"].as_u64().expect("fits judged") as usize;
+        assert!(judged > 0 && judged <= 9, "{c}");
+        let entity = format!("/metrics/pose/sight/{name}");
+        assert_eq!(rows.get(&entity).copied().unwrap_or(0), judged, "{entity}: {rows:?}");
+    }
 
     // Without tool.json every frame is refused with its reason, and no pose fields are written.
     let bare = dir.path().join("bare");

@@ -74,7 +74,8 @@ use crate::weak::WeakArg;
 /// world/hull/LABEL, the blade's estimate and truth under world/tool/{estimate,truth}, timings,
 /// confidence and accuracy as scalars, and under metrics/pose/views/KIND how many views see the
 /// fitted blade's face, see it edge-on, have it hidden by the hand, on background or on the
-/// handle's colour) with --rrd.
+/// handle's colour, and under metrics/pose/sight/CAM 1 where that camera sees its face, 0 where
+/// not) with --rrd. Prints how often each camera saw the fitted blade's face (a `views:` line).
 #[derive(Debug, clap::Args)]
 #[command(verbatim_doc_comment)]
 pub struct Args {
@@ -536,7 +537,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             hullcut_viz::log_scalar(rec, "metrics/pose/confidence", estimate.confidence)?;
             hullcut_viz::log_scalar(rec, "metrics/pose/outline_offset_px", estimate.diagnostics.fit_offset_px)?;
             hullcut_viz::log_scalar(rec, "metrics/pose/valid", f64::from(u8::from(estimate.valid)))?;
-            crate::logging::log_pose_views(rec, &estimate.diagnostics)?;
+            crate::logging::log_pose_views(rec, &estimate.diagnostics, ds.rig())?;
             hullcut_viz::log_scalar(rec, "metrics/time/pose", t.pose.last().map_or(0.0, |d| d.as_secs_f64() * 1e3))?;
             // A recording that cannot be written (a full disk) shows only when flushed.
             if flushed.elapsed() >= FLUSH_EVERY {

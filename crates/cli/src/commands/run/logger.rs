@@ -203,7 +203,7 @@ impl Logger {
             }
             hullcut_viz::log_scalar(rec, "metrics/pose/confidence", e.confidence)?;
             hullcut_viz::log_scalar(rec, "metrics/pose/outline_offset_px", e.diagnostics.fit_offset_px)?;
-            crate::logging::log_pose_views(rec, &e.diagnostics)?;
+            crate::logging::log_pose_views(rec, &e.diagnostics, self.ds.rig())?;
             if let Some(err) = error {
                 hullcut_viz::log_scalar(rec, "metrics/accuracy/blade_normal_deg", err.normal_deg)?;
                 hullcut_viz::log_scalar(rec, "metrics/accuracy/blade_tip_mm", err.tip_mm)?;
