@@ -156,15 +156,19 @@ pub struct CameraSight {
     pub camera: String,
     /// Frames whose fit it judged.
     pub judged: usize,
-    /// Of them: it saw the blade's face, saw it edge-on, had it hidden by the hand, had it on
-    /// background, had it on the handle's colour.
+    /// Of them, those where it saw the blade's face ...
     pub seen: usize,
+    /// ... saw it within 10° of edge-on ...
     pub edge_on: usize,
+    /// ... had it hidden by the hand ...
     pub hidden: usize,
+    /// ... had most of it on background ...
     pub on_background: usize,
+    /// ... had it on the handle's learned colours.
     pub handle_coloured: usize,
-    /// Of the frames it judged, those trusted, and how many of those it saw the blade's face in.
+    /// Of the frames it judged, those trusted.
     pub trusted: usize,
+    /// Of those, the ones where it saw the blade's face.
     pub seen_trusted: usize,
 }
 
