@@ -504,18 +504,17 @@ impl Tracker {
         diag.iterations = best.iterations;
         let seen_before = self.kept_sight(&indices, diag.from_hull);
         let sights = self.look(&best.pose, &evidence, &images, &seen_before, diag);
-        let seen: Vec<bool> = sights.iter().map(|&s| s == Sight::Seen).collect();
         self.seen_now.clear();
         self.seen_now.resize(views.len(), false);
         diag.sight.clear();
         diag.sight.resize(views.len(), None);
-        for ((&k, &s), &sight) in indices.iter().zip(&seen).zip(&sights) {
-            self.seen_now[k] = s;
+        for (&k, &sight) in indices.iter().zip(&sights) {
+            self.seen_now[k] = sight == Sight::Seen;
             diag.sight[k] = Some(sight);
         }
         let (confidence, reason) = self.confidence(time_s, &best, hull, diag);
         if reason.is_none() && confidence >= PARTS_LEARN.0 && diag.views_seen >= PARTS_LEARN.1 {
-            self.learn_parts(&best.pose, &evidence, &images, &seen);
+            self.learn_parts(&best.pose, &evidence, &images, &sights);
         }
         Some((best, confidence, reason))
     }
@@ -627,14 +626,14 @@ impl Tracker {
     }
 
     /// Learns the colours of the tool's parts under a trusted fit: the blade's interior where a
-    /// view sees its face (on scalpel pixels), the body's interior on scalpel pixels of the same
-    /// views.
+    /// view sees its face (`sights`, per view of `views`; on scalpel pixels), the body's interior
+    /// on scalpel pixels of the same views.
     fn learn_parts(
         &mut self,
         pose: &Isometry3<f64>,
         views: &[ViewEvidence],
         images: &[Option<&RgbImage>],
-        seen: &[bool],
+        sights: &[Sight],
     ) {
         let (blade, body) = self.template.interior.split_at(self.template.blade_interior);
         let on_scalpel = |v: &ViewEvidence, points: &[Point3<f64>]| -> Vec<nalgebra::Point2<f64>> {
@@ -645,7 +644,7 @@ impl Tracker {
                 .collect()
         };
         self.parts.age();
-        for ((v, image), _) in views.iter().zip(images).zip(seen).filter(|(_, s)| **s) {
+        for ((v, image), _) in views.iter().zip(images).zip(sights).filter(|(_, s)| **s == Sight::Seen) {
             if let Some(image) = image {
                 self.parts.learn(image, &on_scalpel(v, blade), &on_scalpel(v, body));
             }
@@ -1007,7 +1006,7 @@ mod tests {
         let points: Vec<Point3<f64>> = tracker.template.interior.iter().map(|p| pose * p).collect();
         let radius = camera.distortion.monotonic_radius();
         let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
-        tracker.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[true]);
+        tracker.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[Sight::Seen]);
         assert!(tracker.parts.handle().is_some(), "a grey blade and a blue handle told apart");
         // The blade on its own colour is seen; on the handle's (the fit laid it over the handle),
         // it is not, and the view says why; with no image, colour decides nothing.
@@ -1019,7 +1018,7 @@ mod tests {
         // An all-steel tool learns nothing that decides.
         let (mut steel, pose, camera, mask, image) = tool_painted(GREY, GREY);
         let view = ViewEvidence::new(&camera, radius, &mask, &points, ROI_MARGIN_PX).expect("the tool in view");
-        steel.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[true]);
+        steel.learn_parts(&pose, std::slice::from_ref(&view), &[Some(&image)], &[Sight::Seen]);
         assert!(steel.parts.handle().is_none());
         assert_eq!(looked(&steel, &pose, &camera, &mask, Some(&all_blue), false), seen_only);
     }
