@@ -501,7 +501,8 @@ impl Tracker {
                     .min_by(|a, b| a.cost.total_cmp(&b.cost));
                 let best = kept(tracked, searched)?;
                 // The blade's silhouette nearly repeats itself turned over about its long axis
-                // (spine and edge swapped): fit that twin too and keep the better.
+                // (spine and edge swapped): fit that twin too and keep the better (against the
+                // track's own fit, by the same margin).
                 let twin = fit(&self.template, &evidence, &self.template.turned_over(&best.pose), 3 * it, from_afar);
                 let track_kept = tracked.is_some_and(|t| t.pose == best.pose);
                 if track_kept {
