@@ -768,11 +768,12 @@ impl Tracker {
 }
 
 /// Of the track's own fit and the best fit from the hull's candidates, the one kept: the searched
-/// fit where there is no tracked one or it costs less than the tracked one's cost less
-/// [`SEARCH_MARGIN`] of it, else the tracked one.
+/// fit where there is no tracked one, or the tracked one's cost is NaN (ranked last, as a plain
+/// comparison of costs by `total_cmp` ranks it), or the searched one costs less than the tracked
+/// one's cost less [`SEARCH_MARGIN`] of it; else the tracked one.
 fn kept(tracked: Option<Fit>, searched: Option<Fit>) -> Option<Fit> {
     match (tracked, searched) {
-        (Some(t), Some(s)) => Some(if s.cost < t.cost * (1.0 - SEARCH_MARGIN) { s } else { t }),
+        (Some(t), Some(s)) => Some(if t.cost.is_nan() || s.cost < t.cost * (1.0 - SEARCH_MARGIN) { s } else { t }),
         (t, s) => t.or(s),
     }
 }
@@ -894,6 +895,9 @@ mod tests {
         assert_eq!(kept_cost(None, Some(costing(900.0, 6.0))), Some(900.0));
         assert_eq!(kept_cost(Some(track), None), Some(500.0));
         assert!(kept_cost(None, None).is_none());
+        // A NaN cost is ranked last either way, as the plain comparison before the margin did.
+        assert_eq!(kept_cost(Some(costing(f64::NAN, 0.0)), Some(costing(900.0, 6.0))), Some(900.0));
+        assert_eq!(kept_cost(Some(track), Some(costing(f64::NAN, 6.0))), Some(500.0));
     }
 
     /// A fit in full agreement with the silhouettes, on a hull of one well-filled component, whose
