@@ -126,6 +126,10 @@ pub struct FrameError {
     scalpel_leaves: usize,
     from_hull: bool,
     iterations: usize,
+    /// Where two views saw the blade's face and views edge-on could stand in for a third: the
+    /// span of turns about its long axis that fit as well, degrees (45: its plane is not fixed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    roll_span_deg: Option<f64>,
 }
 
 /// Mean, 95th percentile (nearest rank) and maximum.
@@ -306,6 +310,7 @@ impl PoseReport {
             scalpel_leaves: e.diagnostics.scalpel_leaves,
             from_hull: e.diagnostics.from_hull,
             iterations: e.diagnostics.iterations,
+            roll_span_deg: e.diagnostics.roll_span_deg,
         });
     }
 

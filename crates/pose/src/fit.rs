@@ -319,6 +319,14 @@ pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3
     r.iter().map(|x| x * x).sum()
 }
 
+/// Agreement of a pose without fitting (no outline offset): the lower of the share of outline
+/// samples it explains and the share of its interior on foreground, as [`Fit`] counts them.
+pub(crate) fn agreement(template: &Template, views: &[ViewEvidence], pose: &Isometry3<f64>) -> f64 {
+    let mut r = Vec::new();
+    let tally = residuals(template, views, pose, 0.0, &mut r, None);
+    fraction(tally.explained, tally.samples).min(fraction(tally.covered, tally.points))
+}
+
 /// How a fit treats the outline offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Offset {

@@ -12,8 +12,10 @@
 //!   the projected tool and every interior point of the tool projects onto foreground (the hand may
 //!   hide the tool, so hand pixels count), Huber-weighted, in pixels.
 //! - [`Tracker`]: confidence from the fit's agreement, the number of views that see the blade's
-//!   face (not edge-on, not hidden by the hand), the scalpel leaf count and the step from the last
-//!   trusted pose; a frame below the threshold is refused with a reason, the last trusted pose is
+//!   face (not edge-on, not hidden by the hand; on a rig of four or five views, two seeing it and
+//!   two edge-on count where those fix the blade's turn about its long axis), the scalpel leaf
+//!   count and the step from the last trusted pose; a frame below the threshold is refused with a
+//!   reason, the last trusted pose is
 //!   held for a bounded time. Trusted poses pass a One Euro filter on SE(3) ([`OneEuro`]).
 //! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose;
 //!   [`rigid_from_matrix`]: a true pose's 4x4 matrix checked (finite, orthonormal within

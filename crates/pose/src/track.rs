@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 
 use crate::evidence::ViewEvidence;
 use crate::filter::{OneEuro, OneEuroParams};
-use crate::fit::{Fit, Offset, cost, fit, moved};
+use crate::fit::{Fit, Offset, agreement, cost, fit, moved};
 use crate::init::{HullSummary, candidates, summarize};
 use crate::part_colours::PartColours;
 use crate::template::Template;
@@ -40,6 +40,33 @@ const SEARCH_MARGIN: f64 = 0.01;
 /// on random:769 in random:773 and random:757 in random:761 the shares spread from 0 to 1, and
 /// every fit with such a view on either (62 frame sets) was off by more than 5° or 5 mm.
 const HANDLE_SHARE: f64 = 0.75;
+/// On a rig of fewer than six views, views that see the blade edge-on which, with none hiding
+/// it, stand in for the third view that sees its face ([`TrackerParams::min_views_seen_few`]),
+/// where the silhouettes fix the blade's turn about its long axis ([`ROLL_SPAN_DEG`]). Over the
+/// twenty-sixth session's run reports of rigs of four and five views, fits with two views seeing
+/// the face, two or more edge-on and none hidden were right (within 5° and 5 mm) in 240 of 282.
+const EDGE_ON_STAND_IN: usize = 2;
+/// The turns of the blade about its long axis, through the fit, over which the silhouettes agree
+/// with it as well as with the fit itself (within [`ROLL_SLACK`]), searched in steps of
+/// [`ROLL_STEP_DEG`] on both sides: a span this wide leaves the blade's plane unfixed, and the
+/// views edge-on do not stand in for a third ([`EDGE_ON_STAND_IN`]). Two views that see the
+/// blade's face nearly face-on barely narrow it as it turns (by the cosine of the turn), so on a
+/// rig of four only the views edge-on fix the turn. Measured over 15 recordings of four and five
+/// cameras (`run --dataset D [--masks segment]`, temporary prints; docs/benchmarks.md,
+/// twenty-seventh session), of the fits the views edge-on would let stand: with mask files the
+/// right ones spanned 15-35° (5 of 441 spanned 65-70°), the wrong ones 50-80° (all 86, random:1021
+/// in random:1051, 15-19° off in roll with the tip within a millimetre); with segmented masks 3 of
+/// 242 right ones and 3 of 19 wrong ones spanned 45° or more.
+const ROLL_SPAN_DEG: f64 = 45.0;
+/// How much less agreement with the silhouettes ([`TrackerParams::agreement`]'s measure) a turned
+/// blade may have and still fit them as well as the fit itself ([`ROLL_SPAN_DEG`]). Measured on
+/// the same fits: at 0.005 and 0.01 the span refused only 51 and 68 of random:1021's 86 wrong
+/// fits; the second agreement bound instead of the fit's own less 0.02 (the same with mask files,
+/// whose fits agree fully) took in turns of right fits with segmented masks, whose agreement
+/// stays under it, and refused 37 of the 242.
+const ROLL_SLACK: f64 = 0.02;
+/// The step of the search of [`ROLL_SPAN_DEG`], degrees.
+const ROLL_STEP_DEG: f64 = 5.0;
 /// A trusted fit this confident, whose blade's face that many views see, teaches the colours of
 /// the tool's parts ([`PartColours`]).
 const PARTS_LEARN: (f64, usize) = (0.9, 3);
@@ -84,7 +111,10 @@ pub struct TrackerParams {
     /// 22 recordings' `run` reports: fits trusted with two views seeing were off (over 5° or 5
     /// mm) in 10 of 14 on four-camera rigs (a finger taken for the blade 40-55 mm off), in 13 of
     /// 51 on rigs of six to nine; refusing those too on a nine-camera rig broke the track in the
-    /// second stroke (random:59 in random:101: the lobe was left on).
+    /// second stroke (random:59 in random:101: the lobe was left on). Two views that see the
+    /// blade edge-on, with none having it behind the hand, stand in for one seeing view fewer
+    /// where the silhouettes fix the blade's turn about its long axis (a span of turns that fit as
+    /// well under 45°, [`Diagnostics::roll_span_deg`]).
     pub min_views_seen_few: usize,
     /// Scalpel leaves at which the leaf count stops lowering the confidence.
     pub full_leaves: usize,
@@ -218,6 +248,12 @@ pub struct Diagnostics {
     /// Per view given (in their order), how it saw the kept fit's blade; `None` where the view
     /// gave no evidence (no mask, or the tool out of it). Empty where nothing was fitted.
     pub sight: Vec<Option<Sight>>,
+    /// Where two views see the blade's face and views edge-on may stand in for a third
+    /// ([`TrackerParams::min_views_seen_few`]): the span of turns about the blade's long axis
+    /// over which the silhouettes agree with the fit as well as with the fit itself, degrees, in
+    /// steps of 5 (searched up to 45: a span of 45 or more leaves the blade's plane unfixed).
+    /// `None` where it was not needed.
+    pub roll_span_deg: Option<f64>,
     /// Whether the colours of the tool's blade and handle, learned from trusted fits, were told
     /// apart when the fit was judged (else colour decided nothing: too little learned yet, or
     /// parts alike).
@@ -522,6 +558,7 @@ impl Tracker {
         diag.iterations = best.iterations;
         let seen_before = self.kept_sight(&indices, diag.from_hull);
         let sights = self.look(&best.pose, &evidence, &images, &seen_before, diag);
+        diag.roll_span_deg = self.edge_on_may_stand_in(diag).then(|| self.roll_span(&best.pose, &evidence));
         self.seen_now.clear();
         self.seen_now.resize(views.len(), false);
         diag.sight.clear();
@@ -643,6 +680,38 @@ impl Tracker {
         sights
     }
 
+    /// Whether the views that see the blade edge-on may stand in for a third that sees its face
+    /// ([`EDGE_ON_STAND_IN`]), its turn about the long axis still to be checked.
+    fn edge_on_may_stand_in(&self, diag: &Diagnostics) -> bool {
+        diag.views_used < MANY_VIEWS
+            && diag.views_seen < self.params.min_views_seen_few
+            && diag.views_seen >= 2
+            && diag.views_edge_on >= EDGE_ON_STAND_IN
+            && diag.views_hidden == 0
+    }
+
+    /// The span of turns of the blade about its long axis (through the blade's centre) at `pose`
+    /// over which the silhouettes of `views` agree with it as well as with `pose` (within
+    /// [`ROLL_SLACK`]), degrees, in steps of [`ROLL_STEP_DEG`], searched up to [`ROLL_SPAN_DEG`].
+    fn roll_span(&self, pose: &Isometry3<f64>, views: &[ViewEvidence]) -> f64 {
+        let axis = (self.template.tip - self.template.body_or_blade_centre()).normalize();
+        let centre = self.template.blade_centre;
+        let floor = agreement(&self.template, views, pose) - ROLL_SLACK;
+        let agrees = |deg: f64| {
+            let turned = moved(pose, &(pose * centre), &(pose.rotation * axis * deg.to_radians()), &Vector3::zeros());
+            agreement(&self.template, views, &turned) >= floor
+        };
+        let mut span = 0.0;
+        for side in [1.0, -1.0] {
+            let mut deg = ROLL_STEP_DEG;
+            while span < ROLL_SPAN_DEG && agrees(side * deg) {
+                span += ROLL_STEP_DEG;
+                deg += ROLL_STEP_DEG;
+            }
+        }
+        span
+    }
+
     /// Learns the colours of the tool's parts under a trusted fit: the blade's interior where a
     /// view sees its face (`sights`, per view of `views`; on scalpel pixels), the body's interior
     /// on scalpel pixels of the same views.
@@ -682,19 +751,28 @@ impl Tracker {
                 ),
             ),
             (
-                if diag.views_used < MANY_VIEWS && diag.views_seen < self.params.min_views_seen_few {
+                if diag.views_used < MANY_VIEWS
+                    && diag.views_seen < self.params.min_views_seen_few
+                    && !diag.roll_span_deg.is_some_and(|span| span < ROLL_SPAN_DEG)
+                {
                     0.0
                 } else {
                     ramp(diag.views_seen as f64, 1.0, 2.5)
                 },
                 format!(
-                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, {} on background, {} on the handle's colour, of {}",
+                    "the blade's face is seen by {} view(s): {} edge-on, {} hidden by the hand, {} on background, {} on the handle's colour, of {}{}",
                     diag.views_seen,
                     diag.views_edge_on,
                     diag.views_hidden,
                     diag.views_on_background,
                     diag.views_handle_coloured,
-                    diag.views_used
+                    diag.views_used,
+                    match diag.roll_span_deg {
+                        Some(span) if span >= ROLL_SPAN_DEG => format!(
+                            "; turned {span:.0}° or more about its long axis it fits the silhouettes as well (its plane is not fixed)"
+                        ),
+                        _ => String::new(),
+                    }
                 ),
             ),
             // A blade the hand hides from more views than see it, face-on or edge-on, may have
@@ -904,6 +982,18 @@ mod tests {
     /// blade `used` views see face-on (`seen`), edge-on (`edge_on`), hidden by the hand (`hidden`)
     /// or on background (the rest): its confidence and reason.
     fn judged(seen: usize, edge_on: usize, hidden: usize, used: usize) -> (f64, Option<String>) {
+        judged_turning(seen, edge_on, hidden, used, None)
+    }
+
+    /// [`judged`] with the span of turns about the blade's long axis that fit as well, where it
+    /// was measured.
+    fn judged_turning(
+        seen: usize,
+        edge_on: usize,
+        hidden: usize,
+        used: usize,
+        roll_span_deg: Option<f64>,
+    ) -> (f64, Option<String>) {
         let scene = Scene::new(SceneConfig::new(SceneKind::Cut, 2, 2)).expect("scene");
         let tracker =
             Tracker::new(Template::new(&scene.scalpel().geometry).expect("template"), TrackerParams::default());
@@ -932,9 +1022,44 @@ mod tests {
             views_edge_on: edge_on,
             views_hidden: hidden,
             views_on_background: used - seen - edge_on - hidden,
+            roll_span_deg,
             ..Diagnostics::default()
         };
         tracker.confidence(0.0, &fit, &hull, &mut diag)
+    }
+
+    #[test]
+    fn two_views_edge_on_stand_in_for_a_third_on_a_small_rig_where_the_blades_turn_is_fixed() {
+        let tracker = Tracker::new(
+            Template::new(&Scene::new(SceneConfig::new(SceneKind::Cut, 2, 2)).expect("scene").scalpel().geometry)
+                .expect("template"),
+            TrackerParams::default(),
+        );
+        let asks = |seen: usize, edge_on: usize, hidden: usize, used: usize| {
+            let diag = Diagnostics {
+                views_used: used,
+                views_seen: seen,
+                views_edge_on: edge_on,
+                views_hidden: hidden,
+                ..Diagnostics::default()
+            };
+            tracker.edge_on_may_stand_in(&diag)
+        };
+        // Two seeing and two edge-on, none hidden, on four or five views: the turn is measured.
+        assert!(asks(2, 2, 0, 4) && asks(2, 2, 0, 5) && asks(2, 3, 0, 5));
+        // Not with one edge-on, one hidden, one seeing, three already seeing, or six views.
+        assert!(!asks(2, 1, 0, 4) && !asks(2, 2, 1, 5) && !asks(1, 3, 0, 4) && !asks(3, 1, 0, 4) && !asks(2, 2, 0, 6));
+        for used in [4, 5] {
+            let (confidence, reason) = judged_turning(2, 2, 0, used, Some(ROLL_SPAN_DEG - ROLL_STEP_DEG));
+            assert!(confidence >= 0.5 && reason.is_none(), "{used} views: {confidence} {reason:?}");
+            let (confidence, reason) = judged_turning(2, 2, 0, used, Some(ROLL_SPAN_DEG));
+            assert_eq!(confidence, 0.0);
+            let reason = reason.expect("a reason");
+            assert!(reason.starts_with("the blade's face is seen by 2 view(s): 2 edge-on"), "{reason}");
+            assert!(reason.contains("its plane is not fixed"), "{reason}");
+            // Unmeasured (the views did not qualify): the three-view bound.
+            assert_eq!(judged_turning(2, 2, 0, used, None).0, 0.0);
+        }
     }
 
     #[test]
