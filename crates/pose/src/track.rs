@@ -51,12 +51,15 @@ const EDGE_ON_STAND_IN: usize = 2;
 /// [`ROLL_STEP_DEG`] on both sides: a span this wide leaves the blade's plane unfixed, and the
 /// views edge-on do not stand in for a third ([`EDGE_ON_STAND_IN`]). Two views that see the
 /// blade's face nearly face-on barely narrow it as it turns (by the cosine of the turn), so on a
-/// rig of four only the views edge-on fix the turn. Measured over 15 recordings of four and five
-/// cameras (`run --dataset D [--masks segment]`, temporary prints; docs/benchmarks.md,
-/// twenty-seventh session), of the fits the views edge-on would let stand: with mask files the
-/// right ones spanned 15-35° (5 of 441 spanned 65-70°), the wrong ones 50-80° (all 86, random:1021
-/// in random:1051, 15-19° off in roll with the tip within a millimetre); with segmented masks 3 of
-/// 242 right ones and 3 of 19 wrong ones spanned 45° or more.
+/// rig of four only the views edge-on fix the turn. Measured over 17 recordings of four and five
+/// cameras (`run --dataset D [--masks segment]`, 15 of them segmented, temporary prints;
+/// docs/benchmarks.md, twenty-seventh session), of the fits the views edge-on would let stand
+/// (on random:977, random:631, random:1049 and random:1021; random:727 segmented): with mask
+/// files the right ones spanned 15-35° (5 of 441 spanned 65-70°), the wrong ones 50-80° (all 86,
+/// random:1021 in random:1051, 15-19° off in roll with the tip within a millimetre); with
+/// segmented masks 3 of 242 right ones and 3 of 19 wrong ones spanned 45° or more. Not a complete
+/// guard: on a recording never run while developing, four fits 11-16° off in roll spanned 25-40°
+/// (random:1307 in random:1193, mask files).
 const ROLL_SPAN_DEG: f64 = 45.0;
 /// How much less agreement with the silhouettes ([`TrackerParams::agreement`]'s measure) a turned
 /// blade may have and still fit them as well as the fit itself ([`ROLL_SPAN_DEG`]). Measured on
