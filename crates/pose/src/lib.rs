@@ -15,8 +15,8 @@
 //!   face (not edge-on, not hidden by the hand; on a rig of four or five views, two seeing it and
 //!   two edge-on count where those fix the blade's turn about its long axis), the scalpel leaf
 //!   count and the step from the last trusted pose; a frame below the threshold is refused with a
-//!   reason, the last trusted pose is
-//!   held for a bounded time. Trusted poses pass a One Euro filter on SE(3) ([`OneEuro`]).
+//!   reason, the last trusted pose is held for a bounded time. Trusted poses pass a One Euro
+//!   filter on SE(3) ([`OneEuro`]).
 //! - [`pose_error`]: normal angle, edge distance and tip distance against a true pose;
 //!   [`rigid_from_matrix`]: a true pose's 4x4 matrix checked (finite, orthonormal within
 //!   [`ORTHONORMAL_TOLERANCE`], no reflection) before it is made a rotation, in a bounded number
