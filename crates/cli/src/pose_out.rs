@@ -240,6 +240,10 @@ pub struct PoseReport {
     /// Frames where some view found the fitted blade on the handle's colours.
     #[serde(default)]
     handle_coloured_frames: usize,
+    /// Frames refused where, on a rig of four or five cameras, two views saw the blade's face and
+    /// the views edge-on left it free to turn about its long axis (its plane not fixed).
+    #[serde(default)]
+    unfixed_plane_frames: usize,
     /// Per camera (rig order), how often it saw the fitted blade.
     #[serde(default)]
     per_camera: Vec<CameraSight>,
@@ -266,6 +270,7 @@ impl PoseReport {
         self.held_frames += usize::from(e.held);
         self.parts_told_apart_frames += usize::from(e.diagnostics.parts_told_apart);
         self.handle_coloured_frames += usize::from(e.diagnostics.views_handle_coloured > 0);
+        self.unfixed_plane_frames += usize::from(!e.valid && e.diagnostics.plane_unfixed());
         for (k, sight) in e.diagnostics.sight.iter().enumerate() {
             let Some(sight) = sight else { continue };
             while self.per_camera.len() <= k {
@@ -340,12 +345,14 @@ impl PoseReport {
     }
 
     /// On a rig of fewer than [`MANY_VIEWS`] cameras, where a fit is trusted only if three views
-    /// see the blade's face, and where a fifth of the frames or more were refused: a line naming
-    /// the camera that saw the fitted blade edge-on in the largest share (half or more) of the
-    /// fits it judged ([`EDGE_ON_HINT_FITS`] or more), for the lab to move or add a camera (a
-    /// four-camera rig whose cameras see the blade edge-on by turns trusts it in few frames even
-    /// with perfect masks: random:977 in random:983). On larger rigs a camera edge-on to the
-    /// blade is common and costs little (the others see it), so none is named.
+    /// see the blade's face (or two do and two more, edge-on, fix its turn about its long axis),
+    /// and where a fifth of the frames or more were refused: a line naming the camera that saw
+    /// the fitted blade edge-on in the largest share (half or more) of the fits it judged
+    /// ([`EDGE_ON_HINT_FITS`] or more), for the lab to move or add a camera, with the frames
+    /// refused for a plane the views left free (a four-camera rig whose cameras see the blade
+    /// edge-on by turns trusts it in few frames even with perfect masks: random:1021 in
+    /// random:1051). On larger rigs a camera edge-on to the blade is common and costs little
+    /// (the others see it), so none is named.
     pub fn rig_hint(&self) -> Option<String> {
         let (refused, frames) = self.refused_of();
         if frames == 0 || 5 * refused < frames || self.per_camera.len() >= MANY_VIEWS {
@@ -357,10 +364,14 @@ impl PoseReport {
             .iter()
             .filter(|c| c.judged >= EDGE_ON_HINT_FITS && 2 * c.edge_on >= c.judged)
             .max_by(|a, b| edge_on(a).total_cmp(&edge_on(b)))?;
+        let unfixed = match self.unfixed_plane_frames {
+            0 => String::new(),
+            n => format!(" ({n} frame sets refused where they did not)"),
+        };
         Some(format!(
             "hint: {} saw the fitted blade edge-on in {:.0}% of its fits; on a rig of {} cameras a fit is trusted \
-             only where three views see the blade's face: a camera placed across the blade's usual plane, or one \
-             more, would see it",
+             only where three views see the blade's face, or two do and two more, edge-on, fix its turn about its \
+             long axis{unfixed}: a camera placed across the blade's usual plane, or one more, would see it",
             worst.camera,
             100.0 * edge_on(worst),
             self.per_camera.len()
@@ -581,6 +592,19 @@ mod tests {
             hint.starts_with("hint: b saw the fitted blade edge-on in 50% of its fits; on a rig of 2 cameras"),
             "{hint}"
         );
+        assert!(!hint.contains("frame sets refused where"), "{hint}");
+        // Refusals for a plane the edge-on views left free are counted and named.
+        let mut unfixed = report(5, 8);
+        for frame in 10..13 {
+            let sight = vec![Some(Sight::Seen), Some(Sight::EdgeOn)];
+            let diagnostics =
+                hullcut_pose::Diagnostics { sight, roll_span_deg: Some(45.0), ..hullcut_pose::Diagnostics::default() };
+            unfixed.push(&estimate(frame, false, None, diagnostics), None, None);
+        }
+        let json = serde_json::to_value(&unfixed).expect("serializes");
+        assert_eq!(json["unfixed_plane_frames"], 3);
+        let hint = unfixed.rig_hint().expect("more than half edge-on, a fifth refused");
+        assert!(hint.contains("fix its turn about its long axis (3 frame sets refused where they did not)"), "{hint}");
         assert_eq!(report(4, 8).rig_hint(), None, "under half edge-on");
         assert_eq!(report(10, 9).rig_hint(), None, "under a fifth refused");
         let mut large = report(5, 8);

@@ -288,6 +288,15 @@ pub struct Diagnostics {
     pub fit_ms: f64,
 }
 
+impl Diagnostics {
+    /// Whether views edge-on would have stood in for a third view seeing the blade's face but
+    /// left it free to turn about its long axis ([`Diagnostics::roll_span_deg`] of 45° or more):
+    /// the blade's plane is not fixed, and the fit is refused.
+    pub fn plane_unfixed(&self) -> bool {
+        self.roll_span_deg.is_some_and(|span| span >= ROLL_SPAN_DEG)
+    }
+}
+
 /// The tracker's answer for one frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseEstimate {
@@ -756,7 +765,7 @@ impl Tracker {
             (
                 if diag.views_used < MANY_VIEWS
                     && diag.views_seen < self.params.min_views_seen_few
-                    && !diag.roll_span_deg.is_some_and(|span| span < ROLL_SPAN_DEG)
+                    && (diag.roll_span_deg.is_none() || diag.plane_unfixed())
                 {
                     0.0
                 } else {
@@ -770,11 +779,13 @@ impl Tracker {
                     diag.views_on_background,
                     diag.views_handle_coloured,
                     diag.views_used,
-                    match diag.roll_span_deg {
-                        Some(span) if span >= ROLL_SPAN_DEG => format!(
-                            "; turned {span:.0}° or more about its long axis it fits the silhouettes as well (its plane is not fixed)"
-                        ),
-                        _ => String::new(),
+                    if diag.plane_unfixed() {
+                        format!(
+                            "; turned {:.0}° or more about its long axis it fits the silhouettes as well (its plane is not fixed)",
+                            diag.roll_span_deg.unwrap_or(ROLL_SPAN_DEG)
+                        )
+                    } else {
+                        String::new()
                     }
                 ),
             ),
