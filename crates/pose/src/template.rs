@@ -109,11 +109,17 @@ impl Template {
     /// The pose turned over: rotated half a turn about the tool's long axis through the blade's
     /// centre (spine and cutting edge swapped, the plane kept).
     pub fn turned_over(&self, pose: &nalgebra::Isometry3<f64>) -> nalgebra::Isometry3<f64> {
-        let axis = (self.tip - self.body_or_blade_centre()).normalize();
+        let axis = self.long_axis();
         let half_turn = nalgebra::UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
         let c = self.blade_centre.coords;
         let about_centre = nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(c - half_turn * c), half_turn);
         pose * about_centre
+    }
+
+    /// The tool's long axis in the tool frame: the unit direction from the body's centre (the
+    /// blade's, for a bare blade) to the tip; the blade turns over, or rolls, about it.
+    pub fn long_axis(&self) -> Vector3<f64> {
+        (self.tip - self.body_or_blade_centre()).normalize()
     }
 
     /// Centre of the body's vertices, or of the blade for a bare blade.

@@ -706,7 +706,7 @@ impl Tracker {
     /// over which the silhouettes of `views` agree with it as well as with `pose` (within
     /// [`ROLL_SLACK`]), degrees, in steps of [`ROLL_STEP_DEG`], searched up to [`ROLL_SPAN_DEG`].
     fn roll_span(&self, pose: &Isometry3<f64>, views: &[ViewEvidence]) -> f64 {
-        let axis = (self.template.tip - self.template.body_or_blade_centre()).normalize();
+        let axis = self.template.long_axis();
         let centre = self.template.blade_centre;
         let floor = agreement(&self.template, views, pose) - ROLL_SLACK;
         let agrees = |deg: f64| {
