@@ -267,6 +267,10 @@ impl CutTopology {
                 piece_material[r] < DUST || thickest[r] < SHAVING
             })
             .collect();
+        // One piece takes the whole of a dust piece: the largest other copy over all its cells.
+        // Joined cell by cell, a dust piece on both sides of a cut (a node the tear rules cut
+        // from both) glued the two sides into one.
+        let mut takes: BTreeMap<usize, usize> = BTreeMap::new();
         for c in 0..lattice.cells.len() {
             let range = first_copy[c]..first_copy[c + 1];
             let Some(big) =
@@ -275,8 +279,14 @@ impl CutTopology {
                 continue;
             };
             for k in range.filter(|&k| dust[k]) {
-                pieces.union(k, big);
+                let taker = takes.entry(pieces.find(k)).or_insert(big);
+                if copies[big].share > copies[*taker].share {
+                    *taker = big;
+                }
             }
+        }
+        for (dust_piece, big) in takes {
+            pieces.union(dust_piece, big);
         }
         let mut piece_ids: BTreeMap<usize, u32> = BTreeMap::new();
         let piece_of: Vec<u32> = (0..copies.len())
@@ -655,5 +665,36 @@ pub(crate) mod tests {
                 assert_eq!(t.rest(&l, c.nodes[k]), l.rest[parent.nodes[k] as usize]);
             }
         }
+    }
+
+    #[test]
+    fn dust_on_both_sides_of_a_cut_joins_one_of_them_and_leaves_them_apart() {
+        let l = block();
+        let node = |ijk: [usize; 3]| l.node_at(ijk).expect("a node");
+        // The plane y = 2.75 cm cuts every edge between the node planes j = 2 and j = 3, a
+        // quarter of a cell below j = 3: the cells of the layer below are mostly the lower piece,
+        // those above wholly the upper one.
+        let mut cut: BTreeMap<(u32, u32), f64> = BTreeMap::new();
+        for i in 0..=6 {
+            for k in 0..=6 {
+                let (a, b) = (node([i, 2, k]), node([i, 3, k]));
+                cut.insert((a.min(b), a.max(b)), if a < b { 0.75 } else { 0.25 });
+            }
+        }
+        assert_eq!(CutTopology::from_cut(&l, cut.clone(), Torn::default()).pieces, 2);
+        // The node [3, 3, 3] cut from its other neighbours a twentieth of a cell away: a speck in
+        // its four cells below the plane and its four above, dust.
+        let speck = node([3, 3, 3]);
+        for m in [[2, 3, 3], [4, 3, 3], [3, 3, 2], [3, 3, 4], [3, 4, 3]].map(node) {
+            cut.insert((speck.min(m), speck.max(m)), if speck < m { 0.05 } else { 0.95 });
+        }
+        let t = CutTopology::from_cut(&l, cut, Torn::default());
+        assert_eq!(t.pieces, 2, "the speck glued the two sides");
+        // It went with the upper piece, whose copies of its cells are the largest.
+        let speck_copies: Vec<usize> =
+            (0..t.copies.len()).filter(|&k| t.copies[k].nodes.contains(&speck) && t.copies[k].share < 0.1).collect();
+        assert_eq!(speck_copies.len(), 8);
+        let above = t.piece_of[t.copies_of(l.cell_index([3, 4, 3]).expect("a cell")).start];
+        assert!(speck_copies.iter().all(|&k| t.piece_of[k] == above));
     }
 }
