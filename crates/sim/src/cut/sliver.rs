@@ -38,7 +38,7 @@
 //! body goes on, are cut from the near side: the face's node joins the two sides through its edge
 //! down (random:1361 in random:1187's resection kept its lobe so, with every frame set's blade
 //! trusted). Where the cut runs along the plane (two nodes in a row cut from the same side
-//! within [`END_CELLS`]), [`tear`] carries it on to the face's node: that node's edge toward the
+//! within [`PLANE_CELLS`]), [`tear`] carries it on to the face's node: that node's edge toward the
 //! same side is cut as near it, leaving no more than that between the cut and the body's end.
 //! (Cutting its edge down instead, tried first, left the face's nodes a flap joined to the other
 //! side, which flapped 1.5 cm/s at rest at the end of the built-in main job.)
@@ -51,9 +51,10 @@ use crate::lattice::Lattice;
 /// between them tears.
 pub const TEAR_CELLS: f64 = 0.75;
 
-/// Material thinner than this, in lattice cells along an axis, between a cut carried on past
-/// its last crossing and the body's end tears ([`tear`]'s bridges at the body's end).
-pub const END_CELLS: f64 = 0.25 * TEAR_CELLS;
+/// A cut whose crossings are this near a node plane's nodes, in lattice cells, runs along the
+/// plane: [`holes`] closes a node left uncut in it, and [`tear`] carries it on to where the body
+/// ends at the plane.
+pub const PLANE_CELLS: f64 = 0.5 * TEAR_CELLS;
 
 /// A lattice edge's key in a map of crossings: its nodes, lower first.
 fn key(a: u32, b: u32) -> (u32, u32) {
@@ -165,19 +166,19 @@ pub fn tear(lattice: &Lattice, cut: &mut BTreeMap<(u32, u32), f64>) -> Torn {
     // surface runs along the plane there); its neighbour on this side in that plane, where the
     // body ends on the far side, is uncut toward the side it has and joins the sides alone. The
     // surface is carried on along the plane to it: its edge toward that side is cut as far from
-    // it as the node's is, leaving less than END_CELLS of material between the cut and the end.
+    // it as the node's is, leaving less than PLANE_CELLS of material between the cut and the end.
     let mut carried: Vec<((u32, u32), f64)> = Vec::new();
     for &m in &near {
         for axis in 0..3 {
             let Some((sm, dm)) = cut_side(lattice, cut, m, axis) else { continue };
-            if dm >= END_CELLS || neighbour(lattice, m, axis, -i64::from(sm)).is_none() {
+            if dm >= PLANE_CELLS || neighbour(lattice, m, axis, -i64::from(sm)).is_none() {
                 continue;
             }
             for along in (0..3).filter(|&a| a != axis) {
                 for step in [-1, 1] {
                     let Some(n) = neighbour(lattice, m, along, step) else { continue };
                     let beyond = neighbour(lattice, m, along, -step).and_then(|b| cut_side(lattice, cut, b, axis));
-                    if !beyond.is_some_and(|(sb, db)| sb == sm && db < END_CELLS)
+                    if !beyond.is_some_and(|(sb, db)| sb == sm && db < PLANE_CELLS)
                         || cut.contains_key(&key(n, m))
                         || end_side(lattice, cut, n, axis) != Some(-sm)
                     {
@@ -211,7 +212,7 @@ fn end_side(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>, n: u32, axis: us
 /// The edges that would close the holes of one node in `cut` (crossed edges of `lattice` by
 /// their nodes, the crossing's parameter from the lower node), with their crossings: for each
 /// node uncut along an axis while every neighbour it has in the plane across that axis (at least
-/// two) is cut from the same side along it, near the plane (within half of [`TEAR_CELLS`]), its
+/// two) is cut from the same side along it, near the plane (within [`PLANE_CELLS`]), its
 /// edge toward that side, at their crossings' mean distance. Found on `cut` as it is, so a hole
 /// closed never closes another. [`crate::vna::CutTopology::rebuild`] closes them.
 pub fn holes(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>) -> Vec<((u32, u32), f64)> {
@@ -240,7 +241,7 @@ pub fn holes(lattice: &Lattice, cut: &BTreeMap<(u32, u32), f64>) -> Vec<((u32, u
                 for step in [-1, 1] {
                     let Some(m) = neighbour(lattice, n, other, step) else { continue };
                     match cut_side(lattice, cut, m, axis) {
-                        Some((s, d)) if d < 0.5 * TEAR_CELLS && side.is_none_or(|x| x == s) => {
+                        Some((s, d)) if d < PLANE_CELLS && side.is_none_or(|x| x == s) => {
                             side = Some(s);
                             distances.push(d);
                         }
