@@ -362,7 +362,10 @@ mod tests {
         for (top, below) in [(0.0301, 0.0299), (0.0299, 0.0301), (0.0301, 0.0301), (0.0299, 0.0299)] {
             let mut edges = stroke_x(&l, top, 0.08, 0.055);
             edges.extend(stroke_x(&l, below, 0.056, -0.01));
-            assert_eq!(CutTopology::rebuild(&l, edges).pieces, 2, "x {top} over {below}");
+            let topology = CutTopology::rebuild(&l, edges);
+            assert_eq!(topology.pieces, 2, "x {top} over {below}");
+            // One surface through both passes separates by itself: no rule fires.
+            assert_eq!(top == below, topology.torn == Torn::default(), "x {top} over {below}: {:?}", topology.torn);
         }
     }
 
