@@ -683,7 +683,7 @@ pub(crate) mod tests {
         }
         assert_eq!(CutTopology::from_cut(&l, cut.clone(), Torn::default()).pieces, 2);
         // The node [3, 3, 3] cut from its other neighbours a twentieth of a cell away: a speck in
-        // its four cells below the plane and its four above, dust.
+        // its four cells the plane crosses (mostly the lower piece's) and its four above, dust.
         let speck = node([3, 3, 3]);
         for m in [[2, 3, 3], [4, 3, 3], [3, 3, 2], [3, 3, 4], [3, 4, 3]].map(node) {
             cut.insert((speck.min(m), speck.max(m)), if speck < m { 0.05 } else { 0.95 });
