@@ -639,6 +639,13 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     assert_eq!(t["pose"]["count"].as_u64(), Some(24), "{t}");
     assert_eq!(t["segment"]["count"].as_u64(), Some(24), "{t}");
     assert!(t["pose"]["mean_ms"].as_f64().expect("pose time") > 0.0, "{t}");
+    // The segmentation's foreground test and the fit's evidence are parts of it, every frame set.
+    let mean = |k: &str| t[k]["mean_ms"].as_f64().unwrap_or_else(|| panic!("{k}: {t}"));
+    for part in ["segment_foreground", "segment_evidence"] {
+        assert_eq!(t[part]["count"].as_u64(), Some(24), "{t}");
+        assert!(mean(part) > 0.0, "{part}: {t}");
+    }
+    assert!(mean("segment_foreground") + mean("segment_evidence") <= mean("segment") + 1e-6, "{t}");
     // Every frame set logs where its labels came from; the colours learned from the trusted ones
     // are logged from then on.
     let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");

@@ -307,6 +307,12 @@ pub struct StageTimes {
     pub read: Vec<Duration>,
     /// Segmentation and labelling, its carving and the tool's fit left out.
     pub segment: Vec<Duration>,
+    /// Of `segment`, the foreground test of every view (with the weak foreground's test and
+    /// confirmation where they run).
+    pub segment_foreground: Vec<Duration>,
+    /// Of `segment`, the tool's fit's evidence: its provisional labels around the predicted pose,
+    /// and around the hull's thin parts where the hull is searched.
+    pub segment_evidence: Vec<Duration>,
     /// Carving the hull.
     pub carve: Vec<Duration>,
     /// The labels' grids and surfaces.
@@ -329,10 +335,12 @@ pub struct StageTimes {
 }
 
 impl StageTimes {
-    fn fields(&self) -> [(&'static str, &Vec<Duration>); 11] {
+    fn fields(&self) -> [(&'static str, &Vec<Duration>); 13] {
         [
             ("read", &self.read),
             ("segment", &self.segment),
+            ("segment_foreground", &self.segment_foreground),
+            ("segment_evidence", &self.segment_evidence),
             ("carve", &self.carve),
             ("surface", &self.surface),
             ("pose", &self.pose),
@@ -350,6 +358,8 @@ impl StageTimes {
         let targets = [
             &mut self.read,
             &mut self.segment,
+            &mut self.segment_foreground,
+            &mut self.segment_evidence,
             &mut self.carve,
             &mut self.surface,
             &mut self.pose,
@@ -859,6 +869,10 @@ fn hull_stage(
             // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
             let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));
             work.times.segment.push(clock.elapsed().saturating_sub(carve + fit.unwrap_or_default()));
+            work.times.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
+            work.times
+                .segment_evidence
+                .extend(labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.evidence_ms * 1e-3)));
             work.times.carve.push(carve);
             work.times.pose.extend(fit);
             let hull_search = labelled.hull_search();

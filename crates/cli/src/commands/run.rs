@@ -299,6 +299,12 @@ struct Counters {
 struct Timings {
     read: StageTiming,
     segment: Option<StageTiming>,
+    /// Of `segment`, the foreground test of every view.
+    #[serde(default)]
+    segment_foreground: Option<StageTiming>,
+    /// Of `segment`, the tool's fit's evidence (its provisional labels).
+    #[serde(default)]
+    segment_evidence: Option<StageTiming>,
     carve: StageTiming,
     surface: StageTiming,
     pose: StageTiming,
@@ -982,6 +988,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             timings: Timings {
                 read: timing(&times.read),
                 segment: (!times.segment.is_empty()).then(|| timing(&times.segment)),
+                segment_foreground: (!times.segment_foreground.is_empty()).then(|| timing(&times.segment_foreground)),
+                segment_evidence: (!times.segment_evidence.is_empty()).then(|| timing(&times.segment_evidence)),
                 carve: timing(&times.carve),
                 surface: timing(&times.surface),
                 pose: timing(&times.pose),
