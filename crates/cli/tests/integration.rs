@@ -830,6 +830,13 @@ fn reconstruct_the_committed_dataset_writes_closed_meshes_and_an_accuracy_report
     for key in ["read", "segment", "carve", "surface", "total"] {
         assert!(r["timings"][key]["count"].as_u64().expect("timing") >= 1, "{key}");
     }
+    // The foreground test and the fit's evidence are parts of the segmentation, every frame set.
+    let t = &r["timings"];
+    let mean = |k: &str| t[k]["mean_ms"].as_f64().unwrap_or_else(|| panic!("{k}: {t}"));
+    for part in ["segment_foreground", "segment_evidence"] {
+        assert_eq!(t[part]["count"].as_u64(), Some(3), "{t}");
+    }
+    assert!(mean("segment_foreground") + mean("segment_evidence") <= mean("segment") + 1e-6, "{t}");
 
     let bad = hullcut(&["reconstruct", "--dataset", dataset, "--out", &path(&out), "--frames", "20:30"]);
     assert_eq!(bad.status.code(), Some(1));

@@ -214,6 +214,12 @@ struct Consistency {
 struct Timings {
     read: StageTiming,
     segment: Option<StageTiming>,
+    /// Of `segment`, the foreground test of every view.
+    #[serde(default)]
+    segment_foreground: Option<StageTiming>,
+    /// Of `segment`, the tool's fit's evidence (its provisional labels).
+    #[serde(default)]
+    segment_evidence: Option<StageTiming>,
     carve: StageTiming,
     surface: StageTiming,
     pose: StageTiming,
@@ -400,6 +406,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             let labelled = labelling.label(&set, &mut carver)?;
             let carve_ms = labelled.carve_ms;
             t.segment.push(clock.elapsed().saturating_sub(Duration::from_secs_f64(carve_ms * 1e-3)));
+            t.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
+            t.segment_evidence.extend(labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.evidence_ms * 1e-3)));
             t.carve.push(Duration::from_secs_f64(carve_ms * 1e-3));
             for (view, mask) in set.views.iter_mut().zip(labelled.masks) {
                 set_aside.push(view.as_mut().and_then(|v| std::mem::replace(&mut v.mask, mask)));
@@ -650,6 +658,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             timings: Timings {
                 read: StageTiming::from_durations(&t.read),
                 segment: (!t.segment.is_empty()).then(|| StageTiming::from_durations(&t.segment)),
+                segment_foreground: (!t.segment_foreground.is_empty())
+                    .then(|| StageTiming::from_durations(&t.segment_foreground)),
+                segment_evidence: (!t.segment_evidence.is_empty())
+                    .then(|| StageTiming::from_durations(&t.segment_evidence)),
                 carve: carve_t,
                 surface: StageTiming::from_durations(&t.surface),
                 pose: StageTiming::from_durations(&t.pose),
@@ -738,6 +750,8 @@ fn figure(value: Option<f64>, decimals: usize) -> String {
 struct StageTimes {
     read: Vec<Duration>,
     segment: Vec<Duration>,
+    segment_foreground: Vec<Duration>,
+    segment_evidence: Vec<Duration>,
     carve: Vec<Duration>,
     surface: Vec<Duration>,
     pose: Vec<Duration>,
