@@ -583,6 +583,11 @@ pub struct Labelling {
     /// The foreground masks before the hull resolved their possible shadows (for
     /// [`TableShadows`]), kept from frame set to frame set so that copying them allocates nothing.
     unresolved: Vec<Option<GrayImage>>,
+    /// Per view, the fit's hints within its window ([`fit_hints`]), kept from frame set to frame
+    /// set so that they allocate nothing.
+    hints: Vec<Vec<u8>>,
+    /// Per view, the foreground with the fit's hints ([`apply_hints`]), kept likewise.
+    hinted: Vec<Option<GrayImage>>,
     /// Per camera, its usual foreground pixel count over the last frame sets (a degraded frame
     /// set repeats the last usual count), each with how many degraded frame sets in a row led to
     /// it.
@@ -693,6 +698,8 @@ impl Labelling {
             counters: LabelCounters { hand_hints: true, ..LabelCounters::default() },
             masks: Vec::new(),
             unresolved: Vec::new(),
+            hints: Vec::new(),
+            hinted: Vec::new(),
             history: Vec::new(),
         })
     }
@@ -1003,14 +1010,18 @@ impl Labelling {
         // the tool's outline (as a shadow on the table, [`TABLE_SHADOW`]): the fat hull near the
         // blade confirms the blade's blended edge and the soft rim of its shadow beside it.
         let weak_hints = self.weak_pixels.iter().any(|p| !p.is_empty());
-        let hints: Option<Vec<Option<GrayImage>>> =
-            (self.tool.is_some() && (sure.is_some() || shadow_pixels > 0 || weak_hints)).then(|| {
-                fg.par_iter()
-                    .zip(set.views.par_iter())
-                    .zip(windows.par_iter())
-                    .map(|((m, view), &win)| Some(fit_hints(sure, hand_hints, &view.as_ref()?.image, m.as_ref()?, win)))
-                    .collect()
-            });
+        // Window by window, in buffers kept from frame set to frame set.
+        let mut hints = std::mem::take(&mut self.hints);
+        let hinting = self.tool.is_some() && (sure.is_some() || shadow_pixels > 0 || weak_hints);
+        if hinting {
+            hints.resize_with(fg.len(), Vec::new);
+            hints.par_iter_mut().zip(fg.par_iter()).zip(set.views.par_iter()).zip(windows.par_iter()).for_each(
+                |(((out, m), view), &win)| match (m, view) {
+                    (Some(m), Some(view)) => fit_hints(sure, hand_hints, &view.image, m, win, out),
+                    _ => out.clear(),
+                },
+            );
+        }
         let clock = Instant::now();
         let refs: Vec<Option<&GrayImage>> = fg.iter().map(Option::as_ref).collect();
         let views = silhouettes(&self.rig, &refs).with_context(|| format!("frame {frame}"))?;
@@ -1074,27 +1085,25 @@ impl Labelling {
                 .collect(),
             _ => Vec::new(),
         };
-        let hinted: Option<Vec<Option<GrayImage>>> = hints.map(|hints| {
-            fg.par_iter()
-                .zip(hints.par_iter())
-                .enumerate()
-                .map(|(k, (m, hint))| {
-                    let mut m = m.clone()?;
-                    if let Some(hint) = hint.as_ref().filter(|h| h.dimensions() == m.dimensions()) {
-                        let (w, h) = m.dimensions();
-                        for span in windows[k].spans(w, h) {
-                            for (p, &h) in m.as_mut()[span.clone()].iter_mut().zip(&hint.as_raw()[span]) {
-                                if *p != label::BACKGROUND
-                                    && matches!(
-                                        h,
-                                        label::HAND | label::SCALPEL | POSSIBLE_SHADOW | TOOL_COLOURED_SHADOW
-                                    )
-                                {
-                                    *p = h;
-                                }
-                            }
+        // The hinted masks, in buffers kept from frame set to frame set.
+        let mut hinted_store = std::mem::take(&mut self.hinted);
+        let hinted: Option<&[Option<GrayImage>]> = hinting.then(|| {
+            hinted_store.resize(fg.len(), None);
+            hinted_store.par_iter_mut().zip(fg.par_iter()).zip(hints.par_iter()).enumerate().for_each(
+                |(k, ((out, m), hint))| {
+                    let Some(m) = m else {
+                        *out = None;
+                        return;
+                    };
+                    let m = match out {
+                        Some(o) if o.dimensions() == m.dimensions() => {
+                            o.copy_from_slice(m.as_raw());
+                            o
                         }
-                    }
+                        _ => out.insert(m.clone()),
+                    };
+                    let (w, h) = m.dimensions();
+                    apply_hints(m, windows[k].clipped(w, h), hint);
                     if weak_hints {
                         for &i in self.weak_pixels.get(k).into_iter().flatten() {
                             if m.as_raw()[i] != label::BACKGROUND {
@@ -1108,15 +1117,15 @@ impl Labelling {
                             m.as_mut()[i] = TABLE_SHADOW;
                         }
                     }
-                    Some(m)
-                })
-                .collect()
+                },
+            );
+            &hinted_store[..]
         });
         let inputs: Vec<Option<ViewInput>> = self
             .rig
             .cameras
             .iter()
-            .zip(hinted.as_ref().unwrap_or(&fg))
+            .zip(hinted.unwrap_or(&fg))
             .zip(&set.views)
             .map(|((camera, m), v)| {
                 m.as_ref().map(|mask| ViewInput { camera, mask, image: v.as_ref().map(|v| &v.image) })
@@ -1137,6 +1146,8 @@ impl Labelling {
         let draw = masks_wanted || learn_due || bootstrapping && self.last_agreeing.is_some();
         labeller.draw_labels(draw);
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
+        drop(inputs);
+        (self.hints, self.hinted) = (hints, hinted_store);
         self.counters.searches += u64::from(labelled.stats.from_thin_parts);
         self.counters.searches_paused += u64::from(labelled.stats.search_paused);
         self.drawn += u64::from(draw && labelled.estimate.fitted.is_some());
@@ -1795,32 +1806,36 @@ fn blade_as_hand(sure: &ColourLut, image: &image::RgbImage, pixels: &[usize]) ->
         .sum()
 }
 
-/// The fit's hints ([`ToolLabeller::label`]): each foreground pixel's colour's label where `sure`
-/// decides ([`label::UNKNOWN`] where it does not, or without colours), and a possible shadow
-/// ([`SHADOW_LIKE`]) [`POSSIBLE_SHADOW`], or [`label::HAND`] where its colour is surely the hand's:
-/// its colour is the background's darkened, so it may speak against the tool, never for it (where
-/// it is surely the tool's, [`TOOL_COLOURED_SHADOW`]: a possible shadow still, but one the hand's
-/// hull does not take from the drawn tool on a small rig); background elsewhere. Without
-/// `hand_hints` ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of the hand's colour is
-/// [`label::UNKNOWN`] (a possible shadow of that colour stays the hand's: it is no shadow, and the
-/// hint only keeps it from the tool's shadows). Only the pixels in `win` are looked at: outside it
-/// the mask is background.
+/// The fit's hints ([`ToolLabeller::label`]) in the window `win` of `mask` (outside it the mask
+/// is background), into `out`, row by row (`out` is emptied when the image and mask sizes
+/// differ): each foreground pixel's colour's label where `sure` decides ([`label::UNKNOWN`]
+/// where it does not, or without colours), and a possible shadow ([`SHADOW_LIKE`])
+/// [`POSSIBLE_SHADOW`], or [`label::HAND`] where its colour is surely the hand's: its colour is
+/// the background's darkened, so it may speak against the tool, never for it (where it is surely
+/// the tool's, [`TOOL_COLOURED_SHADOW`]: a possible shadow still, but one the hand's hull does not
+/// take from the drawn tool on a small rig); background elsewhere. Without `hand_hints`
+/// ([`TOOL_AS_HAND_MAX`]) a foreground pixel surely of the hand's colour is [`label::UNKNOWN`] (a
+/// possible shadow of that colour stays the hand's: it is no shadow, and the hint only keeps it
+/// from the tool's shadows).
 fn fit_hints(
     sure: Option<&ColourLut>,
     hand_hints: bool,
     image: &image::RgbImage,
     mask: &GrayImage,
     win: Window,
-) -> GrayImage {
-    let mut out = GrayImage::new(mask.width(), mask.height());
+    out: &mut Vec<u8>,
+) {
+    out.clear();
     if image.dimensions() != mask.dimensions() {
-        return out;
+        return;
     }
     let colour = |p: &[u8]| sure.map_or(label::UNKNOWN, |s| s.get([p[0], p[1], p[2]]));
     let (w, h) = mask.dimensions();
-    for span in win.spans(w, h) {
+    out.resize(win.clipped(w, h).area() as usize, label::BACKGROUND);
+    let rows = win.spans(w, h).zip(out.chunks_mut(win.clipped(w, h).width().max(1) as usize));
+    for (span, row) in rows {
         let pixels = image.as_raw()[3 * span.start..3 * span.end].chunks_exact(3);
-        for ((o, &m), p) in out.as_mut()[span.clone()].iter_mut().zip(&mask.as_raw()[span]).zip(pixels) {
+        for ((o, &m), p) in row.iter_mut().zip(&mask.as_raw()[span]).zip(pixels) {
             if m == SHADOW_LIKE {
                 *o = match colour(p) {
                     label::HAND => label::HAND,
@@ -1835,7 +1850,25 @@ fn fit_hints(
             }
         }
     }
-    out
+}
+
+/// Gives each foreground pixel of `mask` in `win` (clipped to the mask) its hint from `hints`
+/// ([`fit_hints`] over the same window; empty: no hints) where the hint decides something:
+/// [`label::HAND`], [`label::SCALPEL`], [`POSSIBLE_SHADOW`] or [`TOOL_COLOURED_SHADOW`].
+/// Background stays background. Every pixel is stored, without a branch, so the pass vectorizes.
+fn apply_hints(mask: &mut GrayImage, win: Window, hints: &[u8]) {
+    let (w, h) = mask.dimensions();
+    let win = win.clipped(w, h);
+    if hints.len() != win.area() as usize || hints.is_empty() {
+        return;
+    }
+    let rows = win.spans(w, h).zip(hints.chunks_exact(win.width().max(1) as usize));
+    for (span, row) in rows {
+        for (p, &h) in mask.as_mut()[span].iter_mut().zip(row) {
+            let decides = h == label::HAND || h == label::SCALPEL || h == POSSIBLE_SHADOW || h == TOOL_COLOURED_SHADOW;
+            *p = if *p != label::BACKGROUND && decides { h } else { *p };
+        }
+    }
 }
 
 /// Gives the foreground near the drawn tool (`region`, grown by [`SHARPEN_PX`]) the label of its
@@ -2037,10 +2070,43 @@ mod tests {
         let mask = GrayImage::from_raw(4, 1, vec![label::UNKNOWN, label::UNKNOWN, SHADOW_LIKE, label::BACKGROUND])
             .expect("mask");
         let whole = Window::whole(4, 1);
-        let with = fit_hints(Some(&sure), true, &image, &mask, whole);
-        assert_eq!(with.as_raw(), &vec![label::HAND, label::SCALPEL, label::HAND, label::BACKGROUND]);
-        let without = fit_hints(Some(&sure), false, &image, &mask, whole);
-        assert_eq!(without.as_raw(), &vec![label::UNKNOWN, label::SCALPEL, label::HAND, label::BACKGROUND]);
+        let hints = |hand_hints| {
+            let mut out = Vec::new();
+            fit_hints(Some(&sure), hand_hints, &image, &mask, whole, &mut out);
+            out
+        };
+        assert_eq!(hints(true), vec![label::HAND, label::SCALPEL, label::HAND, label::BACKGROUND]);
+        assert_eq!(hints(false), vec![label::UNKNOWN, label::SCALPEL, label::HAND, label::BACKGROUND]);
+    }
+
+    #[test]
+    fn hints_take_only_foreground_pixels_in_their_window_and_only_where_they_decide() {
+        // A 4x3 mask, its window the middle two columns of the last two rows.
+        let fg = label::UNKNOWN;
+        let mut mask = GrayImage::from_raw(
+            4,
+            3,
+            vec![fg, fg, fg, fg, label::BACKGROUND, fg, fg, SHADOW_LIKE, fg, label::HAND, fg, fg],
+        )
+        .expect("mask");
+        let before = mask.clone();
+        let win = Window { x0: 1, y0: 1, x1: 3, y1: 3 };
+        let hints = [label::SCALPEL, POSSIBLE_SHADOW, TOOL_COLOURED_SHADOW, label::UNKNOWN];
+        apply_hints(&mut mask, win, &hints);
+        let expected = vec![fg, fg, fg, fg, label::BACKGROUND, label::SCALPEL, POSSIBLE_SHADOW, SHADOW_LIKE, fg];
+        assert_eq!(&mask.as_raw()[..9], &expected[..]);
+        // A deciding hint takes a labelled pixel too; an undecided one keeps the label; outside
+        // the window nothing changes.
+        assert_eq!(&mask.as_raw()[9..], &[TOOL_COLOURED_SHADOW, fg, fg]);
+        assert_eq!((mask.as_raw()[8], mask.as_raw()[11]), (before.as_raw()[8], before.as_raw()[11]));
+        // A background pixel takes no hint; hints of the wrong size, or none, change nothing.
+        let mut empty = GrayImage::from_raw(2, 1, vec![label::BACKGROUND, fg]).expect("mask");
+        apply_hints(&mut empty, Window::whole(2, 1), &[label::HAND, label::HAND]);
+        assert_eq!(empty.as_raw(), &vec![label::BACKGROUND, label::HAND]);
+        for wrong in [&[][..], &[label::SCALPEL][..]] {
+            apply_hints(&mut empty, Window::whole(2, 1), wrong);
+            assert_eq!(empty.as_raw(), &vec![label::BACKGROUND, label::HAND]);
+        }
     }
 
     #[test]
@@ -2052,11 +2118,13 @@ mod tests {
         let whole = Window::whole(2, 1);
         // Surely the hand's: the hand; surely the tool's: a possible shadow no hand cell takes from
         // the drawn tool; with no colours learned, a possible shadow.
+        let mut hints = Vec::new();
         for hand_hints in [true, false] {
-            let hints = fit_hints(Some(&sure), hand_hints, &image, &mask, whole);
-            assert_eq!(hints.as_raw(), &vec![label::HAND, TOOL_COLOURED_SHADOW]);
+            fit_hints(Some(&sure), hand_hints, &image, &mask, whole, &mut hints);
+            assert_eq!(hints, vec![label::HAND, TOOL_COLOURED_SHADOW]);
         }
-        assert_eq!(fit_hints(None, true, &image, &mask, whole).as_raw(), &vec![POSSIBLE_SHADOW; 2]);
+        fit_hints(None, true, &image, &mask, whole, &mut hints);
+        assert_eq!(hints, vec![POSSIBLE_SHADOW; 2]);
     }
 
     #[test]

@@ -490,6 +490,11 @@ impl Window {
         (win.y0 as usize..win.y1 as usize).map(move |y| y * w + x0..y * w + x1)
     }
 
+    /// Its columns.
+    pub fn width(&self) -> u32 {
+        self.x1.saturating_sub(self.x0)
+    }
+
     /// Pixels in it.
     pub fn area(&self) -> u64 {
         u64::from(self.x1.saturating_sub(self.x0)) * u64::from(self.y1.saturating_sub(self.y0))
