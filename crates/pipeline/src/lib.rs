@@ -35,7 +35,7 @@ pub use labelling::{LabelMethod, LabelSource, LabelTrace, Labelling, LabellingRe
 pub use read::{Faults, ViewFault};
 pub use stages::{
     FrameSource, LabelGrid, MAX_ADVANCE_S, MAX_REALTIME_GAP_S, Outcome, Pipeline, ReadOutcome, Setup, StageTimes, Work,
-    preload, spawn,
+    on_pool, preload, spawn,
 };
 pub use tissue::{Sweeper, Tissue, TissueStep};
 

@@ -403,7 +403,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let (mut labelled_hull, mut labelled_estimate) = (None, None);
         if let Some(labelling) = &mut labelling {
             let clock = Instant::now();
-            let labelled = labelling.label(&set, &mut carver)?;
+            let labelled = hullcut_pipeline::on_pool(|| labelling.label(&set, &mut carver))?;
             let carve_ms = labelled.carve_ms;
             t.segment.push(clock.elapsed().saturating_sub(Duration::from_secs_f64(carve_ms * 1e-3)));
             t.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
@@ -422,7 +422,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let occ = match labelled_hull {
             Some(occ) => occ,
             None => {
-                let occ = carver.carve(&views, &params).with_context(|| format!("frame {frame}"))?;
+                let occ = hullcut_pipeline::on_pool(|| carver.carve(&views, &params))
+                    .with_context(|| format!("frame {frame}"))?;
                 t.carve.push(clock.elapsed());
                 occ
             }
@@ -470,7 +471,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let from_labelling = labelled_estimate.is_some();
         let estimate = match (labelled_estimate, &mut tracker) {
             (Some(estimate), _) => estimate,
-            (None, Some(tracker)) => tracker.update(frame, set.timestamp_ns, &occ, &inputs),
+            (None, Some(tracker)) => {
+                hullcut_pipeline::on_pool(|| tracker.update(frame, set.timestamp_ns, &occ, &inputs))
+            }
             (None, None) => no_tool_estimate(frame, set.timestamp_ns),
         };
         t.pose.push(clock.elapsed());

@@ -225,7 +225,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         let mut set = ds.read_frame_set(frame, score)?;
         read_times.push(t.elapsed());
         let t = Instant::now();
-        let labelled = labelling.label(&set, &mut carver)?;
+        // On the pool, as the main job's loop segments ([`hullcut_pipeline::on_pool`]).
+        let labelled = hullcut_pipeline::on_pool(|| labelling.label(&set, &mut carver))?;
         segment_times.push(t.elapsed());
         fg_times.push(ms(labelled.foreground_ms));
         carve_times.push(ms(labelled.carve_ms));
