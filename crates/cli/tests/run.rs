@@ -646,6 +646,11 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
         assert!(mean(part) > 0.0, "{part}: {t}");
     }
     assert!(mean("segment_foreground") + mean("segment_evidence") <= mean("segment") + 1e-6, "{t}");
+    // The frame sets whose tool was drawn into the views (logged with their images, teaching the
+    // colours) are timed apart too: those the labelling counts, some but not all.
+    let drawn = t["segment_drawn"]["count"].as_u64().unwrap_or_else(|| panic!("segment_drawn: {t}"));
+    assert_eq!(Some(drawn), l["drawn"].as_u64(), "{t} {l}");
+    assert!((1..24).contains(&drawn), "{drawn} drawn: {t}");
     // Every frame set logs where its labels came from; the colours learned from the trusted ones
     // are logged from then on.
     let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");

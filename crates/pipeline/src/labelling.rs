@@ -463,6 +463,10 @@ pub struct Labelled {
     pub carve_ms: f64,
     /// The geometric labeller's counters and timings.
     pub stats: Option<LabelStats>,
+    /// Whether the fitted tool was drawn into the views for these labels (their masks wanted, or
+    /// the frame set may teach the colours: [`Labelling::label_with`]), the costliest frame sets
+    /// to label ([`LabellingReport::drawn`] counts them).
+    pub drawn: bool,
 }
 
 impl Labelled {
@@ -1000,6 +1004,7 @@ impl Labelling {
                 foreground_ms,
                 carve_ms: 0.0,
                 stats: None,
+                drawn: false,
             });
         }
         // The fit's hints (the learned colours', the possible shadows) are taken before possible
@@ -1069,6 +1074,7 @@ impl Labelling {
                 foreground_ms,
                 carve_ms,
                 stats: None,
+                drawn: false,
             });
         }
         // The hints for the tool's fit, on the foreground as the hull left it. The shadows the other
@@ -1150,7 +1156,8 @@ impl Labelling {
         (self.hints, self.hinted) = (hints, hinted_store);
         self.counters.searches += u64::from(labelled.stats.from_thin_parts);
         self.counters.searches_paused += u64::from(labelled.stats.search_paused);
-        self.drawn += u64::from(draw && labelled.estimate.fitted.is_some());
+        let drawn = draw && labelled.estimate.fitted.is_some();
+        self.drawn += u64::from(drawn);
         // The shadows given back to the table are background, unless the tool is drawn there;
         // neither the labels handed out nor the colours learned take them for the hand.
         to_background(&mut labelled.masks, &given_back, true);
@@ -1253,6 +1260,7 @@ impl Labelling {
             foreground_ms,
             carve_ms,
             stats: Some(labelled.stats),
+            drawn,
         })
     }
 

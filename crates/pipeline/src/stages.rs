@@ -313,6 +313,9 @@ pub struct StageTimes {
     /// Of `segment`, the tool's fit's evidence: its provisional labels around the predicted pose,
     /// and around the hull's thin parts where the hull is searched.
     pub segment_evidence: Vec<Duration>,
+    /// `segment` again, for the frame sets whose fitted tool was drawn into the views (logged
+    /// with their images, or teaching the colours: [`crate::Labelled::drawn`]) only.
+    pub segment_drawn: Vec<Duration>,
     /// Carving the hull.
     pub carve: Vec<Duration>,
     /// The labels' grids and surfaces.
@@ -335,12 +338,13 @@ pub struct StageTimes {
 }
 
 impl StageTimes {
-    fn fields(&self) -> [(&'static str, &Vec<Duration>); 13] {
+    fn fields(&self) -> [(&'static str, &Vec<Duration>); 14] {
         [
             ("read", &self.read),
             ("segment", &self.segment),
             ("segment_foreground", &self.segment_foreground),
             ("segment_evidence", &self.segment_evidence),
+            ("segment_drawn", &self.segment_drawn),
             ("carve", &self.carve),
             ("surface", &self.surface),
             ("pose", &self.pose),
@@ -360,6 +364,7 @@ impl StageTimes {
             &mut self.segment,
             &mut self.segment_foreground,
             &mut self.segment_evidence,
+            &mut self.segment_drawn,
             &mut self.carve,
             &mut self.surface,
             &mut self.pose,
@@ -889,7 +894,11 @@ fn hull_frame_set(
             let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
             // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
             let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));
-            work.times.segment.push(clock.elapsed().saturating_sub(carve + fit.unwrap_or_default()));
+            let segment = clock.elapsed().saturating_sub(carve + fit.unwrap_or_default());
+            work.times.segment.push(segment);
+            if labelled.drawn {
+                work.times.segment_drawn.push(segment);
+            }
             work.times.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
             work.times
                 .segment_evidence

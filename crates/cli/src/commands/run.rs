@@ -305,6 +305,10 @@ struct Timings {
     /// Of `segment`, the tool's fit's evidence (its provisional labels).
     #[serde(default)]
     segment_evidence: Option<StageTiming>,
+    /// `segment` over the frame sets whose fitted tool was drawn into the views only (logged with
+    /// their images, or teaching the colours).
+    #[serde(default)]
+    segment_drawn: Option<StageTiming>,
     carve: StageTiming,
     surface: StageTiming,
     pose: StageTiming,
@@ -990,6 +994,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 segment: (!times.segment.is_empty()).then(|| timing(&times.segment)),
                 segment_foreground: (!times.segment_foreground.is_empty()).then(|| timing(&times.segment_foreground)),
                 segment_evidence: (!times.segment_evidence.is_empty()).then(|| timing(&times.segment_evidence)),
+                segment_drawn: (!times.segment_drawn.is_empty()).then(|| timing(&times.segment_drawn)),
                 carve: timing(&times.carve),
                 surface: timing(&times.surface),
                 pose: timing(&times.pose),
