@@ -314,7 +314,7 @@ pub struct StageTimes {
     /// and around the hull's thin parts where the hull is searched.
     pub segment_evidence: Vec<Duration>,
     /// `segment` again, for the frame sets whose fitted tool was drawn into the views (logged
-    /// with their images, or teaching the colours: [`crate::Labelled::drawn`]) only.
+    /// with their images, or teaching the colours: [`crate::labelling::Labelled::drawn`]) only.
     pub segment_drawn: Vec<Duration>,
     /// Carving the hull.
     pub carve: Vec<Duration>,
