@@ -964,8 +964,10 @@ fn hull_frame_set(
 /// Runs `op` on a thread of rayon's pool while the calling thread waits. A stage thread is not
 /// the pool's: each parallel pass it starts is handed over to the pool, and the stage thread put
 /// to sleep until it is done. Run on the pool, the passes split their work with the pool's other
-/// threads by work stealing instead, the thread that starts one working on it at once (on two
-/// cores this took about 0.5 ms off a frame set's segmentation of six views; docs/benchmarks.md).
+/// threads by work stealing instead, the thread that starts one working on it at once. On two
+/// cores this took 1.2-1.5 ms off the built-in scene's segmentation of six views a frame set and
+/// 2 ms off the tissue's deformation, the same results (docs/benchmarks.md, "Each stage's frame
+/// set on the pool"). Nothing inside may wait for another stage: it would hold a pool thread.
 pub fn on_pool<R: Send>(op: impl FnOnce() -> R + Send) -> R {
     rayon::scope(|_| op())
 }
