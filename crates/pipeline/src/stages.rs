@@ -877,87 +877,84 @@ fn hull_frame_set(
     (labelling, (masks_wanted, meshes_wanted)): (Option<&mut Labelling>, (bool, bool)),
     (carver, params, region): (&mut Carver, &HullParams, &mut CarveRegion),
 ) -> Result<(), Error> {
-    {
-        let frame = work.frame;
-        let mut labelled_hull = None;
-        // Around the last hull (see [`CarveRegion`]).
-        let boxed = region.next_box();
-        if let Some(labelling) = labelling {
-            let clock = Instant::now();
-            labelling.set_workspace(boxed);
-            let labelled = labelling.label_with(&work.set, carver, masks_wanted)?;
-            if let Some(occ) = &labelled.occupancy {
-                // A clipped foreground hull stays (labelling a frame set twice would feed its
-                // track twice); the next frame set is carved in the whole volume.
-                region.update(&boxed, occ);
-            }
-            let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
-            // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
-            let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));
-            let segment = clock.elapsed().saturating_sub(carve + fit.unwrap_or_default());
-            work.times.segment.push(segment);
-            if labelled.drawn {
-                work.times.segment_drawn.push(segment);
-            }
-            work.times.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
-            work.times
-                .segment_evidence
-                .extend(labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.evidence_ms * 1e-3)));
-            work.times.carve.push(carve);
-            work.times.pose.extend(fit);
-            let hull_search = labelled.hull_search();
-            for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
-                if let Some(view) = view {
-                    view.mask = mask;
-                }
-            }
-            labelled_hull = labelled.occupancy;
-            // The tool's track is the labelling's: the pose stage takes its estimate.
-            work.estimate = labelled.estimate;
-            work.labels = Some(LabelTrace {
-                source: labelled.source,
-                learned: labelling.learned(),
-                blade_as_hand: labelling.blade_as_hand(),
-                shadow_on_table: labelling.shadow_on_table(),
-                weak_confirmed: labelling.weak_confirmed(),
-                taught: labelling.taught(),
-                segmented: labelling.segmented(),
-                hull_search,
-            });
-        }
-        let occ = match labelled_hull {
-            Some(occ) => occ,
-            None => {
-                let clock = Instant::now();
-                let masks: Vec<Option<&image::GrayImage>> =
-                    work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
-                let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
-                let here = HullParams { workspace: boxed, ..params.clone() };
-                let mut occ = carver.carve(&views, &here).with_context(|| format!("frame {frame}"))?;
-                if region.update(&boxed, &occ) {
-                    occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
-                    region.counts.redone += 1;
-                    region.update(&region.full(), &occ);
-                }
-                work.times.carve.push(clock.elapsed());
-                occ
-            }
-        };
+    let frame = work.frame;
+    let mut labelled_hull = None;
+    // Around the last hull (see [`CarveRegion`]).
+    let boxed = region.next_box();
+    if let Some(labelling) = labelling {
         let clock = Instant::now();
-        // The hand's grid pushes the tissue every frame set; the meshes (and the scalpel's grid,
-        // which only they use) are for the frame sets the caller logs or draws.
-        let meshes = meshes_wanted;
-        work.grids = label::NAMED
-            .iter()
-            .map(|&(l, name)| {
-                let grid = (meshes || l == label::HAND).then(|| DenseGrid::from_occupancy(&occ, Some(l))).flatten();
-                let mesh = grid.as_ref().filter(|_| meshes).map(DenseGrid::surface);
-                (l, name, grid, mesh)
-            })
-            .collect();
-        work.times.surface.push(clock.elapsed());
-        work.occ = Some(occ);
+        labelling.set_workspace(boxed);
+        let labelled = labelling.label_with(&work.set, carver, masks_wanted)?;
+        if let Some(occ) = &labelled.occupancy {
+            // A clipped foreground hull stays (labelling a frame set twice would feed its
+            // track twice); the next frame set is carved in the whole volume.
+            region.update(&boxed, occ);
+        }
+        let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
+        // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
+        let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));
+        let segment = clock.elapsed().saturating_sub(carve + fit.unwrap_or_default());
+        work.times.segment.push(segment);
+        if labelled.drawn {
+            work.times.segment_drawn.push(segment);
+        }
+        work.times.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
+        work.times
+            .segment_evidence
+            .extend(labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.evidence_ms * 1e-3)));
+        work.times.carve.push(carve);
+        work.times.pose.extend(fit);
+        let hull_search = labelled.hull_search();
+        for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
+            if let Some(view) = view {
+                view.mask = mask;
+            }
+        }
+        labelled_hull = labelled.occupancy;
+        // The tool's track is the labelling's: the pose stage takes its estimate.
+        work.estimate = labelled.estimate;
+        work.labels = Some(LabelTrace {
+            source: labelled.source,
+            learned: labelling.learned(),
+            blade_as_hand: labelling.blade_as_hand(),
+            shadow_on_table: labelling.shadow_on_table(),
+            weak_confirmed: labelling.weak_confirmed(),
+            taught: labelling.taught(),
+            segmented: labelling.segmented(),
+            hull_search,
+        });
     }
+    let occ = match labelled_hull {
+        Some(occ) => occ,
+        None => {
+            let clock = Instant::now();
+            let masks: Vec<Option<&image::GrayImage>> =
+                work.set.views.iter().map(|v| v.as_ref().and_then(|v| v.mask.as_ref())).collect();
+            let views = silhouettes(ds.rig(), &masks).with_context(|| format!("frame {frame}"))?;
+            let here = HullParams { workspace: boxed, ..params.clone() };
+            let mut occ = carver.carve(&views, &here).with_context(|| format!("frame {frame}"))?;
+            if region.update(&boxed, &occ) {
+                occ = carver.carve(&views, params).with_context(|| format!("frame {frame}"))?;
+                region.counts.redone += 1;
+                region.update(&region.full(), &occ);
+            }
+            work.times.carve.push(clock.elapsed());
+            occ
+        }
+    };
+    let clock = Instant::now();
+    // The hand's grid pushes the tissue every frame set; the meshes (and the scalpel's grid,
+    // which only they use) are for the frame sets the caller logs or draws.
+    work.grids = label::NAMED
+        .iter()
+        .map(|&(l, name)| {
+            let grid = (meshes_wanted || l == label::HAND).then(|| DenseGrid::from_occupancy(&occ, Some(l))).flatten();
+            let mesh = grid.as_ref().filter(|_| meshes_wanted).map(DenseGrid::surface);
+            (l, name, grid, mesh)
+        })
+        .collect();
+    work.times.surface.push(clock.elapsed());
+    work.occ = Some(occ);
     Ok(())
 }
 
