@@ -1505,6 +1505,21 @@ impl Labelling {
         self.taught
     }
 
+    /// What labelled `labelled`, the frame set this labelling labelled last, and the colours
+    /// learned by then.
+    pub fn trace(&self, labelled: &Labelled) -> LabelTrace {
+        LabelTrace {
+            source: labelled.source,
+            learned: self.learned(),
+            blade_as_hand: self.blade_as_hand(),
+            shadow_on_table: self.shadow_on_table(),
+            weak_confirmed: self.weak_confirmed(),
+            taught: self.taught(),
+            segmented: self.segmented(),
+            hull_search: labelled.hull_search(),
+        }
+    }
+
     /// What the last labelled frame set's segmentation tested: whether only near the last hull,
     /// and the pixels.
     pub fn segmented(&self) -> Segmented {

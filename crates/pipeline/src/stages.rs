@@ -904,7 +904,7 @@ fn hull_frame_set(
             .extend(labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.evidence_ms * 1e-3)));
         work.times.carve.push(carve);
         work.times.pose.extend(fit);
-        let hull_search = labelled.hull_search();
+        work.labels = Some(labelling.trace(&labelled));
         for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
             if let Some(view) = view {
                 view.mask = mask;
@@ -913,16 +913,6 @@ fn hull_frame_set(
         labelled_hull = labelled.occupancy;
         // The tool's track is the labelling's: the pose stage takes its estimate.
         work.estimate = labelled.estimate;
-        work.labels = Some(LabelTrace {
-            source: labelled.source,
-            learned: labelling.learned(),
-            blade_as_hand: labelling.blade_as_hand(),
-            shadow_on_table: labelling.shadow_on_table(),
-            weak_confirmed: labelling.weak_confirmed(),
-            taught: labelling.taught(),
-            segmented: labelling.segmented(),
-            hull_search,
-        });
     }
     let occ = match labelled_hull {
         Some(occ) => occ,

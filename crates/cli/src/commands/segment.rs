@@ -240,16 +240,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             tracing::debug!(frame, valid = e.valid, confidence = e.confidence, reason = ?e.reason, from_thin = ?labelled.stats.as_ref().map(|s| s.from_thin_parts), ms = ?labelled.stats.as_ref().map(|s| [s.evidence_ms, s.fit_ms, s.draw_ms]), carve_ms = labelled.carve_ms, "tool");
         }
         let segment_ms = t.elapsed().as_secs_f64() * 1e3;
-        let trace = LabelTrace {
-            source: labelled.source,
-            learned: labelling.learned(),
-            blade_as_hand: labelling.blade_as_hand(),
-            shadow_on_table: labelling.shadow_on_table(),
-            weak_confirmed: labelling.weak_confirmed(),
-            taught: labelling.taught(),
-            segmented: labelling.segmented(),
-            hull_search: labelled.hull_search(),
-        };
+        let trace = labelling.trace(&labelled);
         match labelled.source {
             LabelSource::Unknown | LabelSource::UntrustedGeometry
                 if args.labels == LabelMethod::Both && deferred.len() < MAX_DEFERRED =>
