@@ -222,11 +222,11 @@ impl Scores {
     }
 }
 
-/// The classes' scores of the features `f`.
+/// The classes' scores of the features `f`: the runner-up is the best class of another label (a
+/// label may have several classes, as the tool's body and its blade: a colour between two of them
+/// is still surely that label's).
 fn scores(compiled: &[Compiled], f: [f64; 3]) -> Scores {
-    let mut best = (f64::INFINITY, label::UNKNOWN, f64::INFINITY);
-    let mut second = f64::INFINITY;
-    for Compiled { label: lbl, mean, inv, log_det } in compiled {
+    let scored = compiled.iter().map(|Compiled { label: lbl, mean, inv, log_det }| {
         let d = [f[0] - mean[0], f[1] - mean[1], f[2] - mean[2]];
         let mut m2 = 0.0;
         for i in 0..3 {
@@ -235,14 +235,11 @@ fn scores(compiled: &[Compiled], f: [f64; 3]) -> Scores {
             }
         }
         // Negative log-likelihood up to a constant.
-        let score = m2 + log_det;
-        if score < best.0 {
-            second = best.0;
-            best = (score, *lbl, m2);
-        } else if score < second {
-            second = score;
-        }
-    }
+        (m2 + log_det, *lbl, m2)
+    });
+    let best =
+        scored.clone().fold((f64::INFINITY, label::UNKNOWN, f64::INFINITY), |b, s| if s.0 < b.0 { s } else { b });
+    let second = scored.filter(|s| s.1 != best.1).fold(f64::INFINITY, |a, s| a.min(s.0));
     Scores { best, second }
 }
 
@@ -472,5 +469,31 @@ mod tests {
             }
             assert!(differ > 100, "the margin leaves {differ} colours unknown");
         }
+    }
+
+    /// The margin of the sure labels is against the best class of another label: a colour between
+    /// two classes of the tool (a blue handle and a grey blade) is surely the tool's, one between
+    /// the tool's and the hand's is not.
+    #[test]
+    fn a_colour_between_two_classes_of_one_label_is_surely_that_label() {
+        let shade = (0.25, 1.15);
+        let (blue, grey, purple) = ([50.0, 110.0, 225.0], [120.0, 124.0, 140.0], [150.0, 60.0, 120.0]);
+        let classes = ColourClasses {
+            classes: vec![
+                ColourClass::from_albedo(label::HAND, purple, shade, 0.02),
+                ColourClass::from_albedo(label::SCALPEL, blue, shade, 0.03),
+                ColourClass::from_albedo(label::SCALPEL, grey, shade, 0.03),
+            ],
+            reject_mahalanobis2: None,
+        };
+        let sure = ColourLut::confident(&classes, 3.0);
+        let mix = |a: [f64; 3], b: [f64; 3], t: f64| [0, 1, 2].map(|i| (a[i] * (1.0 - t) + b[i] * t) as u8);
+        // Where the blue and the grey classes score alike (somewhere between them), the tool.
+        let between: Vec<u8> = (0..=20).map(|k| sure.get(mix(blue, grey, f64::from(k) / 20.0))).collect();
+        assert!(between.iter().all(|&l| l == label::SCALPEL), "{between:?}");
+        // Between the grey and the glove, somewhere not sure.
+        let across: Vec<u8> = (0..=20).map(|k| sure.get(mix(grey, purple, f64::from(k) / 20.0))).collect();
+        assert!(across.contains(&label::UNKNOWN), "{across:?}");
+        assert_eq!((across[0], across[20]), (label::SCALPEL, label::HAND));
     }
 }
