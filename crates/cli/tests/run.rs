@@ -827,6 +827,29 @@ fn the_first_trusted_fit_on_four_cameras_teaches_the_colours_whatever_its_confid
     assert!(c["poses_trusted"].as_u64().expect("trusted") >= 10, "{c}");
 }
 
+/// A thin grey blade on a blue handle, held by a purple glove over a grey checkered table, on four
+/// cameras (random:359 in random:367, the resection's first 60 frame sets, no masks). One colour
+/// class for the whole tool learned the handle alone (the glove's class explained the grey better,
+/// so the blade's samples were gated out); the frame sets labelled by colour then called the blade
+/// the hand's in three or four views, and the track was lost at frame set 27 for good. Measured
+/// 2026-11-30: 17 of 60 trusted with one class; 50 with the blade learned apart (130 of all 150,
+/// and the lobe cut off, against 18 and on).
+#[test]
+fn a_grey_blade_learned_apart_from_its_blue_handle_stays_the_tools_in_the_colour_labels() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let look = ["--rig", "random:359", "--appearance", "random:367", "--tool", "pointed"];
+    let r = run_segmented(dir.path(), &[&["--frames", "60", "--scene", "resect"][..], &look].concat(), "60");
+    let c = &r["counters"];
+    assert_eq!(c["frame_sets_processed"].as_u64(), Some(60), "{c}");
+    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 40, "{c}");
+    let learned = r["labelling"]["appearance"].as_array().expect("the learned colours");
+    let blade = learned.iter().find(|a| a["label"] == "blade").expect("the blade's colour");
+    assert!(blade["pixels"].as_f64().expect("pixels") >= 200.0, "{blade}");
+    let rgb: Vec<f64> = blade["rgb"].as_array().expect("rgb").iter().filter_map(serde_json::Value::as_f64).collect();
+    let (lo, hi) = rgb.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    assert!(rgb.len() == 3 && hi - lo < 0.3 * hi, "a grey blade: {blade}");
+}
+
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.
 fn retime(ds: &Path, timestamp: impl Fn(u64, i64) -> i64) {
     let path = ds.join("frames.csv");

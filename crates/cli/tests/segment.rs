@@ -149,10 +149,14 @@ fn a_shadow_kept_beside_the_blade_does_not_become_the_tool_by_its_colour() {
     let precision = scalpel.and_then(|l| l["precision"].as_f64()).expect("scalpel precision");
     let got = [iou(&r, "hand"), iou(&r, "scalpel"), precision];
     assert!(got[0] >= 0.95 && got[1] >= 0.88 && got[2] >= 0.94, "hand IoU, scalpel IoU, precision {got:?}");
-    // Both sets of colours are reported, each with both labels learned.
-    for key in ["appearance", "sharpening_appearance"] {
+    // Both sets of colours are reported, each with both labels learned; the blade is told apart
+    // from the rest of the tool in the colours that label, not in those that sharpen.
+    for (key, blade) in [("appearance", true), ("sharpening_appearance", false)] {
         let learned = r["labelling"][key].as_array().unwrap_or_else(|| panic!("{key} reported"));
-        assert!(learned.len() == 2 && learned.iter().all(|c| c["rgb"].is_array()), "{key}: {learned:?}");
+        let names: Vec<&str> = learned.iter().filter_map(|c| c["label"].as_str()).collect();
+        assert_eq!(names, ["hand", "scalpel", "blade"], "{key}");
+        let has = |k: usize| learned[k]["rgb"].is_array();
+        assert!(has(0) && has(1) && has(2) == blade, "{key}: {learned:?}");
     }
 }
 

@@ -1200,24 +1200,18 @@ impl Labelling {
             // The colours that label and hint are learned from the labels sharpened wherever a
             // colour is surely the likelier, the sharpening colours from the labels handed out.
             let likelier = learns.then(|| {
-                // The drawn blade's pixels, before any colour sharpens them.
-                let blade = match (&self.tool, &estimate.fitted) {
-                    (Some(labeller), Some(fitted)) => self
-                        .rig
-                        .cameras
-                        .par_iter()
-                        .zip(labelled.masks.par_iter())
-                        .map(|(camera, mask)| {
-                            mask.as_ref().map_or_else(Vec::new, |m| {
-                                blade_pixels(m, &labeller.blade_outline(camera, &fitted.tool_to_world))
-                            })
-                        })
-                        .collect(),
-                    _ => Vec::new(),
-                };
+                // The pixels inside the drawn blade's outline, and its scalpel pixels before any
+                // colour sharpens them.
+                let outline = self.blade_regions(&labelled.masks, estimate.fitted.as_ref());
+                let blade: Vec<Vec<usize>> = labelled
+                    .masks
+                    .par_iter()
+                    .zip(outline.par_iter())
+                    .map(|(mask, inside)| mask.as_ref().map_or_else(Vec::new, |m| scalpel_among(m, inside)))
+                    .collect();
                 let mut masks = labelled.masks.clone();
                 sharpen_all(&mut masks, self.sure.as_ref());
-                (masks, blade)
+                (masks, blade, outline)
             });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_ref());
@@ -1239,14 +1233,15 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some((likelier, blade)) = learn_from {
+        if let Some((likelier, blade, outline)) = learn_from {
             // Only a trusted fit's labels teach: `masks` are the labels handed out.
             let passed = self.since_learned;
-            self.learn(set, &likelier, &masks);
+            self.learn(set, &likelier, &masks, &outline);
             self.judge_hand_hints(set, &blade, passed);
         } else if let Some(taught) = taught {
             // Or, until one has, what an agreeing fit alone decides.
-            self.bootstrap(set, &taught);
+            let outline = self.blade_regions(&taught, estimate.fitted.as_ref());
+            self.bootstrap(set, &taught, &outline);
         }
         // The colour-labelled masks need their own hull; the geometric ones come with theirs.
         let occupancy = (source != LabelSource::Colour).then_some(labelled.occupancy);
@@ -1440,22 +1435,31 @@ impl Labelling {
     /// the hints those colours gave lost random:59 in random:101's track from frame set 93 to 120
     /// (129 -> 104 of 150 frame sets trusted), and the frame sets labelled by colour alone lost
     /// (random:97 in random:137, where the fit is trusted in 34 of 150: scalpel 0.588 -> 0.458).
-    fn learn(&mut self, set: &FrameSet, likelier: &[Option<GrayImage>], handed_out: &[Option<GrayImage>]) {
+    fn learn(
+        &mut self,
+        set: &FrameSet,
+        likelier: &[Option<GrayImage>],
+        handed_out: &[Option<GrayImage>],
+        blade: &[Vec<usize>],
+    ) {
         // The labels are background outside each view's window.
         let windows = &self.windows;
         // What was learned is forgotten by the frame sets passed since ([`LEARN_EVERY`]).
         let passed = std::mem::take(&mut self.since_learned).max(1);
-        let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>]| {
+        let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>], blade: &[Vec<usize>]| {
             model.age_by(passed);
             for (k, (view, mask)) in set.views.iter().zip(masks).enumerate() {
                 if let (Some(view), Some(mask)) = (view, mask) {
                     let window = Window::of_view(windows, k, mask.width(), mask.height());
-                    model.learn_within(&view.image, mask, true, window);
+                    let inside = blade.get(k).map_or(&[][..], Vec::as_slice);
+                    model.learn_parts(&view.image, mask, true, window, inside);
                 }
             }
             model.sources.geometry_frames += 1;
         };
-        rayon::join(|| learn(&mut self.appearance, likelier), || learn(&mut self.sharpening, handed_out));
+        // The blade is told apart in the colours that label and hint only: in the sharpening
+        // colours a grey blade's class took the hand's dark shadow beside it for the tool.
+        rayon::join(|| learn(&mut self.appearance, likelier, blade), || learn(&mut self.sharpening, handed_out, &[]));
         self.counters.learned += 1;
         // Each model compiled on its own: one not learned yet (no class) does not make the other
         // compile every frame set.
@@ -1469,6 +1473,22 @@ impl Labelling {
         if refresh || self.explained.is_none() {
             self.explained = compile_explained(self.sharpening.classes());
         }
+    }
+
+    /// Per view of `masks`, the indices of the pixels inside the blade's outline with the tool at
+    /// `fitted` (ascending; none without a tool, a fit or a mask).
+    fn blade_regions(&self, masks: &[Option<GrayImage>], fitted: Option<&hullcut_pose::BladePose>) -> Vec<Vec<usize>> {
+        let (Some(labeller), Some(fitted)) = (&self.tool, fitted) else { return Vec::new() };
+        self.rig
+            .cameras
+            .par_iter()
+            .zip(masks.par_iter())
+            .map(|(camera, mask)| {
+                mask.as_ref().map_or_else(Vec::new, |m| {
+                    inside_outline(m.width(), m.height(), &labeller.blade_outline(camera, &fitted.tool_to_world))
+                })
+            })
+            .collect()
     }
 
     /// Tallies how much of a learned frame set's drawn blade (`blade`, per view the indices of its
@@ -1568,7 +1588,7 @@ impl Labelling {
     /// could use, and their hints moved the fits (random:257 in random:263's hand IoU 0.959 ->
     /// 0.925, scalpel 0.373 -> 0.099; squared distance of the tool's mean from the hand 1.26 on its
     /// first such frame set, random:71 in random:109's 1.09): then the colours stay as they were.
-    fn bootstrap(&mut self, set: &FrameSet, taught: &[Option<GrayImage>]) {
+    fn bootstrap(&mut self, set: &FrameSet, taught: &[Option<GrayImage>], blade: &[Vec<usize>]) {
         let before = (
             self.appearance.clone(),
             self.sharpening.clone(),
@@ -1578,7 +1598,7 @@ impl Labelling {
             self.counters.learned,
             (self.since_learned, self.since_compiled),
         );
-        self.learn(set, taught, taught);
+        self.learn(set, taught, taught, blade);
         if tool_apart_from_hand(self.appearance.classes().as_ref()) {
             self.counters.bootstrapped += 1;
             let labelled = |m: &Option<GrayImage>| m.as_ref().map_or(0, |m| m.iter().filter(|&&l| l != 0).count());
@@ -1729,17 +1749,17 @@ fn to_background(masks: &mut [Option<GrayImage>], given_back: &[Vec<usize>], kee
     }
 }
 
-/// Whether the learned tool's mean colour lies outside the hand's 99% ellipsoid (squared
-/// Mahalanobis distance above [`SURE_MAHALANOBIS2`]): the hand's class does not explain the tool's
-/// usual colour; `false` without both classes. The tool's class may well explain the hand's mean:
-/// a blue handle, a grey blade and their blends make a broad class beside a bare hand's narrow
-/// one (random:503 in random:509: 8-11 one way, 104-152 the other), and the likelier class still
-/// tells them apart.
+/// Whether the learned tool's mean colours (its body's and its blade's, where learned apart) lie
+/// outside the hand's 99% ellipsoid (squared Mahalanobis distance above [`SURE_MAHALANOBIS2`]):
+/// the hand's class explains none of the tool's usual colours; `false` without both labels'
+/// classes. The tool's class may well explain the hand's mean: a blue handle, a grey blade and
+/// their blends make a broad class beside a bare hand's narrow one (random:503 in random:509: 8-11
+/// one way, 104-152 the other), and the likelier class still tells them apart.
 fn tool_apart_from_hand(classes: Option<&ColourClasses>) -> bool {
     let Some(classes) = classes else { return false };
-    let of = |l: u8| classes.classes.iter().find(|c| c.label == l);
-    let (Some(hand), Some(tool)) = (of(label::HAND), of(label::SCALPEL)) else { return false };
-    hand.mahalanobis2(&tool.mean).is_some_and(|m| m > SURE_MAHALANOBIS2)
+    let Some(hand) = classes.classes.iter().find(|c| c.label == label::HAND) else { return false };
+    let mut tool = classes.classes.iter().filter(|c| c.label == label::SCALPEL).peekable();
+    tool.peek().is_some() && tool.all(|t| hand.mahalanobis2(&t.mean).is_some_and(|m| m > SURE_MAHALANOBIS2))
 }
 
 /// The learned classes compiled two ways: every colour labelled; labelled only where sure
@@ -1788,13 +1808,13 @@ fn bootstrap_labels(
         .collect()
 }
 
-/// The indices of `mask`'s scalpel pixels inside the convex `outline` (counter-clockwise pixels;
-/// none for fewer than three points).
-fn blade_pixels(mask: &GrayImage, outline: &[nalgebra::Point2<f64>]) -> Vec<usize> {
+/// The indices (ascending) of the pixels of a `width` x `height` image inside the convex `outline`
+/// (counter-clockwise pixels; none for fewer than three points).
+fn inside_outline(width: u32, height: u32, outline: &[nalgebra::Point2<f64>]) -> Vec<usize> {
     if outline.len() < 3 {
         return Vec::new();
     }
-    let (w, h) = (f64::from(mask.width()), f64::from(mask.height()));
+    let (w, h) = (f64::from(width), f64::from(height));
     let lo = outline.iter().fold((f64::MAX, f64::MAX), |a, p| (a.0.min(p.x), a.1.min(p.y)));
     let hi = outline.iter().fold((f64::MIN, f64::MIN), |a, p| (a.0.max(p.x), a.1.max(p.y)));
     let (x0, y0) = (lo.0.floor().max(0.0), lo.1.floor().max(0.0));
@@ -1805,17 +1825,22 @@ fn blade_pixels(mask: &GrayImage, outline: &[nalgebra::Point2<f64>]) -> Vec<usiz
     let inside = |q: nalgebra::Point2<f64>| {
         outline.iter().zip(outline.iter().cycle().skip(1)).all(|(a, b)| (b - a).perp(&(q - a)) >= 0.0)
     };
-    let (stride, raw) = (mask.width() as usize, mask.as_raw());
+    let stride = width as usize;
     let mut pixels = Vec::new();
     for y in y0 as usize..=y1 as usize {
         for x in x0 as usize..=x1 as usize {
-            let k = y * stride + x;
-            if raw[k] == label::SCALPEL && inside(nalgebra::Point2::new(x as f64, y as f64)) {
-                pixels.push(k);
+            if inside(nalgebra::Point2::new(x as f64, y as f64)) {
+                pixels.push(y * stride + x);
             }
         }
     }
     pixels
+}
+
+/// Those of `pixels` (indices) where `mask` is the scalpel.
+fn scalpel_among(mask: &GrayImage, pixels: &[usize]) -> Vec<usize> {
+    let raw = mask.as_raw();
+    pixels.iter().copied().filter(|&k| raw.get(k) == Some(&label::SCALPEL)).collect()
 }
 
 /// How many of `image`'s pixels at `pixels` (indices) `sure` calls the hand's (an index outside
@@ -2069,7 +2094,7 @@ mod tests {
             }])
         });
         let counted = |outline: &[nalgebra::Point2<f64>]| {
-            let pixels = blade_pixels(&mask, outline);
+            let pixels = scalpel_among(&mask, &inside_outline(mask.width(), mask.height(), outline));
             (pixels.len() as u64, blade_as_hand(&sure, &image, &pixels))
         };
         let outline = [(6.0, 1.0), (10.0, 1.0), (10.0, 6.0), (6.0, 6.0)].map(|(x, y)| nalgebra::Point2::new(x, y));

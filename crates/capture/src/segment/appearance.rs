@@ -4,7 +4,12 @@
 //! so that the model follows the light. No colour is written in the code.
 //!
 //! Each label is one Gaussian over (r/s, b/s, s/765) (s = r + g + b), the features of
-//! [`ColourClasses`]: chromaticity does not change when shading or exposure scales a colour.
+//! [`ColourClasses`]: chromaticity does not change when shading or exposure scales a colour. The
+//! tool has two where the learner is told which of its pixels are the blade's
+//! ([`AppearanceModel::learn_parts`]): a grey blade on a blue handle is neither blue nor their
+//! blend, and one class for both learned the handle alone (the hand's class explained the grey
+//! better, so the blade's samples were gated out) and left the colours calling the blade the
+//! hand's (random:359 in random:367).
 
 use hullcut_dataset::label;
 use image::{GrayImage, RgbImage};
@@ -40,6 +45,18 @@ impl Sums {
         }
     }
 
+    fn merged(&self, other: &Sums) -> Sums {
+        let mut out = *self;
+        out.weight += other.weight;
+        for i in 0..3 {
+            out.sum[i] += other.sum[i];
+            for j in 0..3 {
+                out.outer[i][j] += other.outer[i][j];
+            }
+        }
+        out
+    }
+
     fn scale(&mut self, k: f64) {
         self.weight *= k;
         self.sum = self.sum.map(|s| s * k);
@@ -72,11 +89,18 @@ pub struct AppearanceSources {
     pub mask_views: u64,
 }
 
+/// The slots of [`AppearanceModel`]'s sums: per label of [`label::NAMED`] (hand, scalpel: the
+/// tool but its blade where that is told apart), then the blade.
+const SLOTS: [(u8, &str); 3] = [(label::HAND, "hand"), (label::SCALPEL, "scalpel"), (label::SCALPEL, "blade")];
+
+/// The slot of the blade's pixels in [`SLOTS`].
+const BLADE: usize = 2;
+
 /// The learned appearance of the hand and the tool (see the module docs).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AppearanceModel {
-    /// Per label of [`label::NAMED`]: hand, scalpel.
-    sums: [Sums; 2],
+    /// Per slot of [`SLOTS`]: hand, scalpel (the tool's body where the blade is told apart), blade.
+    sums: [Sums; 3],
     /// Kept per new frame set of samples: the weight of what was learned `n` frame sets ago is
     /// `forget^n`.
     pub forget: f64,
@@ -96,7 +120,7 @@ pub struct AppearanceModel {
 impl Default for AppearanceModel {
     fn default() -> Self {
         AppearanceModel {
-            sums: [Sums::default(); 2],
+            sums: [Sums::default(); 3],
             forget: 0.97,
             stride: 3,
             min_pixels: 200.0,
@@ -109,7 +133,7 @@ impl Default for AppearanceModel {
 /// One label's learned colour, for reports.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LearnedColour {
-    /// `hand` or `scalpel`.
+    /// `hand`, `scalpel` (the tool, but its blade once that is learned apart) or `blade`.
     pub label: String,
     /// Weight of the samples (pixels, decayed).
     pub pixels: f64,
@@ -142,6 +166,13 @@ impl AppearanceModel {
     /// [`AppearanceModel::learn`] for labels that are background outside `window`: only its
     /// pixels are scanned, and the model learns what it would from the whole image.
     pub fn learn_within(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool, window: Window) {
+        self.learn_parts(image, labels, erode, window, &[]);
+    }
+
+    /// [`AppearanceModel::learn_within`] with the blade told apart: the scalpel pixels whose
+    /// indices (row-major, in `labels`) are in `blade` (sorted ascending; the pixels inside the
+    /// drawn blade's outline) are learned as the blade's, the tool's others as its body's.
+    pub fn learn_parts(&mut self, image: &RgbImage, labels: &GrayImage, erode: bool, window: Window, blade: &[usize]) {
         if image.dimensions() != labels.dimensions() {
             return;
         }
@@ -159,6 +190,8 @@ impl AppearanceModel {
         let first = rows.clone().find(|&j| any(j)).unwrap_or(h);
         let last = rows.rev().find(|&j| any(j)).unwrap_or(0);
         let (lo, hi) = (x0.max(1), x1.min(w.saturating_sub(1)));
+        // The pixels are visited in increasing index: the blade's next index is all that is kept.
+        let mut next_blade = blade.iter().copied().peekable();
         for j in first.max(1)..(last + 1).min(h.saturating_sub(1)) {
             let row = &raw[j * w..(j + 1) * w];
             let mut i = lo;
@@ -171,12 +204,16 @@ impl AppearanceModel {
                 i += 1;
                 let k = j * w + x;
                 let l = raw[k];
-                let Some(slot) = label::NAMED.iter().position(|&(n, _)| n == l) else { continue };
+                let Some(mut slot) = label::NAMED.iter().position(|&(n, _)| n == l) else { continue };
                 if l == label::HAND && !(x.is_multiple_of(stride) && j.is_multiple_of(stride)) {
                     continue;
                 }
                 if erode && (raw[k - 1] != l || raw[k + 1] != l || raw[k - w] != l || raw[k + w] != l) {
                     continue;
+                }
+                while next_blade.next_if(|&b| b < k).is_some() {}
+                if l == label::SCALPEL && next_blade.peek() == Some(&k) {
+                    slot = BLADE;
                 }
                 let rgb = [px[3 * k], px[3 * k + 1], px[3 * k + 2]];
                 if gate.is_some_and(|g| matches!(g.get(rgb), c if c != l && c != label::UNKNOWN)) {
@@ -205,24 +242,43 @@ impl AppearanceModel {
         }
     }
 
-    /// Whether both labels have enough samples to classify with.
-    pub fn ready(&self) -> bool {
-        self.sums.iter().all(|s| s.weight >= self.min_pixels)
+    /// Whether a slot has enough samples to classify with.
+    fn learned(&self, slot: usize) -> bool {
+        self.sums[slot].weight >= self.min_pixels
     }
 
-    /// The colour classes to segment with, once both labels are learned.
+    /// The whole tool's sums: its body's and its blade's.
+    fn tool(&self) -> Sums {
+        self.sums[1].merged(&self.sums[BLADE])
+    }
+
+    /// Whether both labels have enough samples to classify with.
+    pub fn ready(&self) -> bool {
+        self.learned(0) && self.tool().weight >= self.min_pixels
+    }
+
+    /// The colour classes to segment with, once both labels are learned: the hand's, and the
+    /// tool's, as one class until its blade has enough samples of its own, then one for the blade
+    /// and one for the rest where that has enough (two classes of the scalpel label).
     pub fn classes(&self) -> Option<ColourClasses> {
         if !self.ready() {
             return None;
         }
-        let classes: Vec<ColourClass> =
-            label::NAMED.iter().zip(&self.sums).filter_map(|(&(l, _), s)| s.class(l)).collect();
-        (classes.len() == 2).then_some(ColourClasses { classes, reject_mahalanobis2: None })
+        let hand = self.sums[0].class(label::HAND)?;
+        let tool = if self.learned(BLADE) {
+            let body = self.learned(1).then(|| self.sums[1].class(label::SCALPEL)).flatten();
+            body.into_iter().chain(self.sums[BLADE].class(label::SCALPEL)).collect()
+        } else {
+            self.tool().class(label::SCALPEL).into_iter().collect::<Vec<_>>()
+        };
+        (!tool.is_empty())
+            .then(|| ColourClasses { classes: std::iter::once(hand).chain(tool).collect(), reject_mahalanobis2: None })
     }
 
-    /// What was learned, per label.
+    /// What was learned, per slot: the hand, the scalpel (its body where the blade is told
+    /// apart), the blade.
     pub fn summary(&self) -> Vec<LearnedColour> {
-        label::NAMED
+        SLOTS
             .iter()
             .zip(&self.sums)
             .map(|(&(l, name), s)| {
@@ -276,9 +332,75 @@ mod tests {
             model.age();
         }
         for (a, b) in by_five.summary().iter().zip(model.summary()) {
-            assert!((a.pixels - b.pixels).abs() < 1e-9 * b.pixels, "{a:?} against {b:?}");
+            assert!((a.pixels - b.pixels).abs() <= 1e-9 * b.pixels, "{a:?} against {b:?}");
             assert_eq!(a.rgb, b.rgb);
         }
+    }
+
+    /// A purple glove, a blue handle and a grey blade (columns 0..120, 120..140 and from 140 on, as
+    /// many as `blade` columns; the blade's pixels told apart), with a little texture so that no
+    /// class is degenerate: the image, its labels and the blade's pixel indices.
+    fn glove_handle_blade(blade: u32) -> (RgbImage, GrayImage, Vec<usize>) {
+        let (w, h) = (140 + blade, 30);
+        let image = RgbImage::from_fn(w, h, |i, j| {
+            let d = ((i * 7 + j * 13) % 9) as u8;
+            let c = match i {
+                0..120 => PURPLE,
+                120..140 => BLUE,
+                _ => GREY,
+            };
+            image::Rgb(c.map(|v| v.saturating_add(d)))
+        });
+        let labels = GrayImage::from_fn(w, h, |i, _| image::Luma([if i < 120 { label::HAND } else { label::SCALPEL }]));
+        let inside: Vec<usize> = (0..(w * h) as usize).filter(|k| k % w as usize >= 140).collect();
+        (image, labels, inside)
+    }
+
+    const PURPLE: [u8; 3] = [125, 100, 160];
+    const BLUE: [u8; 3] = [50, 110, 225];
+    const GREY: [u8; 3] = [120, 124, 140];
+
+    /// Learned apart, the blade's grey is the tool's with the handle's blue and the glove the
+    /// hand's; until the blade has enough samples of its own, the tool is one class, as learned
+    /// without telling the blade apart.
+    #[test]
+    fn a_blade_learned_apart_from_its_handle_is_a_class_of_the_tool_once_it_has_enough_samples() {
+        // A blade five columns wide: too few of its samples for a class (min_pixels 200).
+        let (image, labels, blade) = glove_handle_blade(5);
+        let window = Window::whole(image.width(), image.height());
+        let mut few = AppearanceModel::default();
+        let mut whole = few.clone();
+        few.learn_parts(&image, &labels, true, window, &blade);
+        whole.learn_within(&image, &labels, true, window);
+        let blade_samples = few.summary()[2].pixels;
+        assert!(blade_samples > 0.0 && blade_samples < few.min_pixels, "{:?}", few.summary());
+        let (split, one) = (few.classes().expect("learned"), whole.classes().expect("learned"));
+        assert_eq!(split.classes.len(), 2);
+        for (a, b) in split.classes.iter().zip(&one.classes) {
+            assert_eq!(a.label, b.label);
+            let near = |x: f64, y: f64| (x - y).abs() <= 1e-9 * (1.0 + y.abs());
+            assert!((0..3).all(|i| near(a.mean[i], b.mean[i]) && (0..3).all(|j| near(a.cov[i][j], b.cov[i][j]))));
+        }
+        assert_eq!(few.summary().iter().map(|c| c.label.as_str()).collect::<Vec<_>>(), ["hand", "scalpel", "blade"]);
+
+        // Forty columns: three classes, the blade's grey and the handle's blue both the tool's.
+        let (image, labels, blade) = glove_handle_blade(40);
+        let window = Window::whole(image.width(), image.height());
+        let mut apart = AppearanceModel::default();
+        apart.learn_parts(&image, &labels, true, window, &blade);
+        let classes = apart.classes().expect("learned");
+        let labels_of: Vec<u8> = classes.classes.iter().map(|c| c.label).collect();
+        assert_eq!(labels_of, [label::HAND, label::SCALPEL, label::SCALPEL]);
+        assert_eq!(classes.classify(GREY), label::SCALPEL);
+        assert_eq!(classes.classify(BLUE), label::SCALPEL);
+        assert_eq!(classes.classify(PURPLE), label::HAND);
+        let grey = &apart.summary()[2];
+        assert!(grey.rgb.is_some_and(|c| c[2] > c[0] && c[0].abs_diff(c[1]) < 10), "{grey:?}");
+        // Learning on, with the classes as the gate, keeps the blade's samples.
+        let before = grey.pixels;
+        apart.age();
+        apart.learn_parts(&image, &labels, true, window, &blade);
+        assert!(apart.summary()[2].pixels > 1.9 * before, "{:?}", apart.summary());
     }
 
     /// What `learn` did before it skipped the background: every pixel visited in turn.
