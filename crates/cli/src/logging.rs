@@ -90,7 +90,7 @@ pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics, rig:
     Ok(())
 }
 
-/// The learned colour of a label (`hand`, `scalpel`) at mid brightness, as three series.
+/// The learned colour of a label (`hand`, `scalpel`, `blade`) at mid brightness, as three series.
 pub fn appearance_colour_entity(label: &str) -> String {
     format!("metrics/appearance/{label}/colour")
 }
@@ -100,9 +100,9 @@ pub fn appearance_pixels_entity(label: &str) -> String {
     format!("metrics/appearance/{label}/pixels")
 }
 
-/// Names and colours the learned colours' series (static; once per recording).
+/// Names and colours the learned colours' series, the blade's too (static; once per recording).
 pub fn log_appearance_style(rec: &RecordingStream) -> anyhow::Result<()> {
-    for (_, name) in label::NAMED {
+    for name in hullcut_capture::segment::LEARNED_NAMES {
         hullcut_viz::log_series_style(
             rec,
             &appearance_colour_entity(name),

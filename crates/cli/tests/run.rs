@@ -848,6 +848,12 @@ fn a_grey_blade_learned_apart_from_its_blue_handle_stays_the_tools_in_the_colour
     let rgb: Vec<f64> = blade["rgb"].as_array().expect("rgb").iter().filter_map(serde_json::Value::as_f64).collect();
     let (lo, hi) = rgb.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     assert!(rgb.len() == 3 && hi - lo < 0.3 * hi, "a grey blade: {blade}");
+    // The blade's learned colour is logged beside the hand's and the rest of the tool's.
+    let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");
+    for what in ["colour", "pixels"] {
+        let e = format!("/metrics/appearance/blade/{what}");
+        assert!(rows.get(&e).copied().unwrap_or(0) >= 1, "{e}: nothing logged in {rows:?}");
+    }
 }
 
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.

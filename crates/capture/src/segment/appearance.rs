@@ -93,6 +93,10 @@ pub struct AppearanceSources {
 /// tool but its blade where that is told apart), then the blade.
 const SLOTS: [(u8, &str); 3] = [(label::HAND, "hand"), (label::SCALPEL, "scalpel"), (label::SCALPEL, "blade")];
 
+/// The names of what the model learns, in the order of [`AppearanceModel::summary`] (and of the
+/// reports' `appearance[]`): `hand`, `scalpel`, `blade`.
+pub const LEARNED_NAMES: [&str; 3] = [SLOTS[0].1, SLOTS[1].1, SLOTS[2].1];
+
 /// The slot of the blade's pixels in [`SLOTS`].
 const BLADE: usize = 2;
 
@@ -382,6 +386,7 @@ mod tests {
             assert!((0..3).all(|i| near(a.mean[i], b.mean[i]) && (0..3).all(|j| near(a.cov[i][j], b.cov[i][j]))));
         }
         assert_eq!(few.summary().iter().map(|c| c.label.as_str()).collect::<Vec<_>>(), ["hand", "scalpel", "blade"]);
+        assert_eq!(few.summary().iter().map(|c| c.label.as_str()).collect::<Vec<_>>(), LEARNED_NAMES);
 
         // Forty columns: three classes, the blade's grey and the handle's blue both the tool's.
         let (image, labels, blade) = glove_handle_blade(40);

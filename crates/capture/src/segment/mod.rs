@@ -26,7 +26,7 @@ use image::{GrayImage, RgbImage};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use appearance::{AppearanceModel, AppearanceSources, LearnedColour};
+pub use appearance::{AppearanceModel, AppearanceSources, LEARNED_NAMES, LearnedColour};
 pub use background::BackgroundModel;
 pub use classes::{ColourClass, ColourClasses, ColourLut};
 pub use mog2::Mog2Params;
