@@ -74,17 +74,30 @@ pub fn pose_sight_entity(camera: &str) -> String {
     format!("metrics/pose/sight/{camera}")
 }
 
+/// Per camera, 1 where the fit set it aside (its residuals made up half the fit's cost or more,
+/// and the tool was fitted again without it: `Diagnostics::view_set_aside`), 0 where it gave
+/// evidence and was kept, nothing where it gave none (the run report's `pose.per_camera[].set_aside`
+/// sums it).
+pub const POSE_SET_ASIDE_ENTITY: &str = "metrics/pose/set_aside/CAM";
+
+/// The series of one camera of [`POSE_SET_ASIDE_ENTITY`].
+pub fn pose_set_aside_entity(camera: &str) -> String {
+    format!("metrics/pose/set_aside/{camera}")
+}
+
 /// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]) and what each
-/// of `rig`'s cameras did ([`POSE_SIGHT_ENTITY`]).
+/// of `rig`'s cameras did ([`POSE_SIGHT_ENTITY`], [`POSE_SET_ASIDE_ENTITY`]).
 pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics, rig: &Rig) -> anyhow::Result<()> {
     let counts = [d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background, d.views_handle_coloured];
     for (kind, n) in POSE_VIEW_KINDS.iter().zip(counts) {
         hullcut_viz::log_scalar(rec, &pose_views_entity(kind), n as f64)?;
     }
-    for (camera, sight) in rig.cameras.iter().zip(&d.sight) {
+    for (k, (camera, sight)) in rig.cameras.iter().zip(&d.sight).enumerate() {
         if let Some(sight) = sight {
             let seen = f64::from(u8::from(*sight == hullcut_pose::Sight::Seen));
             hullcut_viz::log_scalar(rec, &pose_sight_entity(&camera.name), seen)?;
+            let aside = f64::from(u8::from(d.view_set_aside == Some(k)));
+            hullcut_viz::log_scalar(rec, &pose_set_aside_entity(&camera.name), aside)?;
         }
     }
     Ok(())

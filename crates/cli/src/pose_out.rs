@@ -130,6 +130,10 @@ pub struct FrameError {
     /// span of turns about its long axis that fit as well, degrees (45: its plane is not fixed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     roll_span_deg: Option<f64>,
+    /// The camera set aside before the fit was judged: its residuals made up half the fit's cost
+    /// or more, and the tool was fitted again without it ([`hullcut_pose::Diagnostics::view_set_aside`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    set_aside: Option<String>,
 }
 
 /// Mean, 95th percentile (nearest rank) and maximum.
@@ -174,6 +178,10 @@ pub struct CameraSight {
     pub trusted: usize,
     /// Of those, the ones where it saw the blade's face.
     pub seen_trusted: usize,
+    /// Of the frames it judged, those whose fit set it aside (its residuals half the fit's cost
+    /// or more: its mask lost the blade where the other views agree on it).
+    #[serde(default)]
+    pub set_aside: usize,
 }
 
 impl CameraSight {
@@ -244,6 +252,9 @@ pub struct PoseReport {
     /// the views edge-on left it free to turn about its long axis (its plane not fixed).
     #[serde(default)]
     unfixed_plane_frames: usize,
+    /// Frames whose fit set a view aside ([`CameraSight::set_aside`]).
+    #[serde(default)]
+    set_aside_frames: usize,
     /// Per camera (rig order), how often it saw the fitted blade.
     #[serde(default)]
     per_camera: Vec<CameraSight>,
@@ -271,14 +282,18 @@ impl PoseReport {
         self.parts_told_apart_frames += usize::from(e.diagnostics.parts_told_apart);
         self.handle_coloured_frames += usize::from(e.diagnostics.views_handle_coloured > 0);
         self.unfixed_plane_frames += usize::from(!e.valid && e.diagnostics.plane_unfixed());
+        self.set_aside_frames += usize::from(e.diagnostics.view_set_aside.is_some());
+        let aside = e.diagnostics.view_set_aside;
         for (k, sight) in e.diagnostics.sight.iter().enumerate() {
             let Some(sight) = sight else { continue };
-            while self.per_camera.len() <= k {
-                let camera = format!("view {}", self.per_camera.len());
-                self.per_camera.push(CameraSight { camera, ..CameraSight::default() });
-            }
+            self.name_views(k + 1);
             self.per_camera[k].count(*sight, e.valid);
+            self.per_camera[k].set_aside += usize::from(aside == Some(k));
         }
+        let set_aside = aside.map(|k| {
+            self.name_views(k + 1);
+            self.per_camera[k].camera.clone()
+        });
         if let Some(r) = &e.reason {
             let key = reason_kind(r).to_owned();
             match self.reasons.iter_mut().find(|(k, _)| *k == key) {
@@ -316,7 +331,16 @@ impl PoseReport {
             from_hull: e.diagnostics.from_hull,
             iterations: e.diagnostics.iterations,
             roll_span_deg: e.diagnostics.roll_span_deg,
+            set_aside,
         });
+    }
+
+    /// Names views up to `n` (a view beyond the rig's cameras is named by its index).
+    fn name_views(&mut self, n: usize) {
+        while self.per_camera.len() < n {
+            let camera = format!("view {}", self.per_camera.len());
+            self.per_camera.push(CameraSight { camera, ..CameraSight::default() });
+        }
     }
 
     /// Computes the aggregates.
@@ -340,6 +364,12 @@ impl PoseReport {
         let mut s = format!("views: the fitted blade's face seen by {}", shares.join(", "));
         if let Some((words, share)) = least.commonest_miss() {
             s += &format!("; least by {} ({} in {:.0}% of its fits)", least.camera, words, 100.0 * share);
+        }
+        if let Some(aside) = judged.iter().filter(|c| c.set_aside > 0).max_by_key(|c| c.set_aside) {
+            s += &format!(
+                "; {} set aside in {} of its {} fits (its mask lost the blade where the others agree on it)",
+                aside.camera, aside.set_aside, aside.judged
+            );
         }
         Some(s)
     }
@@ -571,6 +601,32 @@ mod tests {
         let json = serde_json::to_value(&report).expect("serializes");
         assert_eq!(json["per_camera"][1]["edge_on"], 2);
         assert_eq!(report.rig_hint(), None, "too few fits judged to name a camera");
+    }
+
+    #[test]
+    fn a_camera_set_aside_is_counted_named_in_its_frames_and_in_the_views_line() {
+        // Three frames of two cameras: the second set aside in the first two, none in the third.
+        let mut report = PoseReport::new(true).with_cameras(["left".to_owned(), "right".to_owned()]);
+        for (frame, aside) in [Some(1), Some(1), None].into_iter().enumerate() {
+            let sight = vec![Some(Sight::Seen), Some(Sight::OnBackground)];
+            let diagnostics =
+                hullcut_pose::Diagnostics { sight, view_set_aside: aside, ..hullcut_pose::Diagnostics::default() };
+            report.push(&estimate(frame as u64, true, None, diagnostics), None, None);
+        }
+        assert_eq!(report.set_aside_frames, 2);
+        assert_eq!((report.per_camera[0].set_aside, report.per_camera[1].set_aside), (0, 2));
+        let json = serde_json::to_value(&report).expect("serializes");
+        let named: Vec<&serde_json::Value> =
+            json["per_frame"].as_array().expect("frames").iter().map(|f| &f["set_aside"]).collect();
+        assert_eq!(named, [&serde_json::json!("right"), &serde_json::json!("right"), &serde_json::Value::Null]);
+        assert_eq!(json["set_aside_frames"], 2);
+        let line = report.sight_summary().expect("fits judged");
+        assert!(
+            line.ends_with(
+                "; right set aside in 2 of its 3 fits (its mask lost the blade where the others agree on it)"
+            ),
+            "{line}"
+        );
     }
 
     #[test]

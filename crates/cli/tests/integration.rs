@@ -950,6 +950,9 @@ fn reconstruct_writes_one_pose_line_per_frame_as_the_contract_says() {
         assert!(judged > 0 && judged <= 9, "{c}");
         let entity = format!("/metrics/pose/sight/{name}");
         assert_eq!(rows.get(&entity).copied().unwrap_or(0), judged, "{entity}: {rows:?}");
+        // Whether the fit set it aside, on the same rows.
+        let entity = format!("/metrics/pose/set_aside/{name}");
+        assert_eq!(rows.get(&entity).copied().unwrap_or(0), judged, "{entity}: {rows:?}");
     }
 
     // Without tool.json every frame is refused with its reason, and no pose fields are written.

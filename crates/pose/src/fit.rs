@@ -319,6 +319,46 @@ pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3
     r.iter().map(|x| x * x).sum()
 }
 
+/// Each view's part of the cost of a pose with the outline offset `offset_px` (the sum of its
+/// squared robust residuals, as [`Fit::cost`] sums them over all views), in the order of `views`.
+pub(crate) fn view_costs(
+    template: &Template,
+    views: &[ViewEvidence],
+    pose: &Isometry3<f64>,
+    offset_px: f64,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    views
+        .par_iter()
+        .map(|view| {
+            let mut r = Vec::new();
+            residuals_of(template, std::slice::from_ref(view), pose, offset_px, &mut r, None);
+            r.iter().map(|x| x * x).sum()
+        })
+        .collect()
+}
+
+/// How one view's mask sits against the tool projected at a pose, with the outline offset
+/// `offset_px`: the shares of its outline samples that lie outside the tool's outline by more than
+/// [`AGREE_PX`] (scalpel pixels the tool there does not explain), and of the blade's interior
+/// points that lie farther than that from its foreground (where the view shows no tool); 0 of none.
+pub(crate) fn view_sides(
+    template: &Template,
+    view: &ViewEvidence,
+    pose: &Isometry3<f64>,
+    offset_px: f64,
+) -> (f64, f64) {
+    let mut r = Vec::new();
+    residuals_of(template, std::slice::from_ref(view), pose, offset_px, &mut r, None);
+    // The samples' residuals come first, robust but of the raw residual's sign and order, then
+    // the interior's, the blade's first (0 where the blade is seen edge-on).
+    let n = view.samples.len().min(r.len());
+    let (samples, interior) = r.split_at(n);
+    let blade = &interior[..template.blade_interior.min(interior.len())];
+    let beyond = |v: &[f64]| fraction(v.iter().filter(|&&d| d > AGREE_PX).count(), v.len());
+    (beyond(samples), beyond(blade))
+}
+
 /// Agreement of a pose without fitting (no outline offset): the lower of the share of outline
 /// samples it explains and the share of its interior on foreground, as [`Fit`] counts them.
 pub(crate) fn agreement(template: &Template, views: &[ViewEvidence], pose: &Isometry3<f64>) -> f64 {

@@ -49,8 +49,8 @@ pub use metrics::{PoseError, pose_error};
 pub use table_shadow::{SHADE_TOLERANCE, Shading, TableShadows};
 pub use template::{Template, check_tool};
 pub use track::{
-    BladePose, Diagnostics, MANY_VIEWS, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Sight, Tracker,
-    TrackerParams, ViewInput, isometry_from_matrix, rigid_from_matrix,
+    BladePose, Diagnostics, MANY_VIEWS, MIN_VIEWS_LEFT, MatrixError, ORTHONORMAL_TOLERANCE, PoseEstimate, Sight,
+    Tracker, TrackerParams, ViewInput, isometry_from_matrix, rigid_from_matrix,
 };
 
 /// Why a pose estimator could not be set up.

@@ -342,6 +342,9 @@ fn a_blade_the_masks_lost_in_one_view_is_on_background_there_not_behind_the_hand
         let expected = if to == label::BACKGROUND { (0, 1) } else { (1, 0) };
         for (s, c) in steps.iter().zip(&counts) {
             assert_eq!((c.2, c.3), expected, "{name}: frame {} counted {c:?}", s.estimate.frame);
+            // Nor is the view set aside: it shows no blade where the others put it, and may be
+            // right (only a view that lost the blade in patches is).
+            assert_eq!(s.estimate.diagnostics.view_set_aside, None, "{name}: frame {}", s.estimate.frame);
         }
     }
 }
@@ -649,5 +652,48 @@ fn each_views_sight_of_the_blade_is_given_by_its_place_in_the_rig() {
             assert!(d.views_seen >= 2, "{name}, frame {f}: truth masks, the blade's face seen: {d:?}");
         }
         assert!(judged >= 5, "{name}: {judged} of 6 frames fitted");
+    }
+}
+
+/// From frame 34 on, the scalpel's pixels of camera 0 in a checkerboard of 3-pixel blocks turned
+/// to background: a grey blade come over a grey table, half lost from one view's foreground in
+/// patches.
+fn patchy_in_camera_0(c: usize, f: u64, m: &mut GrayImage) {
+    if c == 0 && f >= 34 {
+        for (x, y, p) in m.enumerate_pixels_mut() {
+            if p.0[0] == label::SCALPEL && (x / 3 + y / 3) % 2 == 0 {
+                p.0[0] = label::BACKGROUND;
+            }
+        }
+    }
+}
+
+#[test]
+fn a_view_whose_mask_lost_the_blade_in_patches_is_set_aside_and_the_others_fit_it() {
+    // The cut scene's frames 30..44, on the built-in rig (six cameras) and on eight cameras with
+    // the pointed scalpel, camera 0's blade in patches from frame 34: the fit that keeps every
+    // view cannot explain the patches' outlines and is refused; set aside, that view leaves the
+    // blade to the others, within a degree or two of the truth. With whole masks no view is set
+    // aside.
+    for setup in [BUILTIN, LAB8] {
+        let never = TrackerParams { set_aside_share: 2.0, ..TrackerParams::default() };
+        let kept = track_with(never, setup, SceneKind::Cut, 2, 30, 14, None, patchy_in_camera_0);
+        let aside = track(setup, SceneKind::Cut, 2, 30, 14, None, patchy_in_camera_0);
+        let whole = track(setup, SceneKind::Cut, 2, 30, 14, None, no_edit);
+        let trusted = |steps: &[Step]| steps.iter().filter(|s| s.estimate.valid).count();
+        println!("{setup:?}, camera 0 patchy: {} of 14 trusted keeping it", trusted(&kept));
+        let (normal, tip, valid) = summary(&format!("{setup:?}, camera 0 patchy, set aside"), &aside);
+        let set_aside: Vec<Option<usize>> = aside.iter().map(|s| s.estimate.diagnostics.view_set_aside).collect();
+        println!("{setup:?}: views set aside {set_aside:?}");
+        assert!(set_aside[4..].iter().all(|v| *v == Some(0)), "{setup:?}: {set_aside:?}");
+        assert!(set_aside.iter().all(|v| v.is_none_or(|k| k == 0)), "{setup:?}: {set_aside:?}");
+        assert!(valid >= 0.9 && trusted(&aside) > trusted(&kept), "{setup:?}: {valid}");
+        assert!(normal[2] < 3.0 && tip[2] < 2.0, "{setup:?}: normal {normal:?}, tip {tip:?}");
+        let whole_aside: Vec<u64> = whole
+            .iter()
+            .filter(|s| s.estimate.diagnostics.view_set_aside.is_some())
+            .map(|s| s.estimate.frame)
+            .collect();
+        assert!(whole_aside.is_empty(), "{setup:?}: a view of whole masks set aside in frames {whole_aside:?}");
     }
 }
