@@ -179,7 +179,8 @@ pub struct CameraSight {
     /// Of those, the ones where it saw the blade's face.
     pub seen_trusted: usize,
     /// Of the frames it judged, those whose fit set it aside (its residuals half the fit's cost
-    /// or more: its mask lost the blade where the other views agree on it).
+    /// or more, its mask within the fit without it: it lost the blade's pixels in patches where
+    /// the other views agree on it; [`hullcut_pose::Diagnostics::view_set_aside`]).
     #[serde(default)]
     pub set_aside: usize,
 }
@@ -367,7 +368,7 @@ impl PoseReport {
         }
         if let Some(aside) = judged.iter().filter(|c| c.set_aside > 0).max_by_key(|c| c.set_aside) {
             s += &format!(
-                "; {} set aside in {} of its {} fits (its mask lost the blade where the others agree on it)",
+                "; {} set aside in {} of its {} fits (its mask lost the blade in patches where the others agree on it)",
                 aside.camera, aside.set_aside, aside.judged
             );
         }
@@ -623,7 +624,7 @@ mod tests {
         let line = report.sight_summary().expect("fits judged");
         assert!(
             line.ends_with(
-                "; right set aside in 2 of its 3 fits (its mask lost the blade where the others agree on it)"
+                "; right set aside in 2 of its 3 fits (its mask lost the blade in patches where the others agree on it)"
             ),
             "{line}"
         );
