@@ -489,6 +489,44 @@ mod tests {
         (template, camera, GrayImage::from_pixel(320, 240, image::Luma([1])))
     }
 
+    /// One distorted view of the pointed tool with three masks: all hand, a scalpel square
+    /// around the whole tool (its outline everywhere outside the tool's), all background. Each
+    /// view's cost adds up to the cost of the three together; the square's outline lies outside
+    /// the tool and the blade on its foreground, the background mask shows no blade anywhere.
+    #[test]
+    fn each_views_cost_adds_up_to_the_whole_and_its_sides_say_where_its_mask_lies() {
+        let (template, camera, hand) = pointed_tool_in_view();
+        let radius = camera.distortion.monotonic_radius();
+        let pose = Isometry3::new(Vector3::new(0.0, 0.0, 0.05), Vector3::new(0.2, -0.1, 0.4));
+        let around: Vec<Point3<f64>> = template.blade.iter().chain(&template.body).map(|p| pose * p).collect();
+        let pixels: Vec<Point2<f64>> =
+            around.iter().filter_map(|p| crate::evidence::project(&camera, radius, p)).collect();
+        let (lo, hi) = pixels.iter().fold(((f64::MAX, f64::MAX), (f64::MIN, f64::MIN)), |(lo, hi), q| {
+            ((lo.0.min(q.x), lo.1.min(q.y)), (hi.0.max(q.x), hi.1.max(q.y)))
+        });
+        let mut square = GrayImage::new(320, 240);
+        for (x, y, p) in square.enumerate_pixels_mut() {
+            let (x, y) = (f64::from(x), f64::from(y));
+            if x >= lo.0 - 6.0 && x <= hi.0 + 6.0 && y >= lo.1 - 6.0 && y <= hi.1 + 6.0 {
+                p.0[0] = hullcut_dataset::label::SCALPEL;
+            }
+        }
+        assert!(lo.0 > 10.0 && lo.1 > 10.0 && hi.0 < 310.0 && hi.1 < 230.0, "the tool within the image");
+        let background = GrayImage::new(320, 240);
+        let views: Vec<ViewEvidence> = [&hand, &square, &background]
+            .iter()
+            .map(|m| ViewEvidence::new(&camera, radius, m, &around, 12.0).expect("the tool in view"))
+            .collect();
+        let each = view_costs(&template, &views, &pose, 0.0);
+        let whole = cost(&template, &views, &pose);
+        assert!((each.iter().sum::<f64>() - whole).abs() <= 1e-9 * whole.max(1.0), "{each:?} against {whole}");
+        assert!(each[2] > each[0], "no foreground under the blade costs more than foreground all over: {each:?}");
+        assert_eq!(view_sides(&template, &views[0], &pose, 0.0), (0.0, 0.0), "all hand: no outline, all on it");
+        let (outside, off) = view_sides(&template, &views[1], &pose, 0.0);
+        assert!(views[1].samples.len() > 50 && outside == 1.0 && off == 0.0, "the square: {outside}, {off}");
+        assert_eq!(view_sides(&template, &views[2], &pose, 0.0), (0.0, 1.0), "all background: the blade off it");
+    }
+
     /// The pointed tool's handle (hundreds of vertices) seen by a distorted camera at several
     /// poses: the outline's corners are those of every projected vertex's hull, each with the
     /// derivative [`ViewEvidence::project_with_jacobian`] gives its vertex, and the pixel it
