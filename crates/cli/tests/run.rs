@@ -856,6 +856,36 @@ fn a_grey_blade_learned_apart_from_its_blue_handle_stays_the_tools_in_the_colour
     }
 }
 
+/// The built-in scene's last 50 frame sets, segmented: from frame set 144 on cam0 loses the grey
+/// blade over the grey-brown table in patches, and the fit, pulled by them, turned 5-11° about
+/// the blade's long axis; cam0 is set aside and the other five views keep the blade (measured on
+/// 2026-11-30: 28 of the 50 trusted more than 5° off before, 5.32° mean; none after, 1.35°, cam0
+/// set aside in 41).
+#[test]
+fn the_built_in_scenes_view_that_loses_the_grey_blade_in_patches_is_set_aside() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let ds = dir.path().join("builtin");
+    let o = hullcut(&["synth", "--out", &p(&ds), "--scene", "resect", "--frames", "180", "--no-truth-meshes"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let report = dir.path().join("run.json");
+    let args = ["run", "--dataset", &p(&ds), "--masks", "segment", "--frames", "130:180", "--report", &p(&report)];
+    let o = hullcut(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    let r = json(&report);
+    let pose = &r["pose"];
+    assert!(r["counters"]["poses_trusted"].as_u64().expect("trusted") >= 45, "{}", r["counters"]);
+    assert!(pose["trusted_wrong"].as_u64().expect("off") <= 2, "{}", pose["trusted_wrong"]);
+    assert!(pose["normal_deg"]["mean"].as_f64().expect("normal error") < 2.5, "{}", pose["normal_deg"]);
+    let cam0 = &pose["per_camera"][0];
+    assert_eq!(cam0["camera"], "cam0", "{cam0}");
+    assert!(cam0["set_aside"].as_u64().expect("set aside") >= 20, "{cam0}");
+    let frames = pose["per_frame"].as_array().expect("per frame");
+    let named = frames.iter().filter(|f| f["set_aside"] == "cam0").count();
+    assert_eq!(Some(named as u64), pose["set_aside_frames"].as_u64(), "only cam0 is set aside");
+    assert!(text(&o).contains("cam0 set aside in"), "the views line names it: {}", text(&o));
+}
+
 /// Rewrites the `timestamp_ns` of every row of `ds`/frames.csv as `timestamp(frame, old)`.
 fn retime(ds: &Path, timestamp: impl Fn(u64, i64) -> i64) {
     let path = ds.join("frames.csv");
