@@ -166,9 +166,10 @@ pub struct TrackerParams {
     /// never-seen pointed-blade recording fell from 99 to 5 trusted frame sets of 150 with it).
     pub outline_offset: bool,
     /// A view whose residuals make up at least this share of the fitted tool's cost is set aside
-    /// and the tool fitted again from there without it, where at least [`MIN_VIEWS_LEFT`] other
-    /// views give evidence (rigs of six views or more); above 1, never. Such a view's mask has
-    /// lost the blade, or put something else in its place, where the others agree on it: a grey
+    /// while the track holds, and the tool fitted again from the track's prediction without it,
+    /// where at least [`MIN_VIEWS_LEFT`] other views give evidence (rigs of six views or more)
+    /// and on the conditions of [`Tracker`]'s `set_aside`; above 1, never. Such a view's mask
+    /// has lost the blade's pixels in patches where the others agree on it: a grey
     /// blade over a grey-brown table, its pixels as dark as the table's shadow, half missing from
     /// one view's foreground, pulled the built-in scene's fit 5-11° about its long axis over its
     /// last 40 frame sets while the other five views explained the blade nearly as well with or
