@@ -320,20 +320,24 @@ pub(crate) fn cost(template: &Template, views: &[ViewEvidence], pose: &Isometry3
 }
 
 /// Each view's part of the cost of a pose with the outline offset `offset_px` (the sum of its
-/// squared robust residuals, as [`Fit::cost`] sums them over all views), in the order of `views`.
+/// squared robust residuals, as [`Fit::cost`] sums them over all views), in the order of `views`:
+/// one evaluation of them all, split view by view (each view's residuals are its outline samples'
+/// and then the tool's interior points', in turn).
 pub(crate) fn view_costs(
     template: &Template,
     views: &[ViewEvidence],
     pose: &Isometry3<f64>,
     offset_px: f64,
 ) -> Vec<f64> {
-    use rayon::prelude::*;
+    let mut r = Vec::new();
+    residuals(template, views, pose, offset_px, &mut r, None);
+    let mut rest = r.as_slice();
     views
-        .par_iter()
+        .iter()
         .map(|view| {
-            let mut r = Vec::new();
-            residuals_of(template, std::slice::from_ref(view), pose, offset_px, &mut r, None);
-            r.iter().map(|x| x * x).sum()
+            let (own, more) = rest.split_at((view.samples.len() + template.interior.len()).min(rest.len()));
+            rest = more;
+            own.iter().map(|x| x * x).sum()
         })
         .collect()
 }
@@ -520,6 +524,10 @@ mod tests {
         let each = view_costs(&template, &views, &pose, 0.0);
         let whole = cost(&template, &views, &pose);
         assert!((each.iter().sum::<f64>() - whole).abs() <= 1e-9 * whole.max(1.0), "{each:?} against {whole}");
+        for (k, own) in each.iter().enumerate() {
+            let alone = cost(&template, &views[k..=k], &pose);
+            assert!((own - alone).abs() <= 1e-9 * alone.max(1.0), "view {k}: {own} in the whole, {alone} alone");
+        }
         assert!(each[2] > each[0], "no foreground under the blade costs more than foreground all over: {each:?}");
         assert_eq!(view_sides(&template, &views[0], &pose, 0.0), (0.0, 0.0), "all hand: no outline, all on it");
         let (outside, off) = view_sides(&template, &views[1], &pose, 0.0);

@@ -620,10 +620,8 @@ impl Tracker {
         // A tracked fit in full agreement with the silhouettes is kept; anything less is fitted
         // again from the hull's candidates too (the better of all is kept, the track's own
         // unless a searched one is clearly better: `kept`).
-        let full = self.params.agreement.1;
-        let good = |f: &Fit| f.explained >= full && f.covered >= full;
         match tracked {
-            Some(f) if good(&f) => Some(f),
+            Some(f) if self.agrees_fully(&f) => Some(f),
             _ => {
                 *from_hull = true;
                 let mut starts: Vec<(f64, Isometry3<f64>)> = candidates(&self.template, hull)
@@ -651,6 +649,13 @@ impl Tracker {
                 }
             }
         }
+    }
+
+    /// Whether a fit agrees fully with the silhouettes it was fitted to
+    /// ([`TrackerParams::agreement`]'s second bound, both shares).
+    fn agrees_fully(&self, f: &Fit) -> bool {
+        let full = self.params.agreement.1;
+        f.explained >= full && f.covered >= full
     }
 
     /// While the track holds (`prediction`), where one view's residuals make up
@@ -683,8 +688,7 @@ impl Tracker {
         // hull (a lost track would search it twice a frame set).
         let offset = if self.params.outline_offset { Offset::From(self.offset_px) } else { Offset::Fixed };
         let refit = fit(&self.template, &others, &prediction, self.params.max_iterations, offset);
-        let full = self.params.agreement.1;
-        if !(refit.explained >= full && refit.covered >= full) {
+        if !self.agrees_fully(&refit) {
             return None;
         }
         // The view lost pixels of the tool in patches: it shows none of it where the others put
