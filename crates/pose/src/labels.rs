@@ -86,11 +86,11 @@ pub struct LabelParams {
     pub band_px: f64,
     /// The band is taken around the tool as predicted and as rolled this many degrees either way
     /// about its long axis (blade centre to tip), each part's three drawings in one convex
-    /// outline. A thin blade's roll is what a prediction gets most wrong,
-    /// and foreground beyond a band around a wrong roll went to the hand, out of the fit's sight,
-    /// so the fit stayed at the prediction's roll frame set after frame set (random:1453 in
-    /// random:1483: 44 trusted fits off by 8-12°; with the band around the true pose, 16).
-    /// 0: the band around the prediction alone.
+    /// outline. A thin blade's roll is what a prediction gets most wrong, and foreground beyond a
+    /// band around a wrong roll went to the hand, out of the fit's sight, so the fit stayed at the
+    /// prediction's roll frame set after frame set (random:1453 in random:1483: 44 trusted fits
+    /// off by 8-12°; with the band around the true pose, 16; 34 with 6°). 0: the band around the
+    /// prediction alone.
     pub roll_deg: f64,
     /// Hull cells whose centre lies this close to the tool's surface (plus half a cell's diagonal)
     /// are the tool's, metres.
