@@ -821,14 +821,11 @@ fn rolled_silhouette(
         return silhouette(cam, radius, template, pose);
     };
     let c = template.blade_centre;
-    let rolled: Vec<Isometry3<f64>> = [-roll_deg, roll_deg]
-        .iter()
-        .map(|&deg| {
-            let turn = nalgebra::UnitQuaternion::from_axis_angle(&axis, deg.to_radians());
-            // About the axis through the blade's centre, in the tool's frame.
-            pose * Isometry3::from_parts((c.coords - turn * c.coords).into(), turn)
-        })
-        .collect();
+    let rolled = [-roll_deg, roll_deg].map(|deg| {
+        let turn = nalgebra::UnitQuaternion::from_axis_angle(&axis, deg.to_radians());
+        // About the axis through the blade's centre, in the tool's frame.
+        pose * Isometry3::from_parts((c.coords - turn * c.coords).into(), turn)
+    });
     let part = |points: &[Point3<f64>]| {
         let pixels: Vec<Point2<f64>> = std::iter::once(pose)
             .chain(&rolled)
