@@ -1878,24 +1878,37 @@ fn fit_hints(
         return;
     }
     let colour = |p: &[u8]| sure.map_or(label::UNKNOWN, |s| s.get([p[0], p[1], p[2]]));
+    let hint = |m: u8, p: &[u8]| match m {
+        SHADOW_LIKE => match colour(p) {
+            label::HAND => label::HAND,
+            label::SCALPEL => TOOL_COLOURED_SHADOW,
+            _ => POSSIBLE_SHADOW,
+        },
+        _ => match colour(p) {
+            label::HAND if !hand_hints => label::UNKNOWN,
+            c => c,
+        },
+    };
     let (w, h) = mask.dimensions();
     out.resize(win.clipped(w, h).area() as usize, label::BACKGROUND);
     let rows = win.spans(w, h).zip(out.chunks_mut(win.clipped(w, h).width().max(1) as usize));
     for (span, row) in rows {
-        let pixels = image.as_raw()[3 * span.start..3 * span.end].chunks_exact(3);
-        for ((o, &m), p) in row.iter_mut().zip(&mask.as_raw()[span]).zip(pixels) {
-            if m == SHADOW_LIKE {
-                *o = match colour(p) {
-                    label::HAND => label::HAND,
-                    label::SCALPEL => TOOL_COLOURED_SHADOW,
-                    _ => POSSIBLE_SHADOW,
-                };
-            } else if m != label::BACKGROUND {
-                *o = match colour(p) {
-                    label::HAND if !hand_hints => label::UNKNOWN,
-                    c => c,
-                };
+        let (pixels, mask) = (&image.as_raw()[3 * span.start..3 * span.end], &mask.as_raw()[span]);
+        // Most of a window is background: eight of its pixels are passed over at a time.
+        let mut i = 0;
+        while i < mask.len() {
+            if let Some(eight) = mask.get(i..i + 8).and_then(|e| <[u8; 8]>::try_from(e).ok()) {
+                // Background is 0.
+                if u64::from_ne_bytes(eight) == 0 {
+                    i += 8;
+                    continue;
+                }
             }
+            let m = mask[i];
+            if m != label::BACKGROUND {
+                row[i] = hint(m, &pixels[3 * i..3 * i + 3]);
+            }
+            i += 1;
         }
     }
 }
@@ -2125,6 +2138,65 @@ mod tests {
         };
         assert_eq!(hints(true), vec![label::HAND, label::SCALPEL, label::HAND, label::BACKGROUND]);
         assert_eq!(hints(false), vec![label::UNKNOWN, label::SCALPEL, label::HAND, label::BACKGROUND]);
+    }
+
+    #[test]
+    fn fit_hints_pass_background_over_eight_at_a_time_and_hint_every_foreground_pixel_as_one_by_one() {
+        // Pixel by pixel, as the hints are defined.
+        let one_by_one =
+            |sure: Option<&ColourLut>, hand_hints: bool, image: &image::RgbImage, mask: &GrayImage, win: Window| {
+                let (w, h) = mask.dimensions();
+                let win = win.clipped(w, h);
+                let mut out = Vec::new();
+                for y in win.y0..win.y1 {
+                    for x in win.x0..win.x1 {
+                        let p = image.get_pixel(x, y).0;
+                        let colour = sure.map_or(label::UNKNOWN, |s| s.get(p));
+                        out.push(match mask.get_pixel(x, y).0[0] {
+                            label::BACKGROUND => label::BACKGROUND,
+                            SHADOW_LIKE => match colour {
+                                label::HAND => label::HAND,
+                                label::SCALPEL => TOOL_COLOURED_SHADOW,
+                                _ => POSSIBLE_SHADOW,
+                            },
+                            _ if colour == label::HAND && !hand_hints => label::UNKNOWN,
+                            _ => colour,
+                        });
+                    }
+                }
+                out
+            };
+        let lut = skin_and_blue();
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |n: u64| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 33) % n.max(1)
+        };
+        for round in 0..300 {
+            let (w, h) = (1 + next(37) as u32, 1 + next(9) as u32);
+            // Foreground in runs, long stretches of background between them.
+            let mut raw = vec![label::BACKGROUND; (w * h) as usize];
+            let mut i = next(12) as usize;
+            while i < raw.len() {
+                let run = 1 + next(5) as usize;
+                let value = [label::HAND, label::SCALPEL, label::UNKNOWN, SHADOW_LIKE][next(4) as usize];
+                let end = (i + run).min(raw.len());
+                raw[i..end].fill(value);
+                i += run + next(20) as usize;
+            }
+            let mask = GrayImage::from_raw(w, h, raw).expect("mask");
+            let image = image::RgbImage::from_fn(w, h, |_, _| {
+                let c = [[200, 150, 120], [40, 60, 200], [120, 120, 120]][next(3) as usize];
+                image::Rgb(c.map(|v: u8| v.saturating_add(next(9) as u8)))
+            });
+            let (x0, y0) = (next(u64::from(w)) as u32, next(u64::from(h)) as u32);
+            let win = Window { x0, y0, x1: x0 + next(u64::from(w) + 3) as u32, y1: y0 + 1 + next(u64::from(h)) as u32 };
+            for (sure, hand_hints) in [(Some(&lut), true), (Some(&lut), false), (None, true)] {
+                let mut out = vec![7; 3];
+                fit_hints(sure, hand_hints, &image, &mask, win, &mut out);
+                assert_eq!(out, one_by_one(sure, hand_hints, &image, &mask, win), "round {round}, {w}x{h}, {win:?}");
+            }
+        }
     }
 
     #[test]

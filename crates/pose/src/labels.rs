@@ -1112,6 +1112,34 @@ fn ceil_within(x: f64, lo: f64, hi: f64) -> usize {
     t + usize::from((t as f64) < v)
 }
 
+/// `x.ceil()` exactly (infinities and NaN as they are), without the library call `ceil` is where
+/// the build does not assume SSE4.1 ([`ToolDepth::span`]: four roundings per cell it tests).
+#[inline]
+fn ceil(x: f64) -> f64 {
+    // From 2^52 on every number is whole; below, truncation toward zero is exact, and is the
+    // ceiling of a negative number.
+    if x.abs() < TWO_52 {
+        let t = x as i64 as f64;
+        if t < x { t + 1.0 } else { t }
+    } else {
+        x
+    }
+}
+
+/// `x.floor()` exactly: see [`ceil`].
+#[inline]
+fn floor(x: f64) -> f64 {
+    if x.abs() < TWO_52 {
+        let t = x as i64 as f64;
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x
+    }
+}
+
+/// 2^52: every `f64` at least this large in magnitude is a whole number.
+const TWO_52: f64 = 4_503_599_627_370_496.0;
+
 /// `x.floor()` clamped to `[lo, hi]` (whole numbers at least 0; `hi` for NaN): see
 /// [`ceil_within`].
 #[inline]
@@ -1631,10 +1659,10 @@ impl ToolDepth {
     /// and last column, first and last row), or `None` where they miss it.
     fn span(&self, lo: Point2<f64>, hi: Point2<f64>) -> Option<(usize, usize, usize, usize)> {
         let h = self.depth.len() / self.w.max(1);
-        let (i0, j0) = ((lo.x.ceil() - self.x0 as f64).max(0.0), (lo.y.ceil() - self.y0 as f64).max(0.0));
+        let (i0, j0) = ((ceil(lo.x) - self.x0 as f64).max(0.0), (ceil(lo.y) - self.y0 as f64).max(0.0));
         let (i1, j1) = (
-            (hi.x.floor() - self.x0 as f64).min(self.w as f64 - 1.0),
-            (hi.y.floor() - self.y0 as f64).min(h as f64 - 1.0),
+            (floor(hi.x) - self.x0 as f64).min(self.w as f64 - 1.0),
+            (floor(hi.y) - self.y0 as f64).min(h as f64 - 1.0),
         );
         (i0 <= i1 && j0 <= j1).then_some((i0 as usize, i1 as usize, j0 as usize, j1 as usize))
     }
@@ -1782,6 +1810,46 @@ impl CellRun {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rounding_without_the_library_is_the_library_s() {
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5,
+            -2.5,
+            1e-300,
+            -1e-300,
+            TWO_52 - 0.5,
+            -(TWO_52 - 0.5),
+            TWO_52,
+            -TWO_52,
+            TWO_52 + 2.0,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MAX,
+            f64::MIN,
+        ];
+        let mut s = 88172645463325252u64;
+        for _ in 0..10_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let unit = (s >> 11) as f64 / (1u64 << 53) as f64;
+            values.push((unit - 0.5) * [2.0, 1e3, 1e7, 1e16][(s % 4) as usize]);
+        }
+        for v in values {
+            assert_eq!(ceil(v), v.ceil(), "ceil({v:e})");
+            assert_eq!(floor(v), v.floor(), "floor({v:e})");
+        }
+        assert!(ceil(f64::NAN).is_nan() && floor(f64::NAN).is_nan());
+    }
 
     #[test]
     fn searches_pace_by_doubling_gaps_up_to_the_most_allowed() {
