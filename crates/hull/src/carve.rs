@@ -176,6 +176,7 @@ pub struct Cell {
 
 impl Cell {
     /// Whether the cell carries a label (`label::HAND` or `label::SCALPEL`).
+    #[inline]
     pub fn has(&self, l: u8) -> bool {
         match l {
             label::HAND => self.hand,
@@ -185,12 +186,14 @@ impl Cell {
     }
 
     /// Centre of the cell.
+    #[inline]
     pub fn centre(&self) -> Point3<f64> {
         self.min + Vector3::repeat(self.size / 2.0)
     }
 
     /// The radius of a ball around [`Cell::centre`] that holds the whole cell: its half-diagonal,
     /// rounded up (√3 / 2 of its side, to six digits).
+    #[inline]
     pub fn bounding_radius(&self) -> f64 {
         0.866_026 * self.size
     }

@@ -82,6 +82,7 @@ impl Distortion {
     /// `1 + 3|k1| r² + 5|k2| r⁴ + 7|k3| r⁶ + 12 (|p1| + |p2|) r`. The radial part's Jacobian is
     /// symmetric with eigenvalues `1 + k1 r² + k2 r⁴ + k3 r⁶` and `1 + 3 k1 r² + 5 k2 r⁴ + 7 k3 r⁶`;
     /// the tangential part's four entries sum, in absolute value, to at most `12 (|p1| + |p2|) r`.
+    #[inline]
     pub fn stretch_bound(&self, r: f64) -> f64 {
         let r2 = r * r;
         1.0 + r2 * (3.0 * self.k1.abs() + r2 * (5.0 * self.k2.abs() + r2 * 7.0 * self.k3.abs()))
