@@ -298,7 +298,7 @@ impl Silhouette {
     /// Whether the blocks covering the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside
     /// the image) hold any foreground: `false` means the rectangle holds none (always `true` for
     /// a [`Silhouette::direct`] one: its counts tell).
-    #[inline]
+    #[inline(always)]
     pub fn may_have_foreground(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> bool {
         let Store::Summed { window, blocks: b, block_stride: s, .. } = &self.store else { return true };
         let Some((i0, j0, i1, j1)) = window.clip(i0, j0, i1, j1) else { return false };
@@ -307,6 +307,7 @@ impl Silhouette {
     }
 
     /// Counts inside the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside the image).
+    #[inline(always)]
     pub fn counts(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> Counts {
         let total = ((i1 - i0 + 1) * (j1 - j0 + 1)) as u32;
         match &self.store {

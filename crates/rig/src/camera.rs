@@ -192,7 +192,7 @@ impl Camera {
 
     /// [`Camera::project_ball`] of a centre already in the camera's frame (`pc`), for a caller
     /// that has it (for its depth).
-    #[inline]
+    #[inline(always)]
     pub fn project_ball_in_camera(
         &self,
         pc: &Point3<f64>,
