@@ -298,6 +298,8 @@ impl Silhouette {
     /// Whether the blocks covering the pixel rectangle `[i0, i1] × [j0, j1]` (inclusive, inside
     /// the image) hold any foreground: `false` means the rectangle holds none (always `true` for
     /// a [`Silhouette::direct`] one: its counts tell).
+    // Inlined always, as `counts`: called per cell and view in carving (a million times in 20 frame
+    // sets), where the compiler left them calls (carving 11.3 -> 10.9 ms a frame set).
     #[inline(always)]
     pub fn may_have_foreground(&self, i0: usize, j0: usize, i1: usize, j1: usize) -> bool {
         let Store::Summed { window, blocks: b, block_stride: s, .. } = &self.store else { return true };
