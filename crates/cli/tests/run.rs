@@ -3,11 +3,17 @@
 
 use std::path::Path;
 use std::process::{Command, Output};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 const CUT_SMALL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../datasets/cut-small");
 
 fn hullcut(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_hullcut")).args(args).output().expect("hullcut runs")
+}
+
+/// [`hullcut`] run in `dir`, where a run with no sink flag writes its recording.
+fn hullcut_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hullcut")).args(args).current_dir(dir).output().expect("hullcut runs")
 }
 
 fn text(o: &Output) -> String {
@@ -20,6 +26,17 @@ fn json(path: &Path) -> serde_json::Value {
 
 mod common;
 use common::read_csv;
+
+/// Held by every test that writes a recording of more than 100 MB (150 MB to 2 GB of images), so
+/// that one such recording is on disk at a time: run two by two, this file's tests took 2.8 GB of
+/// the temporary folder at peak (1.96 GB alone for the nine-camera rig's, measured 2026-12-01),
+/// and a CI run ran out of disk in them. Each run uses every core anyway.
+static LARGE_RECORDING: Mutex<()> = Mutex::new(());
+
+/// Waits for [`LARGE_RECORDING`]; a test that failed holding it does not fail the others.
+fn one_large_recording_at_a_time() -> MutexGuard<'static, ()> {
+    LARGE_RECORDING.lock().unwrap_or_else(PoisonError::into_inner)
+}
 
 /// `hullcut run` on the shipped dataset at 1 cm cells with `extra` arguments, recording and
 /// reporting into `dir`; the output and the report (null when none was written).
@@ -233,6 +250,7 @@ fn assert_pieces_on_the_table(tissue: &serde_json::Value, speed: &str) {
 
 #[test]
 fn the_built_in_scene_cuts_the_organ_in_two() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
@@ -255,11 +273,12 @@ fn the_built_in_scene_cuts_the_organ_in_two() {
 /// the tissue diverged at frame 105 (2 mm cells, 2026-11-26).
 #[test]
 fn the_built_in_scene_cuts_the_large_organ_as_it_cuts_the_organ_scaled() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let mut tips = Vec::new();
     for tissue in ["organ", "organ-large"] {
-        let report = dir.path().join(format!("{tissue}.json"));
-        let report_arg = report.to_str().expect("utf-8");
+        let (report, rrd) = (dir.path().join(format!("{tissue}.json")), dir.path().join(format!("{tissue}.rrd")));
+        let (report_arg, rrd_arg) = (report.to_str().expect("utf-8"), rrd.to_str().expect("utf-8"));
         let o = hullcut(&[
             "run",
             "--scene-frames",
@@ -268,6 +287,8 @@ fn the_built_in_scene_cuts_the_large_organ_as_it_cuts_the_organ_scaled() {
             tissue,
             "--report",
             report_arg,
+            "--rrd",
+            rrd_arg,
             "--rrd-every",
             "1000",
         ]);
@@ -292,6 +313,7 @@ fn the_built_in_scene_cuts_the_large_organ_as_it_cuts_the_organ_scaled() {
 /// 700 m/s, 2026-11-26) until slivers that diverge were torn off.
 #[test]
 fn the_built_in_scene_replayed_three_times_recuts_its_groove_and_keeps_both_pieces_at_rest() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let (rrd, report) = (dir.path().join("run.rrd"), dir.path().join("run.json"));
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
@@ -309,15 +331,23 @@ fn the_built_in_scene_replayed_three_times_recuts_its_groove_and_keeps_both_piec
 
 #[test]
 fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let report = dir.path().join("run.json");
     let report_arg = report.to_str().expect("utf-8");
-    let o = hullcut(&["run", "--scene-frames", "135", "--backend", "gpu", "--report", report_arg]);
+    // No sink flag: the recording is hullcut-run.rrd in the folder it runs in (the temporary one).
+    let o = hullcut_in(
+        dir.path(),
+        &["run", "--scene-frames", "135", "--backend", "gpu", "--report", report_arg, "--rrd-every", "1000"],
+    );
     if !o.status.success() && text(&o).contains("no GPU adapter") && std::env::var_os("CI").is_none() {
         eprintln!("skipping a GPU test: {}", text(&o));
         return;
     }
     assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("writing hullcut-run.rrd"), "{}", text(&o));
+    let entities = hullcut_viz::rrd_entities(&dir.path().join("hullcut-run.rrd")).expect("the recording reads back");
+    assert!(entities.contains("/world/tissue/surface"), "{entities:?}");
     let r = json(&report);
     assert_eq!(r["backend"].as_str(), Some("gpu"));
     let t = &r["tissue"];
@@ -336,7 +366,7 @@ fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
     assert!(written > 0 && written < total, "only what changed is written: {g}");
     assert!(g["abandoned"].is_null(), "{g}");
     // The hybrid model stays on the CPU: a clear error, not a silent CPU run.
-    let o = hullcut(&["run", "--scene-frames", "2", "--backend", "gpu", "--operational-radius", "0.02"]);
+    let o = hullcut_in(dir.path(), &["run", "--scene-frames", "2", "--backend", "gpu", "--operational-radius", "0.02"]);
     assert!(!o.status.success());
     assert!(text(&o).contains("--operational-radius"), "{}", text(&o));
 }
@@ -346,6 +376,7 @@ fn the_built_in_scene_cuts_the_organ_in_two_on_the_gpu_backend() {
 /// planes enforced once per 46-step batch it was pumped to 95 mm/s mean (nodes near 0.9 m/s).
 #[test]
 fn the_pointed_blade_resects_the_lobe_on_the_gpu_backend_and_the_pieces_come_to_rest() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
     let ds = dir.path().join("pointed");
@@ -622,6 +653,7 @@ fn run_segmented(dir: &Path, synth: &[&str], rrd_every: &str) -> serde_json::Val
 /// 2026-11-25: 18 of 24 trusted, 41 lattice edges cut).
 #[test]
 fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "lab8", "--appearance", "skin-dark", "--tool", "pointed"];
     let r = run_segmented(dir.path(), &[&["--frames", "24", "--fps", "10", "--seed", "6"][..], &look].concat(), "12");
@@ -691,6 +723,7 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
 /// so the pieces' mean speed is what is checked here.
 #[test]
 fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "random:47", "--appearance", "random:88", "--tool", "pointed"];
     let r = run_segmented(dir.path(), &[&["--frames", "150", "--scene", "resect"][..], &look].concat(), "50");
@@ -711,6 +744,7 @@ fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
 /// and each frame set logged has its label masks.
 #[test]
 fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "random:47", "--appearance", "random:88", "--tool", "pointed"];
     let synth = [&["--frames", "30", "--scene", "resect"][..], &look].concat();
@@ -772,6 +806,7 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
 /// trusted, 14 off, the lobe left on: the first stroke's turn at the table was refused).
 #[test]
 fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and_cuts() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "random:59", "--appearance", "random:101"];
     let r = run_segmented(dir.path(), &[&["--frames", "150", "--scene", "resect"][..], &look].concat(), "50");
@@ -795,6 +830,7 @@ fn run_on_a_nine_camera_rig_with_cast_shadows_on_a_grey_mat_trusts_the_blade_and
 /// into the shadow).
 #[test]
 fn run_does_not_trust_a_fit_that_crept_into_the_hands_shadow_on_the_table() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "random:127", "--appearance", "random:173", "--tool", "pointed"];
     let r = run_segmented(dir.path(), &[&["--frames", "40", "--scene", "resect"][..], &look].concat(), "40");
@@ -836,6 +872,7 @@ fn the_first_trusted_fit_on_four_cameras_teaches_the_colours_whatever_its_confid
 /// and the lobe cut off, against 18 and on).
 #[test]
 fn a_grey_blade_learned_apart_from_its_blue_handle_stays_the_tools_in_the_colour_labels() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let look = ["--rig", "random:359", "--appearance", "random:367", "--tool", "pointed"];
     let r = run_segmented(dir.path(), &[&["--frames", "60", "--scene", "resect"][..], &look].concat(), "60");
@@ -863,14 +900,17 @@ fn a_grey_blade_learned_apart_from_its_blue_handle_stays_the_tools_in_the_colour
 /// set aside in 41).
 #[test]
 fn the_built_in_scenes_view_that_loses_the_grey_blade_in_patches_is_set_aside() {
+    let _disk = one_large_recording_at_a_time();
     let dir = tempfile::tempdir().expect("tempdir");
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
     let ds = dir.path().join("builtin");
     let o = hullcut(&["synth", "--out", &p(&ds), "--scene", "resect", "--frames", "180", "--no-truth-meshes"]);
     assert!(o.status.success(), "{}", text(&o));
     let report = dir.path().join("run.json");
-    let args = ["run", "--dataset", &p(&ds), "--masks", "segment", "--frames", "130:180", "--report", &p(&report)];
-    let o = hullcut(&args);
+    let o = hullcut_in(
+        dir.path(),
+        &["run", "--dataset", &p(&ds), "--masks", "segment", "--frames", "130:180", "--report", &p(&report)],
+    );
     assert!(o.status.success(), "{}", text(&o));
     let r = json(&report);
     let pose = &r["pose"];
