@@ -394,6 +394,7 @@ fn the_pointed_blade_resects_the_lobe_on_the_gpu_backend_and_the_pieces_come_to_
         "--tool",
         "pointed",
         "--no-truth-meshes",
+        "--no-depth",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let report = dir.path().join("run.json");
@@ -635,7 +636,7 @@ fn a_camera_that_dies_mid_run_and_a_recording_that_stops_early_are_counted_not_f
 fn run_segmented(dir: &Path, synth: &[&str], rrd_every: &str) -> serde_json::Value {
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
     let ds = dir.join("recording");
-    let o = hullcut(&[&["synth", "--out", &p(&ds), "--no-truth-meshes"][..], synth].concat());
+    let o = hullcut(&[&["synth", "--out", &p(&ds), "--no-truth-meshes", "--no-depth"][..], synth].concat());
     assert!(o.status.success(), "{}", text(&o));
     std::fs::remove_dir_all(ds.join("masks")).expect("the recording's truth masks removed");
     let (rrd, report) = (dir.join("run.rrd"), dir.join("run.json"));
@@ -904,7 +905,17 @@ fn the_built_in_scenes_view_that_loses_the_grey_blade_in_patches_is_set_aside() 
     let dir = tempfile::tempdir().expect("tempdir");
     let p = |p: &Path| p.to_str().expect("utf-8").to_owned();
     let ds = dir.path().join("builtin");
-    let o = hullcut(&["synth", "--out", &p(&ds), "--scene", "resect", "--frames", "180", "--no-truth-meshes"]);
+    let o = hullcut(&[
+        "synth",
+        "--out",
+        &p(&ds),
+        "--scene",
+        "resect",
+        "--frames",
+        "180",
+        "--no-truth-meshes",
+        "--no-depth",
+    ]);
     assert!(o.status.success(), "{}", text(&o));
     let report = dir.path().join("run.json");
     let o = hullcut_in(

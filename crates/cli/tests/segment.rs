@@ -23,8 +23,19 @@ fn path(p: &Path) -> String {
 /// arguments.
 fn synth_into(out: PathBuf, rig: &str, look: &str, tool: &str, extra: &[&str]) -> PathBuf {
     let out_arg = path(&out);
-    let mut args =
-        vec!["synth", "--out", &out_arg, "--rig", rig, "--appearance", look, "--tool", tool, "--no-truth-meshes"];
+    let mut args = vec![
+        "synth",
+        "--out",
+        &out_arg,
+        "--rig",
+        rig,
+        "--appearance",
+        look,
+        "--tool",
+        tool,
+        "--no-truth-meshes",
+        "--no-depth",
+    ];
     args.extend_from_slice(extra);
     let o = hullcut(&args);
     assert!(o.status.success(), "synth {rig} {look} {tool}: {}", stderr(&o));

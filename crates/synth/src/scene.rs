@@ -46,6 +46,9 @@ pub struct SceneConfig {
     pub background_frames: usize,
     /// Write world-frame truth meshes for every frame and label.
     pub truth_meshes: bool,
+    /// Write every view's depth map (depth/, 16-bit millimetres): the hull's benchmark scores
+    /// against them; the loop never reads them (a tenth of a recording's bytes).
+    pub depth_maps: bool,
     /// PNG compression of the written dataset.
     pub compression: hullcut_dataset::PngCompression,
     /// How far below [`crate::ORGAN_TOP`] the blade's tip presses during a stroke, metres, drawn
@@ -84,6 +87,7 @@ impl SceneConfig {
             dropping_camera: hard.then_some((4, 0.1)),
             background_frames: 5,
             truth_meshes: true,
+            depth_maps: true,
             compression: hullcut_dataset::PngCompression::Fast,
             stroke_depth: DEFAULT_STROKE_DEPTH,
             appearance: Appearance::classic(),

@@ -73,7 +73,9 @@ pub fn synthesize(
             };
             writer.write_image(frame, camera, &view.image, view.timestamp_ns)?;
             writer.write_mask(frame, camera, &view.mask)?;
-            writer.write_depth(frame, camera, &view.depth)?;
+            if config.depth_maps {
+                writer.write_depth(frame, camera, &view.depth)?;
+            }
             views.fetch_add(1, Ordering::Relaxed);
             skipped.fetch_add(view.skipped_triangles, Ordering::Relaxed);
             let count = |l: u8| view.mask.as_raw().iter().filter(|&&v| v == l).count();

@@ -167,3 +167,45 @@ fn an_existing_output_is_refused_and_nothing_half_written_remains() {
     synthesize(&scene, &out, "x", true, &|| {}).expect("--force replaces");
     assert!(Dataset::open(&out).is_ok());
 }
+
+/// Without depth maps and truth meshes (`hullcut run`'s built-in scene, `hullcut synth --no-depth
+/// --no-truth-meshes`) a recording holds the same images, masks, times and true poses, in fewer
+/// bytes, and reads back: neither folder is written.
+#[test]
+fn without_depth_maps_and_truth_meshes_the_recording_is_the_same_and_smaller() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut config = SceneConfig::new(SceneKind::Cut, 5, 3);
+    config.rig.cameras = config.rig.cameras.iter().map(|c| c.scaled(0.25)).collect();
+    let full = Scene::new(config.clone()).expect("scene");
+    (config.truth_meshes, config.depth_maps) = (false, false);
+    let lean = Scene::new(config).expect("scene");
+    let (a, b) = (dir.path().join("full"), dir.path().join("lean"));
+    synthesize(&full, &a, "full", false, &|| {}).expect("synthesize");
+    synthesize(&lean, &b, "lean", false, &|| {}).expect("synthesize");
+    assert!(a.join("depth").is_dir() && a.join("truth/meshes").is_dir());
+    assert!(!b.join("depth").exists() && !b.join("truth/meshes").exists());
+    let size = |p: &std::path::Path| -> u64 {
+        fn walk(p: &std::path::Path) -> u64 {
+            std::fs::read_dir(p)
+                .expect("read_dir")
+                .flatten()
+                .map(|e| {
+                    let p = e.path();
+                    if p.is_dir() { walk(&p) } else { e.metadata().map_or(0, |m| m.len()) }
+                })
+                .sum()
+        }
+        walk(p)
+    };
+    assert!(size(&b) < size(&a), "{} bytes against {}", size(&b), size(&a));
+    let (da, db) = (Dataset::open(&a).expect("open"), Dataset::open(&b).expect("open"));
+    assert_eq!(da.truth_poses().expect("poses"), db.truth_poses().expect("poses"));
+    for frame in 0..3 {
+        let (sa, sb) = (da.read_frame_set(frame, true).expect("set"), db.read_frame_set(frame, true).expect("set"));
+        assert_eq!(sa.timestamp_ns, sb.timestamp_ns);
+        for (va, vb) in sa.views.iter().zip(&sb.views) {
+            let (va, vb) = (va.as_ref().expect("view"), vb.as_ref().expect("view"));
+            assert_eq!((&va.image, &va.mask), (&vb.image, &vb.mask), "frame {frame} camera {}", va.camera);
+        }
+    }
+}

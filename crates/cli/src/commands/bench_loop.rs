@@ -128,7 +128,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         config.tool = recording.tool;
         config.appearance = look;
         config.stroke_depth = super::run::BUILTIN_STROKE_DEPTH;
-        config.truth_meshes = false;
+        (config.truth_meshes, config.depth_maps) = (false, false);
         let scene = Scene::new(config)?;
         let dir = tmp.path().join(name.replace([' ', ':'], "_"));
         let pb = bar(frames, &format!("rendering {name}"));

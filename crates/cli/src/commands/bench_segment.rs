@@ -94,7 +94,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
         config.tool = setup.tool;
         config.appearance = look;
         config.fps = 10.0;
-        config.truth_meshes = false;
+        (config.truth_meshes, config.depth_maps) = (false, false);
         let scene = Scene::new(config)?;
         let dir = tmp.path().join(name.replace([' ', ':'], "_"));
         synthesize(&scene, &dir, &name, false, &|| {}).with_context(|| format!("rendering {name}"))?;

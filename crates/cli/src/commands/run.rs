@@ -586,6 +586,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             // The organ's top lies 5 to 15 mm below ORGAN_TOP where strokes run (it is domed, and
             // sags under gravity): strokes 18 to 35 mm below it cut about 5 to 25 mm deep.
             config.stroke_depth = BUILTIN_STROKE_DEPTH;
+            // Nor truth meshes nor depth maps: the loop reads neither (a tenth of the bytes).
+            (config.truth_meshes, config.depth_maps) = (false, false);
             // The hand works on the organ it is shown: over the large one, higher and wider.
             if args.tissue == "organ-large" {
                 config.organ_scale = hullcut_sim::LARGE_ORGAN_SCALE;

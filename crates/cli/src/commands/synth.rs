@@ -26,8 +26,9 @@ use crate::report::{Provenance, SCHEMA_VERSION, write_json};
 /// Writes the dataset OUT (DESIGN "Dataset format", datasets/README.md): dataset.toml, rig.yaml,
 /// frames.csv (per-camera timestamps with jitter), CAM/NNNNNN.png, CAM/backgroundNN.png
 /// (empty-scene images), masks/CAM/NNNNNN.png (0 background, 1 hand, 2 scalpel),
-/// depth/CAM/NNNNNN.png (16-bit, mm), tool.json + tool.ply, truth/poses.jsonl and
-/// truth/meshes/LABEL/NNNNNN.ply (CAM is a camera name, LABEL hand or scalpel). The dataset is written to a temporary folder and renamed into
+/// depth/CAM/NNNNNN.png (16-bit, mm; not with --no-depth), tool.json + tool.ply, truth/poses.jsonl and
+/// truth/meshes/LABEL/NNNNNN.ply (CAM is a camera name, LABEL hand or scalpel; not with
+/// --no-truth-meshes). The dataset is written to a temporary folder and renamed into
 /// place when complete. Also REPORT (JSON) with --report and an .rrd (undistorted images and masks
 /// under world/cams/NAME every --rrd-every frames, the true tool under world/tool/truth) with --rrd.
 #[derive(Debug, clap::Args)]
@@ -69,6 +70,10 @@ pub struct Args {
     /// Do not write per-frame truth meshes (truth/meshes/).
     #[arg(long)]
     no_truth_meshes: bool,
+    /// Do not write the views' depth maps (depth/; only `hullcut bench hull` scores against
+    /// them): a tenth less disk.
+    #[arg(long)]
+    no_depth: bool,
     /// Write a JSON report.
     #[arg(long, value_name = "FILE")]
     report: Option<PathBuf>,
@@ -130,6 +135,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     config.tool = args.tool;
     config.appearance = args.appearance.clone();
     config.truth_meshes = !args.no_truth_meshes;
+    config.depth_maps = !args.no_depth;
     config.background_frames = args.background_frames;
     if args.compact {
         config.compression = hullcut_dataset::PngCompression::Best;
