@@ -184,20 +184,7 @@ fn without_depth_maps_and_truth_meshes_the_recording_is_the_same_and_smaller() {
     synthesize(&lean, &b, "lean", false, &|| {}).expect("synthesize");
     assert!(a.join("depth").is_dir() && a.join("truth/meshes").is_dir());
     assert!(!b.join("depth").exists() && !b.join("truth/meshes").exists());
-    let size = |p: &std::path::Path| -> u64 {
-        fn walk(p: &std::path::Path) -> u64 {
-            std::fs::read_dir(p)
-                .expect("read_dir")
-                .flatten()
-                .map(|e| {
-                    let p = e.path();
-                    if p.is_dir() { walk(&p) } else { e.metadata().map_or(0, |m| m.len()) }
-                })
-                .sum()
-        }
-        walk(p)
-    };
-    assert!(size(&b) < size(&a), "{} bytes against {}", size(&b), size(&a));
+    assert!(bytes_under(&b) < bytes_under(&a), "{} bytes against {}", bytes_under(&b), bytes_under(&a));
     let (da, db) = (Dataset::open(&a).expect("open"), Dataset::open(&b).expect("open"));
     assert_eq!(da.truth_poses().expect("poses"), db.truth_poses().expect("poses"));
     for frame in 0..3 {
@@ -208,4 +195,13 @@ fn without_depth_maps_and_truth_meshes_the_recording_is_the_same_and_smaller() {
             assert_eq!((&va.image, &va.mask), (&vb.image, &vb.mask), "frame {frame} camera {}", va.camera);
         }
     }
+}
+
+/// The bytes of the files under `dir`, at any depth.
+fn bytes_under(dir: &std::path::Path) -> u64 {
+    std::fs::read_dir(dir)
+        .expect("read_dir")
+        .flatten()
+        .map(|e| if e.path().is_dir() { bytes_under(&e.path()) } else { e.metadata().map_or(0, |m| m.len()) })
+        .sum()
 }
