@@ -21,6 +21,7 @@
 
 pub mod backend;
 pub mod budget;
+pub mod deferred;
 pub mod error;
 pub mod labelling;
 pub mod measure;
@@ -30,6 +31,7 @@ pub mod stages;
 pub mod tissue;
 
 pub use backend::{Backend, Carver, GpuHandle};
+pub use deferred::PendingLabels;
 pub use error::Error;
 pub use labelling::{LabelMethod, LabelSource, LabelTrace, Labelling, LabellingReport, Segmented, WeakWhen};
 pub use read::{Faults, ViewFault};

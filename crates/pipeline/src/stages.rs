@@ -30,6 +30,7 @@ use hullcut_pose::{PoseEstimate, Template, Tracker, TrackerParams, ViewInput};
 use hullcut_sim::CutSim;
 
 use crate::backend::Carver;
+use crate::deferred::PendingLabels;
 use crate::error::{Context as _, Error};
 use crate::labelling::{LabelTrace, Labelling, LabellingReport};
 use crate::no_tool_estimate;
@@ -139,7 +140,9 @@ pub struct Setup {
     /// When segmenting, the frame sets whose label masks the caller uses: those whose number on
     /// the frame timeline (the frame's, plus the pass times one more than the last frame's) is a
     /// multiple of this (1, the default: all; `None`: none). The others get the hull and the
-    /// pose, and their masks only where they teach the colours ([`Labelling::label_with`]).
+    /// pose, and their masks only where they teach the colours ([`Labelling::label_with`]). The
+    /// masks of these are drawn as they teach the colours, or else left to the caller to draw
+    /// ([`Work::draw_labels`], off the stages' path).
     /// The same frame sets get the hull's surface meshes (with mask files too; the hand's
     /// distance grid, which pushes the tissue, every frame set).
     pub masks_every: Option<u64>,
@@ -259,6 +262,9 @@ pub struct Work {
     pub estimate: Option<PoseEstimate>,
     /// When segmenting: what labelled the views and the colours learned by then.
     pub labels: Option<LabelTrace>,
+    /// When segmenting: the label masks of a frame set the caller logs, left to be drawn off the
+    /// stages' path ([`Work::draw_labels`]; its views' masks are `None` until then).
+    pub pending_labels: Option<PendingLabels>,
     /// What the tissue did.
     pub tissue: Option<TissueStep>,
     /// How long each stage took on this frame set.
@@ -285,6 +291,21 @@ impl Work {
     /// How long it waited for room before the stages took it.
     pub fn admission_wait(&self) -> Duration {
         self.admitted.saturating_duration_since(self.captured)
+    }
+
+    /// Draws the label masks the segmentation left to be drawn ([`Work::pending_labels`]) into
+    /// its views, the same masks it would have drawn; whether there were any. The stages hand
+    /// out a frame set whose masks the caller wants (`Setup::masks_every`) with its masks drawn,
+    /// or with them pending: the consumer draws them on its own thread, beside the loop.
+    pub fn draw_labels(&mut self) -> bool {
+        let (Some(pending), Some(occ)) = (self.pending_labels.take(), self.occ.as_ref()) else { return false };
+        let masks = pending.draw(&self.set, occ);
+        for (view, mask) in self.set.views.iter_mut().zip(masks) {
+            if let Some(view) = view {
+                view.mask = mask;
+            }
+        }
+        true
     }
 }
 
@@ -578,6 +599,10 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
         let depth = Arc::clone(&depth);
         stage("hull", &abort, move || {
             let mut labelling = labelling;
+            // The masks of the frame sets logged are drawn by the consumer ([`Work::draw_labels`]).
+            if let Some(labelling) = labelling.as_mut() {
+                labelling.defer_drawing(true);
+            }
             let mut region = CarveRegion::new(hull.workspace, hull.leaf_size);
             let result = hull_stage(
                 &ds,
@@ -797,6 +822,7 @@ fn read_stage(
             grids: Vec::new(),
             estimate: None,
             labels: None,
+            pending_labels: None,
             tissue: None,
             times,
             started,
@@ -905,6 +931,7 @@ fn hull_frame_set(
         work.times.carve.push(carve);
         work.times.pose.extend(fit);
         work.labels = Some(labelling.trace(&labelled));
+        work.pending_labels = labelled.pending;
         for (view, mask) in work.set.views.iter_mut().zip(labelled.masks) {
             if let Some(view) = view {
                 view.mask = mask;

@@ -17,6 +17,7 @@
 //! foreground pixel is hand. The hull's cells are relabelled the same way: near the tool,
 //! scalpel; the rest, hand. A frame whose tool cannot be fitted leaves its foreground unknown.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use hullcut_dataset::{Mesh, ToolGeometry, label};
@@ -278,7 +279,7 @@ impl ToolRegion {
 #[derive(Debug, Clone)]
 pub struct ToolLabeller {
     tracker: Tracker,
-    mesh: Mesh,
+    mesh: Arc<Mesh>,
     /// Distance to the tool, tool frame (for the hull's tool cells).
     field: ToolField,
     params: LabelParams,
@@ -309,7 +310,7 @@ impl ToolLabeller {
         let field = ToolField::new(&tool_points(&tool.mesh, 0.001), 0.001, params.tool_margin_m + 0.02);
         Ok(ToolLabeller {
             tracker: Tracker::new(template, tracker),
-            mesh: tool.mesh.clone(),
+            mesh: Arc::new(tool.mesh.clone()),
             field,
             params,
             unoccluded: false,
@@ -345,6 +346,12 @@ impl ToolLabeller {
     /// sets, the drawing is most of the labelling's time.
     pub fn draw_labels(&mut self, on: bool) {
         self.draw = on;
+    }
+
+    /// What draws the fitted tool into the views as [`ToolLabeller::label`] does, to draw a
+    /// frame set's labels that it did not draw ([`ToolLabeller::draw_labels`]) later.
+    pub fn drawer(&self) -> ToolDrawer {
+        ToolDrawer { mesh: Arc::clone(&self.mesh), occlusion_margin_m: self.params.occlusion_margin_m }
     }
 
     /// The blade's outline in `camera` with the tool at `tool_to_world`: the convex hull of its
@@ -517,103 +524,11 @@ impl ToolLabeller {
             Some(fitted) => {
                 let pose = fitted.tool_to_world;
                 let occupancy = near_tool(occ, &self.field, &pose, self.params.tool_margin_m, not_hand);
-                // The tool drawn into every view, and the hull's cells labelled from those
-                // drawings: a cell is the hand's only where views see foreground the tool does not
-                // explain (the tool's own hull, fatter than the tool, hides nothing).
-                // Per view, in one task each: the tool drawn into it; its labels with the hull's
-                // cells judged against that drawing, for the occluders below: the hull's hand
-                // cells (labelled from those drawings) whose footprint in that very view holds hand
-                // pixels, i.e. cells that view can see as hand (a cell of the hand's hull that the
-                // view sees only where the tool is drawn is the hull's fat, a phantom in front of
-                // the tool, not what hides it; only the cells near the tool are judged, so the
-                // drawings are counted pixel by pixel, not tabled); and the cells drawn over the
-                // tool there: only cells drawn over the tool in some view can hide it, the others
-                // are neither relabelled nor judged.
-                let margin = self.params.occlusion_margin_m + occ.leaf_size;
-                let runs = CellRun::split(&occupancy.cells);
-                type PerView = (Option<ToolDepth>, Option<Silhouette>, Vec<(usize, DrawnBox)>);
-                let per_view: Vec<PerView> = views
-                    .par_iter()
-                    .map(|v| {
-                        let Some(v) = v else { return (None, None, Vec::new()) };
-                        let d = ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), &self.mesh, &pose);
-                        let sil = Silhouette::direct(v.camera, labels_without_occlusion(*v, d.as_ref()));
-                        let over = d
-                            .as_ref()
-                            .map_or_else(Vec::new, |d| d.cells_over(v.camera, &occupancy.cells, &runs, margin));
-                        (d, Some(sil), over)
-                    })
-                    .collect();
-                let mut drawn = Vec::with_capacity(views.len());
-                let mut sil = Vec::with_capacity(views.len());
-                let mut over = Vec::with_capacity(views.len());
-                for (d, s, o) in per_view {
-                    drawn.push(d);
-                    sil.push(s);
-                    over.push(o);
-                }
-                let mut wanted: Vec<usize> = over.iter().flatten().map(|(i, _)| *i).collect();
-                wanted.sort_unstable();
-                wanted.dedup();
-                let params = HullParams::new(hullcut_hull::Aabb { min: occ.origin, max: occ.origin }, occ.leaf_size);
-                let near = Occupancy {
-                    cells: wanted.iter().map(|&i| occupancy.cells[i]).collect(),
-                    stats: occupancy.stats.clone(),
-                    ..occupancy
-                };
-                let mut hand = vec![false; occupancy.cells.len()];
-                let (relabelled, hand_seen) = hullcut_hull::relabel(&near, &sil, &params);
-                // Where each wanted cell sits in `wanted` (and in `hand_seen`'s rows).
-                let mut row = vec![usize::MAX; occupancy.cells.len()];
-                for (r, (&i, l)) in wanted.iter().zip(&relabelled.cells).enumerate() {
-                    hand[i] = l.hand && !l.scalpel;
-                    row[i] = r;
-                }
-                let n = sil.len();
-                let occluders: Vec<Vec<DrawnBox>> = sil
-                    .iter()
-                    .zip(&over)
-                    .enumerate()
-                    .map(|(v, (s, over))| match s {
-                        Some(_) => over
-                            .iter()
-                            .filter(|(i, _)| hand[*i] && hand_seen[row[*i] * n + v])
-                            .map(|(_, b)| *b)
-                            .collect(),
-                        None => Vec::new(),
-                    })
-                    .collect();
-                let labelled: Vec<Option<(GrayImage, u64, u64)>> = views
-                    .par_iter()
-                    .zip(drawn.par_iter())
-                    .zip(occluders.par_iter())
-                    .map(|((v, d), o)| v.map(|v| self.final_labels(v, d.as_ref(), o, occ.leaf_size)))
-                    .collect();
-                let masks = labelled
-                    .into_iter()
-                    .map(|l| {
-                        l.map(|(mask, scalpel, hidden)| {
-                            stats.scalpel_pixels += scalpel;
-                            stats.hidden_pixels += hidden;
-                            mask
-                        })
-                    })
-                    .collect();
-                let regions = drawn.iter().map(|d| d.as_ref().map(ToolDepth::region)).collect();
-                let unoccluded = if self.unoccluded {
-                    views
-                        .par_iter()
-                        .zip(drawn.par_iter())
-                        .zip(over.par_iter())
-                        .map(|((v, d), over)| match (v, d) {
-                            (Some(v), Some(d)) => d.unoccluded(v.mask, over.iter().map(|(_, b)| *b), margin),
-                            _ => Vec::new(),
-                        })
-                        .collect()
-                } else {
-                    Vec::new()
-                };
-                (masks, occupancy, regions, unoccluded)
+                let drawn =
+                    draw_views(&self.mesh, self.params.occlusion_margin_m, views, &occupancy, &pose, self.unoccluded);
+                stats.scalpel_pixels += drawn.scalpel_pixels;
+                stats.hidden_pixels += drawn.hidden_pixels;
+                (drawn.masks, occupancy, drawn.tool_regions, drawn.unoccluded)
             }
             None => {
                 let masks = views
@@ -635,75 +550,223 @@ impl ToolLabeller {
         stats.draw_ms = clock.elapsed().as_secs_f64() * 1e3;
         LabelledFrame { estimate, masks, occupancy, tool_regions, unoccluded, stats }
     }
+}
 
-    /// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
-    /// hand cell (its [`drawn_box`] among `hand_cells`) lies in front of it there; the rest of the
-    /// foreground hand. With the pixels labelled scalpel and those the hand hides.
-    fn final_labels(
+/// A fitted tool drawn into the views ([`ToolDrawer::draw`]).
+#[derive(Debug)]
+pub struct DrawnViews {
+    /// Per view (rig order): 0 background, 1 hand, 2 scalpel, 255 unknown; `None` for a missing
+    /// view.
+    pub masks: Vec<Option<GrayImage>>,
+    /// Per view: where the tool's mesh is drawn, hidden or not.
+    pub tool_regions: Vec<Option<ToolRegion>>,
+    /// Per view (empty unless asked for): the foreground pixels where the tool is drawn and no
+    /// cell of the hand's hull lies in front of it ([`LabelledFrame::unoccluded`]).
+    pub unoccluded: Vec<Vec<usize>>,
+    /// Pixels labelled scalpel, over the views.
+    pub scalpel_pixels: u64,
+    /// Pixels of the drawn tool the hand hides, over the views.
+    pub hidden_pixels: u64,
+}
+
+/// What draws a fitted tool into the views to label them ([`ToolLabeller::drawer`]): the tool's
+/// mesh (shared, not copied) and the occlusion margin. It keeps no state from frame set to frame
+/// set, so a fitted frame set's labels can be drawn later, on another thread, from what its
+/// labelling saw (the views' foreground, the hull with the tool's cells labelled, the fitted
+/// pose): the same labels as [`ToolLabeller::label`] draws.
+#[derive(Debug, Clone)]
+pub struct ToolDrawer {
+    mesh: Arc<Mesh>,
+    occlusion_margin_m: f64,
+}
+
+impl ToolDrawer {
+    /// The tool at `pose` drawn into `views` and their foreground labelled, the hand's cells of
+    /// `occupancy` (the foreground's hull, its cells near the tool labelled: [`LabelledFrame::occupancy`])
+    /// hiding it where they lie in front of it; with `unoccluded`, the drawn tool's pixels no
+    /// hand cell hides listed too.
+    pub fn draw(
         &self,
-        view: ViewInput,
-        tool: Option<&ToolDepth>,
-        hand_cells: &[DrawnBox],
-        leaf: f64,
-    ) -> (GrayImage, u64, u64) {
-        let mut out = all_hand(view.mask);
-        let Some(tool) = tool else { return (out, 0, 0) };
-        let (mut scalpel, mut hidden_pixels) = (0, 0);
-        let mut hand = vec![f32::INFINITY; tool.depth.len()];
-        let margin = self.params.occlusion_margin_m + leaf;
-        for &(lo, hi, z) in hand_cells {
-            tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
-        }
-        let (w, raw) = (out.width() as usize, view.mask.as_raw());
-        // 0 outside the tool or on background, 1 visible tool, 2 hidden by the hand.
-        let state: Vec<u8> = tool
-            .depth
-            .iter()
-            .enumerate()
-            .map(|(k, &d)| {
-                let px = (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w;
-                if !d.is_finite() || raw[px] == label::BACKGROUND {
-                    0
-                } else if hand[k] < d {
-                    2
-                } else {
-                    1
-                }
+        views: &[Option<ViewInput>],
+        occupancy: &Occupancy,
+        pose: &Isometry3<f64>,
+        unoccluded: bool,
+    ) -> DrawnViews {
+        draw_views(&self.mesh, self.occlusion_margin_m, views, occupancy, pose, unoccluded)
+    }
+}
+
+/// [`ToolDrawer::draw`]'s work.
+fn draw_views(
+    mesh: &Mesh,
+    occlusion_margin_m: f64,
+    views: &[Option<ViewInput>],
+    occupancy: &Occupancy,
+    pose: &Isometry3<f64>,
+    unoccluded: bool,
+) -> DrawnViews {
+    // The tool drawn into every view, and the hull's cells labelled from those
+    // drawings: a cell is the hand's only where views see foreground the tool does not
+    // explain (the tool's own hull, fatter than the tool, hides nothing).
+    // Per view, in one task each: the tool drawn into it; its labels with the hull's
+    // cells judged against that drawing, for the occluders below: the hull's hand
+    // cells (labelled from those drawings) whose footprint in that very view holds hand
+    // pixels, i.e. cells that view can see as hand (a cell of the hand's hull that the
+    // view sees only where the tool is drawn is the hull's fat, a phantom in front of
+    // the tool, not what hides it; only the cells near the tool are judged, so the
+    // drawings are counted pixel by pixel, not tabled); and the cells drawn over the
+    // tool there: only cells drawn over the tool in some view can hide it, the others
+    // are neither relabelled nor judged.
+    let margin = occlusion_margin_m + occupancy.leaf_size;
+    let runs = CellRun::split(&occupancy.cells);
+    type PerView = (Option<ToolDepth>, Option<Silhouette>, Vec<(usize, DrawnBox)>);
+    let per_view: Vec<PerView> = views
+        .par_iter()
+        .map(|v| {
+            let Some(v) = v else { return (None, None, Vec::new()) };
+            let d = ToolDepth::draw(v.camera, v.camera.distortion.monotonic_radius(), mesh, pose);
+            let sil = Silhouette::direct(v.camera, labels_without_occlusion(*v, d.as_ref()));
+            let over = d.as_ref().map_or_else(Vec::new, |d| d.cells_over(v.camera, &occupancy.cells, &runs, margin));
+            (d, Some(sil), over)
+        })
+        .collect();
+    let mut drawn = Vec::with_capacity(views.len());
+    let mut sil = Vec::with_capacity(views.len());
+    let mut over = Vec::with_capacity(views.len());
+    for (d, s, o) in per_view {
+        drawn.push(d);
+        sil.push(s);
+        over.push(o);
+    }
+    let mut wanted: Vec<usize> = over.iter().flatten().map(|(i, _)| *i).collect();
+    wanted.sort_unstable();
+    wanted.dedup();
+    let params =
+        HullParams::new(hullcut_hull::Aabb { min: occupancy.origin, max: occupancy.origin }, occupancy.leaf_size);
+    let near = Occupancy {
+        cells: wanted.iter().map(|&i| occupancy.cells[i]).collect(),
+        stats: occupancy.stats.clone(),
+        leaf_size: occupancy.leaf_size,
+        origin: occupancy.origin,
+        resolution: occupancy.resolution,
+    };
+    let mut hand = vec![false; occupancy.cells.len()];
+    let (relabelled, hand_seen) = hullcut_hull::relabel(&near, &sil, &params);
+    // Where each wanted cell sits in `wanted` (and in `hand_seen`'s rows).
+    let mut row = vec![usize::MAX; occupancy.cells.len()];
+    for (r, (&i, l)) in wanted.iter().zip(&relabelled.cells).enumerate() {
+        hand[i] = l.hand && !l.scalpel;
+        row[i] = r;
+    }
+    let n = sil.len();
+    let occluders: Vec<Vec<DrawnBox>> = sil
+        .iter()
+        .zip(&over)
+        .enumerate()
+        .map(|(v, (s, over))| match s {
+            Some(_) => over.iter().filter(|(i, _)| hand[*i] && hand_seen[row[*i] * n + v]).map(|(_, b)| *b).collect(),
+            None => Vec::new(),
+        })
+        .collect();
+    let labelled: Vec<Option<(GrayImage, u64, u64)>> = views
+        .par_iter()
+        .zip(drawn.par_iter())
+        .zip(occluders.par_iter())
+        .map(|((v, d), o)| v.map(|v| final_labels(v, d.as_ref(), o, margin)))
+        .collect();
+    let (mut scalpel_pixels, mut hidden_pixels) = (0, 0);
+    let masks = labelled
+        .into_iter()
+        .map(|l| {
+            l.map(|(mask, scalpel, hidden)| {
+                scalpel_pixels += scalpel;
+                hidden_pixels += hidden;
+                mask
             })
-            .collect();
-        // The hand's hull is coarser than the pixels: where a finger crosses the tool, slivers of
-        // the tool's drawing slip past its cells. A visible pixel with more hidden than visible
-        // tool pixels around it (5x5) is hidden too.
-        let h = state.len() / tool.w.max(1);
-        for (k, &st) in state.iter().enumerate() {
-            if st == 0 {
-                continue;
+        })
+        .collect();
+    let tool_regions = drawn.iter().map(|d| d.as_ref().map(ToolDepth::region)).collect();
+    let unoccluded = if unoccluded {
+        views
+            .par_iter()
+            .zip(drawn.par_iter())
+            .zip(over.par_iter())
+            .map(|((v, d), over)| match (v, d) {
+                (Some(v), Some(d)) => d.unoccluded(v.mask, over.iter().map(|(_, b)| *b), margin),
+                _ => Vec::new(),
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    DrawnViews { masks, tool_regions, unoccluded, scalpel_pixels, hidden_pixels }
+}
+
+/// A view's labels with the tool drawn (`tool`): scalpel where it covers foreground, unless a
+/// hand cell (its [`drawn_box`] among `hand_cells`) lies in front of it there (within `margin`: the occlusion margin and the hull's leaf); the rest of the
+/// foreground hand. With the pixels labelled scalpel and those the hand hides.
+fn final_labels(
+    view: ViewInput,
+    tool: Option<&ToolDepth>,
+    hand_cells: &[DrawnBox],
+    margin: f64,
+) -> (GrayImage, u64, u64) {
+    let mut out = all_hand(view.mask);
+    let Some(tool) = tool else { return (out, 0, 0) };
+    let (mut scalpel, mut hidden_pixels) = (0, 0);
+    let mut hand = vec![f32::INFINITY; tool.depth.len()];
+    for &(lo, hi, z) in hand_cells {
+        tool.splat_min(&mut hand, lo, hi, (z + margin) as f32);
+    }
+    let (w, raw) = (out.width() as usize, view.mask.as_raw());
+    // 0 outside the tool or on background, 1 visible tool, 2 hidden by the hand.
+    let state: Vec<u8> = tool
+        .depth
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            let px = (tool.y0 + k / tool.w) * w + tool.x0 + k % tool.w;
+            if !d.is_finite() || raw[px] == label::BACKGROUND {
+                0
+            } else if hand[k] < d {
+                2
+            } else {
+                1
             }
-            let (i, j) = (k % tool.w, k / tool.w);
-            let mut hidden = st == 2;
-            if !hidden {
-                let (mut vis, mut hid) = (0, 0);
-                for y in j.saturating_sub(2)..(j + 3).min(h) {
-                    for x in i.saturating_sub(2)..(i + 3).min(tool.w) {
-                        match state[y * tool.w + x] {
-                            1 => vis += 1,
-                            2 => hid += 1,
-                            _ => {}
-                        }
+        })
+        .collect();
+    // The hand's hull is coarser than the pixels: where a finger crosses the tool, slivers of
+    // the tool's drawing slip past its cells. A visible pixel with more hidden than visible
+    // tool pixels around it (5x5) is hidden too.
+    let h = state.len() / tool.w.max(1);
+    for (k, &st) in state.iter().enumerate() {
+        if st == 0 {
+            continue;
+        }
+        let (i, j) = (k % tool.w, k / tool.w);
+        let mut hidden = st == 2;
+        if !hidden {
+            let (mut vis, mut hid) = (0, 0);
+            for y in j.saturating_sub(2)..(j + 3).min(h) {
+                for x in i.saturating_sub(2)..(i + 3).min(tool.w) {
+                    match state[y * tool.w + x] {
+                        1 => vis += 1,
+                        2 => hid += 1,
+                        _ => {}
                     }
                 }
-                hidden = hid > vis;
             }
-            let px = (tool.y0 + j) * w + tool.x0 + i;
-            if hidden {
-                hidden_pixels += 1;
-            } else {
-                out.as_mut()[px] = label::SCALPEL;
-                scalpel += 1;
-            }
+            hidden = hid > vis;
         }
-        (out, scalpel, hidden_pixels)
+        let px = (tool.y0 + j) * w + tool.x0 + i;
+        if hidden {
+            hidden_pixels += 1;
+        } else {
+            out.as_mut()[px] = label::SCALPEL;
+            scalpel += 1;
+        }
     }
+    (out, scalpel, hidden_pixels)
 }
 
 /// `mask` with all its foreground the hand's (every pixel stored, without a branch, so the pass

@@ -42,8 +42,8 @@ mod track;
 
 pub use filter::{OneEuro, OneEuroParams};
 pub use labels::{
-    LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, TABLE_SHADOW, TOOL_COLOURED_SHADOW, ToolLabeller,
-    ToolRegion,
+    DrawnViews, LabelParams, LabelStats, LabelledFrame, POSSIBLE_SHADOW, TABLE_SHADOW, TOOL_COLOURED_SHADOW,
+    ToolDrawer, ToolLabeller, ToolRegion,
 };
 pub use metrics::{PoseError, pose_error};
 pub use table_shadow::{SHADE_TOLERANCE, Shading, TableShadows};

@@ -321,6 +321,11 @@ struct Timings {
     tissue_surface: StageTiming,
     /// Rerun logging, meshes and snapshots, on the logging thread.
     log: StageTiming,
+    /// Of `log`, per frame set logged with its images and labelled by the tool's fit without
+    /// teaching the colours: drawing its label masks, left to the logging thread (null when
+    /// there were none).
+    #[serde(default)]
+    log_labels: Option<StageTiming>,
     /// Times the loop waited for the logging queue (without --realtime), per wait.
     log_wait: StageTiming,
     /// From a frame set's capture (without --realtime: from when it was let into the stages) to
@@ -1008,6 +1013,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 deform: timing(&times.deform),
                 tissue_surface: timing(&times.tissue_surface),
                 log: timing(&logged.times),
+                log_labels: (!logged.label_times.is_empty()).then(|| timing(&logged.label_times)),
                 log_wait: timing(&log_wait),
                 latency: timing(&latency),
                 admission_wait: timing(&admission),

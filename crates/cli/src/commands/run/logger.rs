@@ -57,6 +57,9 @@ pub struct Logger {
 pub struct Logged {
     /// Time spent logging each frame set it logged.
     pub times: Vec<Duration>,
+    /// Of `times`, drawing the label masks the segmentation left to be drawn
+    /// ([`hullcut_pipeline::Work::draw_labels`]), per frame set it drew.
+    pub label_times: Vec<Duration>,
     pub meshes_exported: u64,
     pub snapshots_written: u64,
     pub surfaces: tissue_log::SurfaceLog,
@@ -179,7 +182,13 @@ impl Logger {
 
     /// Logs one frame set: everything on the frame and capture-time timelines.
     fn log(&mut self, item: Item, logged: &mut Logged) -> anyhow::Result<()> {
-        let Item { work, shown, truth, error } = item;
+        let Item { mut work, shown, truth, error } = item;
+        // The label masks of a logged frame set that taught nothing are drawn here, off the loop's
+        // path, before anything shows them.
+        let clock = Instant::now();
+        if work.draw_labels() {
+            logged.label_times.push(clock.elapsed());
+        }
         let rec = &self.rec;
         let every = self.rrd_every;
         hullcut_viz::set_frame(rec, i64::try_from(shown).unwrap_or(i64::MAX));
