@@ -217,8 +217,9 @@ pub struct Args {
     /// Log images (JPEG), masks, hull leaves and meshes and the lattice nodes every N-th frame; the
     /// blade, the swept surface and the scalars every frame; the tissue surface whenever it has
     /// changed (a cut, or a vertex moved by more than 0.2 mm since it was last logged). When
-    /// segmenting, the label masks of the frames between are not drawn (unless they teach the
-    /// colours): N changes the time segmentation takes, not what the loop computes.
+    /// segmenting, the label masks of the frames logged are drawn on the logging thread (unless
+    /// they teach the colours: then in the loop), those of the frames between not at all: N
+    /// changes what the logging thread does beside the loop, not what the loop computes.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(1..))]
     rrd_every: u64,
     /// Decode the frame sets into memory before the loop when they take at most this many MiB
@@ -305,8 +306,9 @@ struct Timings {
     /// Of `segment`, the tool's fit's evidence (its provisional labels).
     #[serde(default)]
     segment_evidence: Option<StageTiming>,
-    /// `segment` over the frame sets whose fitted tool was drawn into the views only (logged with
-    /// their images, or teaching the colours).
+    /// `segment` over the frame sets whose fitted tool was drawn into the views in the loop only
+    /// (teaching the colours; those logged with their images that teach nothing are drawn on the
+    /// logging thread: `log_labels`).
     #[serde(default)]
     segment_drawn: Option<StageTiming>,
     carve: StageTiming,
