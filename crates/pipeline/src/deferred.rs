@@ -45,7 +45,7 @@ impl std::fmt::Debug for PendingLabels {
 impl PendingLabels {
     /// The label masks of `set` (per view, rig order; `None` for a missing view), the same as
     /// its labelling would have drawn: `occupancy` is the hull it handed out with the frame set
-    /// ([`crate::Labelled::occupancy`]).
+    /// ([`crate::labelling::Labelled::occupancy`]).
     pub fn draw(self, set: &FrameSet, occupancy: &Occupancy) -> Vec<Option<GrayImage>> {
         let views: Vec<Option<ViewInput>> = self
             .rig

@@ -973,7 +973,7 @@ impl Labelling {
 
     /// Labels one frame set; without `masks_wanted`, a frame set the tool's fit labels (trusted
     /// or not) gets no label masks (`None` for every view) unless it may teach the colours (a
-    /// trusted frame set at most every fifteenth frame set, [`LEARN_EVERY`]; an agreeing untrusted
+    /// trusted frame set at most every fifteenth frame set; an agreeing untrusted
     /// one while no trusted one has): its hull and pose are the same either way, and so is every
     /// frame set after it (the masks of a frame set that does not teach feed nothing that
     /// follows). With `masks_wanted` and [`Labelling::defer_drawing`], such a frame set's masks
