@@ -966,9 +966,13 @@ impl Labelling {
         self.segmenter.params()
     }
 
-    /// Labels one frame set, its label masks drawn.
+    /// Labels one frame set, its label masks drawn (at once, whatever
+    /// [`Labelling::defer_drawing`] says).
     pub fn label(&mut self, set: &FrameSet, carver: &mut Carver) -> Result<Labelled, Error> {
-        self.label_with(set, carver, true)
+        let defer = std::mem::replace(&mut self.defer, false);
+        let labelled = self.label_with(set, carver, true);
+        self.defer = defer;
+        labelled
     }
 
     /// Labels one frame set; without `masks_wanted`, a frame set the tool's fit labels (trusted

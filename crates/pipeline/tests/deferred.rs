@@ -1,6 +1,7 @@
 //! A frame set's label masks left to be drawn later, off the loop's path
 //! ([`Labelling::defer_drawing`]), are the masks its labelling would have drawn at once, frame set
-//! after frame set, on two rigs, looks and tools (the second and third seeded random).
+//! after frame set, on three rigs, looks and tools (the second and third seeded random); and
+//! [`Labelling::label`] draws them at once whatever the deferral says.
 
 use hullcut_dataset::Dataset;
 use hullcut_hull::{HullParams, WorkingVolume};
@@ -58,6 +59,15 @@ fn drawn_and_deferred(rig: &str, appearance: Appearance, tool: ToolKind, frames:
     // untrusted fit was drawn but the colours labelled (neither drawn nor deferred later).
     assert_eq!(report_now.deferred, 0);
     assert!(report_later.drawn + report_later.deferred <= report_now.drawn, "{rig}");
+    // `label` draws at once whatever the deferral says (the first ten frame sets: all but the
+    // first teach nothing, and some are deferred above).
+    let mut eager = labelling();
+    eager.defer_drawing(true);
+    for frame in ds.frame_numbers().into_iter().take(10) {
+        let set = ds.read_frame_set(frame, false).expect("a frame set");
+        let labelled = eager.label(&set, &mut carve_later).expect("labelled");
+        assert!(labelled.pending.is_none(), "{rig}, frame {frame}: `label` left masks to draw");
+    }
     (report_later.deferred, report_later.drawn)
 }
 
