@@ -55,7 +55,6 @@ impl PendingLabels {
             .map(|(camera, m)| m.as_ref().map(|mask| ViewInput { camera, mask, image: None }))
             .collect();
         let drawn = self.drawer.draw(&views, occupancy, &self.pose, false);
-        drop(views);
         let mut masks = drawn.masks;
         to_background(&mut masks, &self.given_back, true);
         if let Some(lut) = &self.sharpen {

@@ -1188,9 +1188,7 @@ impl Labelling {
         let draw = teach || masks_wanted && !defer;
         labeller.draw_labels(draw);
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
-        // What the fit saw, to draw its labels later.
-        let seen = (defer && labelled.estimate.fitted.is_some())
-            .then(|| (labeller.drawer(), hinted.unwrap_or(&fg).to_vec(), given_back.clone()));
+        let drawer = defer.then(|| labeller.drawer());
         drop(inputs);
         (self.hints, self.hinted) = (hints, hinted_store);
         self.counters.searches += u64::from(labelled.stats.from_thin_parts);
@@ -1284,18 +1282,15 @@ impl Labelling {
             let outline = self.blade_regions(&taught, estimate.fitted.as_ref());
             self.bootstrap(set, &taught, &outline);
         }
-        let pending = match (seen, &estimate.fitted, source) {
-            (
-                Some((drawer, masks, given_back)),
-                Some(fitted),
-                LabelSource::Geometry | LabelSource::UntrustedGeometry,
-            ) => {
+        // Left to be drawn later: the foreground the fit saw (its hints in, as `inputs` had it).
+        let pending = match (drawer, &estimate.fitted, source) {
+            (Some(drawer), Some(fitted), LabelSource::Geometry | LabelSource::UntrustedGeometry) => {
                 self.deferred += 1;
                 Some(PendingLabels {
                     drawer,
                     rig: Arc::clone(&self.rig),
                     pose: fitted.tool_to_world,
-                    masks,
+                    masks: if hinting { self.hinted.clone() } else { fg.clone() },
                     given_back,
                     sharpen: sharpen_later,
                 })
