@@ -9,6 +9,8 @@
 //! - [`Synchronizer`]: groups frames of N cameras into [`hullcut_dataset::FrameSet`]s by
 //!   timestamp, with counted policies for late and missing frames ([`SyncStats`]);
 //!   [`Capture::synchronized`] wires both into an iterator of frame sets.
+//! - [`ImageUndistorter`], [`JpegEncoder`]: images undistorted (OpenCV `remap`) and encoded for
+//!   logging.
 //! - [`write_video`], [`export_camera_video`]: OpenCV `VideoWriter` (MJPG in `.avi`).
 //! - [`import::import_videos`]: one video per camera, paired by timestamp, into a dataset.
 //! - [`Segmenter`]: background model (or MOG2) + colour classes + morphological clean-up → label
@@ -25,6 +27,7 @@ mod jpeg;
 pub mod segment;
 mod source;
 mod sync;
+mod undistort;
 mod video;
 
 pub use error::CaptureError;
@@ -38,4 +41,5 @@ pub use source::{
     SourceFailure, SourceSpec, SyncedFrames,
 };
 pub use sync::{CapturedFrame, SyncParams, SyncStats, Synchronizer};
+pub use undistort::ImageUndistorter;
 pub use video::{ExportedVideo, VideoCodec, export_camera_video, write_video};

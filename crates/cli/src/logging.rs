@@ -179,6 +179,7 @@ const JPEG_QUALITY: u8 = 85;
 #[derive(Debug)]
 pub struct CameraLogger {
     names: Vec<String>,
+    /// For the label masks (nearest, labels stay labels).
     maps: Vec<UndistortMap>,
     /// The encoder and buffers, reused from frame to frame.
     scratch: std::sync::Mutex<Scratch>,
@@ -189,8 +190,9 @@ pub struct CameraLogger {
 struct Scratch {
     /// OpenCV's JPEG encoder, with its own buffers.
     jpeg: hullcut_capture::JpegEncoder,
-    /// An undistorted image.
-    rgb: Vec<u8>,
+    /// Per camera, OpenCV's bilinear remap for the images (vectorised: 0.65 ms for a 640x480
+    /// image where [`UndistortMap`]'s takes 1.2, on the logging thread beside the loop).
+    images: Vec<hullcut_capture::ImageUndistorter>,
     /// An undistorted label mask.
     labels: Vec<u8>,
 }
@@ -205,7 +207,12 @@ impl CameraLogger {
             maps: rig.cameras.iter().map(UndistortMap::new).collect(),
             scratch: std::sync::Mutex::new(Scratch {
                 jpeg: hullcut_capture::JpegEncoder::new(JPEG_QUALITY),
-                rgb: Vec::new(),
+                images: rig
+                    .cameras
+                    .iter()
+                    .map(hullcut_capture::ImageUndistorter::new)
+                    .collect::<Result<_, _>>()
+                    .context("preparing the logged images' undistortion")?,
                 labels: Vec::new(),
             }),
         })
@@ -222,10 +229,11 @@ impl CameraLogger {
                 anyhow::bail!("camera {name}: image is {w}x{h}, the rig says {}x{}", map.width(), map.height());
             }
             let mut scratch = self.scratch.lock().map_err(|_| anyhow::anyhow!("the logging buffers were poisoned"))?;
-            let Scratch { jpeg: encoder, rgb, labels } = &mut *scratch;
-            if !map.remap_into(view.image.as_raw(), 3, true, rgb) {
-                anyhow::bail!("camera {name}: remapping an image of the wrong size");
-            }
+            let Scratch { jpeg: encoder, images, labels } = &mut *scratch;
+            let Some(undistorter) = images.get_mut(view.camera) else { continue };
+            let rgb = undistorter
+                .undistort_rgb(view.image.as_raw())
+                .with_context(|| format!("camera {name}: undistorting an image for rerun"))?;
             // rerun keeps the encoded bytes: a new buffer each time.
             let mut jpeg = Vec::new();
             encoder

@@ -3,7 +3,7 @@
 //! entity tree"), or 3-D overlays would not line up with them.
 
 use hullcut_rig::Camera;
-use nalgebra::{Point2, Vector2};
+use nalgebra::Point2;
 
 /// For each pixel of the ideal (undistorted) image, where to read in the distorted image.
 ///
@@ -68,19 +68,13 @@ impl UndistortMap {
     /// The map of one camera.
     pub fn new(camera: &Camera) -> Self {
         let (w, h) = (camera.width, camera.height);
-        let limit = camera.distortion.monotonic_radius();
         let mut source = Vec::with_capacity(w as usize * h as usize);
         for j in 0..h {
             for i in 0..w {
-                let xn: Vector2<f64> = camera.pixel_to_normalized(Point2::new(f64::from(i), f64::from(j)));
-                let uv = camera.normalized_to_pixel(camera.distortion.distort(xn));
-                let ok = xn.norm() < limit && camera.contains_pixel(uv);
-                // Positions rounded to f32 as before, so that the nearest pixel is the same.
-                let (u, v) = (f64::from(uv.x as f32), f64::from(uv.y as f32));
-                source.push(if ok {
-                    Tap::new(u, v, w as usize, h as usize)
-                } else {
-                    Tap { base: Tap::NONE, fu: 0, fv: 0, flags: 0 }
+                source.push(match camera.distorted_source(Point2::new(f64::from(i), f64::from(j))) {
+                    // Positions rounded to f32 as before, so that the nearest pixel is the same.
+                    Some(uv) => Tap::new(f64::from(uv.x as f32), f64::from(uv.y as f32), w as usize, h as usize),
+                    None => Tap { base: Tap::NONE, fu: 0, fv: 0, flags: 0 },
                 });
             }
         }
