@@ -1,8 +1,9 @@
 //! JPEG encoding through OpenCV (libjpeg-turbo where OpenCV is built with it, as Debian's is):
 //! several times faster than the pure-Rust encoder, for images logged every few frames.
 
-use opencv::core::{Mat, Vec3b, Vector};
-use opencv::{imgcodecs, imgproc};
+use opencv::core::{CV_8UC3, Mat, Scalar, Vector};
+use opencv::imgcodecs;
+use opencv::prelude::*;
 
 use crate::error::{CaptureError, Context as _};
 
@@ -32,8 +33,15 @@ impl JpegEncoder {
                 rgb.len()
             )));
         }
-        let rgb = Mat::new_rows_cols_with_bytes::<Vec3b>(rows, cols, rgb).context(ctx)?;
-        imgproc::cvt_color_def(&rgb, &mut self.bgr, imgproc::COLOR_RGB2BGR).context(ctx)?;
+        if self.bgr.rows() != rows || self.bgr.cols() != cols || self.bgr.typ() != CV_8UC3 {
+            self.bgr = Mat::new_rows_cols_with_default(rows, cols, CV_8UC3, Scalar::all(0.0)).context(ctx)?;
+        }
+        let dst = self.bgr.data_bytes_mut().context(ctx)?;
+        for (d, s) in dst.chunks_exact_mut(3).zip(rgb.chunks_exact(3)) {
+            d[0] = s[2];
+            d[1] = s[1];
+            d[2] = s[0];
+        }
         let params = Vector::<i32>::from_slice(&[imgcodecs::IMWRITE_JPEG_QUALITY, self.quality]);
         let ok = imgcodecs::imencode(".jpg", &self.bgr, &mut self.encoded, &params).context(ctx)?;
         if !ok {

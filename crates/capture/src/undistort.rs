@@ -45,6 +45,7 @@ impl ImageUndistorter {
             return Err(CaptureError::Param { name: "camera size", message: format!("{}: {w}x{h}", ctx()) });
         };
         let (max_u, max_v) = (f64::from(w.max(1) - 1), f64::from(h.max(1) - 1));
+        let limit = camera.distortion.monotonic_radius();
         let mut map_x = Mat::new_rows_cols_with_default(rows, cols, CV_32FC1, Scalar::all(0.0)).context(ctx)?;
         let mut map_y = Mat::new_rows_cols_with_default(rows, cols, CV_32FC1, Scalar::all(0.0)).context(ctx)?;
         {
@@ -54,7 +55,7 @@ impl ImageUndistorter {
             for ((x, y), ideal) in xs.iter_mut().zip(ys.iter_mut()).zip(ideal) {
                 // Clamped into the image as the pure-Rust remap does (no tap beyond the last
                 // column or row is weighted).
-                (*x, *y) = match camera.distorted_source(ideal) {
+                (*x, *y) = match camera.distorted_source(ideal, limit) {
                     Some(uv) => (uv.x.clamp(0.0, max_u) as f32, uv.y.clamp(0.0, max_v) as f32),
                     None => (NO_SOURCE, NO_SOURCE),
                 };
@@ -163,10 +164,11 @@ mod tests {
             let (wu, hu) = (w as usize, h as usize);
             let at = |i: usize, j: usize, c: usize| f64::from(rgb[(j * wu + i) * 3 + c]);
             let (mut sampled, mut black, mut worst) = (0, 0, 0.0f64);
+            let limit = cam.distortion.monotonic_radius();
             for j in 0..hu {
                 for i in 0..wu {
                     let k = (j * wu + i) * 3;
-                    let Some(uv) = cam.distorted_source(Point2::new(i as f64, j as f64)) else {
+                    let Some(uv) = cam.distorted_source(Point2::new(i as f64, j as f64), limit) else {
                         assert_eq!(&out[k..k + 3], &[0, 0, 0], "pixel ({i}, {j}) has no source");
                         black += 1;
                         continue;

@@ -225,12 +225,14 @@ impl Camera {
 
     /// Where an ideal (undistorted) pixel reads in this camera's distorted image: the pixel
     /// position the same viewing direction lands on, or `None` where it falls outside the
-    /// image or beyond the radius up to which the distortion is one-to-one
-    /// ([`Distortion::monotonic_radius`]). What undistorting an image for display samples.
-    pub fn distorted_source(&self, ideal: Point2<f64>) -> Option<Point2<f64>> {
+    /// image or beyond `max_radius`, the radius up to which the distortion is one-to-one
+    /// ([`Distortion::monotonic_radius`], a search: computed once by the caller for a whole
+    /// image). What undistorting an image for display samples.
+    #[inline]
+    pub fn distorted_source(&self, ideal: Point2<f64>, max_radius: f64) -> Option<Point2<f64>> {
         let xn = self.pixel_to_normalized(ideal);
         let uv = self.normalized_to_pixel(self.distortion.distort(xn));
-        (xn.norm() < self.distortion.monotonic_radius() && self.contains_pixel(uv)).then_some(uv)
+        (xn.norm() < max_radius && self.contains_pixel(uv)).then_some(uv)
     }
 
     /// Pixel → the world ray through it, starting at the camera centre.

@@ -68,10 +68,11 @@ impl UndistortMap {
     /// The map of one camera.
     pub fn new(camera: &Camera) -> Self {
         let (w, h) = (camera.width, camera.height);
+        let limit = camera.distortion.monotonic_radius();
         let mut source = Vec::with_capacity(w as usize * h as usize);
         for j in 0..h {
             for i in 0..w {
-                source.push(match camera.distorted_source(Point2::new(f64::from(i), f64::from(j))) {
+                source.push(match camera.distorted_source(Point2::new(f64::from(i), f64::from(j)), limit) {
                     // Positions rounded to f32 as before, so that the nearest pixel is the same.
                     Some(uv) => Tap::new(f64::from(uv.x as f32), f64::from(uv.y as f32), w as usize, h as usize),
                     None => Tap { base: Tap::NONE, fu: 0, fv: 0, flags: 0 },
