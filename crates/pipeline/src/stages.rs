@@ -916,6 +916,9 @@ fn hull_frame_set(
             // track twice); the next frame set is carved in the whole volume.
             region.update(&boxed, occ);
         }
+        // A tool not trusted is looked for in the whole volume next ([`CarveRegion::set_tracked`]);
+        // without a tool.json there is no track to lose.
+        region.set_tracked(labelled.estimate.as_ref().is_none_or(|e| e.valid));
         let carve = Duration::from_secs_f64(labelled.carve_ms * 1e-3);
         // The tool's fit is the pose stage's work, done here (see [`pose_stage`]).
         let fit = labelled.stats.as_ref().map(|s| Duration::from_secs_f64(s.fit_ms * 1e-3));

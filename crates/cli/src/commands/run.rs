@@ -443,7 +443,8 @@ struct Report {
     /// `budget`): over_ms > 0 is a miss by that much.
     budget: Vec<hullcut_pipeline::budget::Line>,
     /// Where the frame sets were carved: in a box around the last hull, in the whole working
-    /// volume, and hulls that reached the box's side (carved again in the whole volume).
+    /// volume (of those, the ones after a tool not trusted), and hulls that reached the box's
+    /// side (carved again in the whole volume).
     carve_region: hullcut_pipeline::region::RegionCounts,
     /// Entities logged to the recording.
     entities: Vec<String>,
