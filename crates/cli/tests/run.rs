@@ -714,6 +714,13 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     let searches = ["searches", "searches_paused"].map(|k| counters[k].as_u64().expect("searches counted"));
     assert!(searches[0] > 0, "{counters}");
     assert_eq!(rows_of("/metrics/pose/hull_searched") as u64, searches[0] + searches[1], "{rows:?}");
+    // A frame set after one whose tool was refused is carved, and segmented, in the whole volume:
+    // some of the frame sets carved whole were so for that alone.
+    let region = &r["carve_region"];
+    let count = |k: &str| region[k].as_u64().unwrap_or_else(|| panic!("{k}: {region}"));
+    assert_eq!(count("boxed") + count("full"), 24, "{region}");
+    assert!(c["poses_refused"].as_u64().expect("refused") > 0, "{c}");
+    assert!((1..=count("full")).contains(&count("untracked")), "{region}");
 }
 
 /// The lobe resection seen by a seeded random rig of five cameras in a seeded random look (a
