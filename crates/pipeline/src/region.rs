@@ -64,16 +64,16 @@ impl CarveRegion {
 
     /// The box to carve the next frame set in.
     pub fn next_box(&mut self) -> Aabb {
+        let due = self.since_full + 1 >= FULL_EVERY;
         match self.last {
-            Some(last) if self.tracked && self.since_full + 1 < FULL_EVERY => {
+            Some(last) if self.tracked && !due => {
                 self.since_full += 1;
                 self.counts.boxed += 1;
                 self.around(&last)
             }
-            _ => {
-                if self.last.is_some() && !self.tracked && self.since_full + 1 < FULL_EVERY {
-                    self.counts.untracked += 1;
-                }
+            last => {
+                // Boxed but for the tool not trusted.
+                self.counts.untracked += u64::from(last.is_some() && !due);
                 self.since_full = 0;
                 self.counts.full += 1;
                 self.full
