@@ -8,7 +8,8 @@
 //! silhouette (the tool as predicted and rolled a few degrees either way about its long axis,
 //! [`LabelParams::roll_deg`]) are taken as scalpel for the fit, the rest as hand, so the outline of
 //! the tool against the background is what pulls the fit, and the hand's outline elsewhere does
-//! not.
+//! not. Small holes in that foreground near the tool ([`crate::holes`]: a grey handle over a grey
+//! table) are foreground of no label to the fit, not outline.
 //!
 //! With the fitted pose, the tool's mesh is drawn into every view with a depth buffer; a
 //! foreground pixel it covers is scalpel unless a hull cell of the hand (farther than
@@ -68,6 +69,11 @@ fn possible_shadow(hint: u8) -> bool {
 /// A possible shadow is evidence of the tool within this many pixels of the drawn tool (the fit
 /// puts the outline to a pixel or so).
 const SHADOW_REACH_PX: usize = 1;
+/// The holes of the fit's evidence filled before its outline is sampled: those of up to this share
+/// of the view's pixels ([`crate::holes`]) ...
+const HOLE_AREA: f64 = 1e-3;
+/// ... within this many pixels of the box of its scalpel pixels.
+const HOLE_MARGIN_PX: usize = 16;
 
 /// The largest side of a tool a template or labeller is built for, metres (a scalpel is some
 /// 15 cm long): see [`crate::check_tool`].
@@ -858,7 +864,27 @@ fn band_labels(
         }
     }
     clear_hand(&mut out, view.camera, radius, hand, hints, &scalpel);
+    fill_evidence_holes(&mut out, &scalpel);
     out
+}
+
+/// Fills the holes of the fit's evidence `labels` near its scalpel pixels (`scalpel`, their box
+/// widened by [`HOLE_MARGIN_PX`]) of up to [`HOLE_AREA`] of the view's pixels, enclosed by scalpel
+/// pixels alone, with [`label::UNKNOWN`]: foreground the tool may cover, and no outline of it. A
+/// hole the hand closes (a gap between a finger and a blade seen edge-on) is left as it is: its
+/// rim is where the tool is, and filled, a blade turned across it fitted as well (random:1307 in
+/// random:1193, four cameras: right fits seen edge-on by two views refused as free to turn).
+fn fill_evidence_holes(labels: &mut GrayImage, scalpel: &PixelBox) {
+    if scalpel.is_empty() {
+        return;
+    }
+    let (w, h) = (labels.width() as usize, labels.height() as usize);
+    let (x0, y0) = (scalpel.lo.0.saturating_sub(HOLE_MARGIN_PX), scalpel.lo.1.saturating_sub(HOLE_MARGIN_PX));
+    let (x1, y1) = ((scalpel.hi.0 + HOLE_MARGIN_PX + 1).min(w), (scalpel.hi.1 + HOLE_MARGIN_PX + 1).min(h));
+    let max_area = (HOLE_AREA * (w * h) as f64) as usize;
+    crate::holes::fill_holes(labels.as_mut(), w, (x0, y0, x1 - x0, y1 - y0), (max_area, label::UNKNOWN), |l| {
+        l == label::SCALPEL
+    });
 }
 
 /// Where [`band_labels`] takes the fit's evidence: within `px` pixels of the tool's outline, the
@@ -2137,6 +2163,69 @@ mod tests {
         assert_eq!(label_with(POSSIBLE_SHADOW), label::SCALPEL, "a possible shadow where the tool is drawn");
         assert_eq!(label_with(TOOL_COLOURED_SHADOW), label::SCALPEL, "one of the tool's colour, alike");
         assert_eq!(label_with(TABLE_SHADOW), label::HAND, "a shadow on the table, even where the tool is drawn");
+    }
+
+    /// A hole in the tool's foreground (its colour the background's there) is foreground of no
+    /// label to the fit, and its rim no outline; a notch open to the background stays outline.
+    #[test]
+    fn holes_in_the_tools_foreground_are_no_outline_and_notches_are() {
+        // The standard scalpel lying face-up under a camera 0.5 m above it, its pixels the
+        // foreground.
+        let scalpel = hullcut_synth::Scalpel::new();
+        let template = Template::new(&scalpel.geometry).expect("the scalpel's template");
+        let camera = Camera::new("top", 400, 400, 1000.0, 1000.0, 200.0, 200.0)
+            .looking_at(Point3::new(0.0, 0.0, 0.5), Point3::origin(), Vector3::y())
+            .expect("a camera looking down");
+        let pose = Isometry3::identity();
+        let radius = camera.distortion.monotonic_radius();
+        let depth = ToolDepth::draw(&camera, radius, &scalpel.geometry.mesh, &pose).expect("the tool in view");
+        let mut mask = GrayImage::new(400, 400);
+        for (k, d) in depth.depth.iter().enumerate() {
+            if d.is_finite() {
+                let (i, j) = ((depth.x0 + k % depth.w) as u32, (depth.y0 + k / depth.w) as u32);
+                mask.put_pixel(i, j, image::Luma([label::UNKNOWN]));
+            }
+        }
+        // A 3x3 hole in the middle of the blade's face; a notch cut from the body's edge inwards.
+        let uv = project(&camera, radius, &Point3::new(0.02, 0.0, 0.0)).expect("the blade in view");
+        let (hi, hj) = (uv.x.round() as u32, uv.y.round() as u32);
+        let hole: Vec<(u32, u32)> = (hi - 1..=hi + 1).flat_map(|i| (hj - 1..=hj + 1).map(move |j| (i, j))).collect();
+        let body = project(&camera, radius, &Point3::new(-0.04, 0.0, 0.0)).expect("the body in view");
+        let (bi, bj) = (body.x.round() as u32, body.y.round() as u32);
+        let top =
+            (0..bj).rev().find(|&j| mask.get_pixel(bi, j).0[0] == label::BACKGROUND).expect("the body's edge") + 1;
+        let notch: Vec<(u32, u32)> = (top..top + 3).map(|j| (bi, j)).collect();
+        for &(i, j) in hole.iter().chain(&notch) {
+            assert_eq!(mask.get_pixel(i, j).0[0], label::UNKNOWN, "({i}, {j}) on the tool");
+            mask.put_pixel(i, j, image::Luma([label::BACKGROUND]));
+        }
+        let cells = HandCells::new(Vec::new(), Vec::new());
+        let hand = HandInFront { hand: &cells, tool: Some(&depth), margin: 0.003, tool_colour_decides: true };
+        let view = ViewInput { camera: &camera, mask: &mask, image: None };
+        let labels = band_labels(view, &template, &pose, Band { px: 3.0, roll_deg: 0.0 }, &hand, None);
+        assert!(hole.iter().all(|&(i, j)| labels.get_pixel(i, j).0[0] == label::UNKNOWN));
+        assert!(notch.iter().all(|&(i, j)| labels.get_pixel(i, j).0[0] == label::BACKGROUND));
+        // The outline the fit samples: scalpel pixels beside background ones (`ViewEvidence`).
+        let outline_at = |labels: &GrayImage, pixels: &[(u32, u32)]| {
+            pixels
+                .iter()
+                .flat_map(|&(i, j)| [(i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)])
+                .filter(|&(i, j)| labels.get_pixel(i, j).0[0] == label::SCALPEL)
+                .filter(|&(i, j)| {
+                    [(i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)]
+                        .iter()
+                        .any(|&(a, b)| labels.get_pixel(a, b).0[0] == label::BACKGROUND)
+                })
+                .count()
+        };
+        assert_eq!(outline_at(&labels, &hole), 0, "no outline around the hole");
+        assert!(outline_at(&labels, &notch) > 0, "the notch's sides are outline");
+        // Left as it was, the hole's rim is outline.
+        let mut unfilled = labels.clone();
+        for &(i, j) in &hole {
+            unfilled.put_pixel(i, j, image::Luma([label::BACKGROUND]));
+        }
+        assert!(outline_at(&unfilled, &hole) >= 8);
     }
 
     #[test]

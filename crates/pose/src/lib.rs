@@ -32,6 +32,7 @@ mod evidence;
 mod filter;
 mod fit;
 mod geometry;
+mod holes;
 mod init;
 pub mod labels;
 mod metrics;
