@@ -8,8 +8,8 @@
 //! silhouette (the tool as predicted and rolled a few degrees either way about its long axis,
 //! [`LabelParams::roll_deg`]) are taken as scalpel for the fit, the rest as hand, so the outline of
 //! the tool against the background is what pulls the fit, and the hand's outline elsewhere does
-//! not. Small holes in that foreground near the tool ([`crate::holes`]: a grey handle over a grey
-//! table) are foreground of no label to the fit, not outline.
+//! not. Small holes in that foreground near the tool (a grey handle over a grey table) are
+//! foreground of no label to the fit, not outline, on rigs of six views or more.
 //!
 //! With the fitted pose, the tool's mesh is drawn into every view with a depth buffer; a
 //! foreground pixel it covers is scalpel unless a hull cell of the hand (farther than
