@@ -302,9 +302,11 @@ pub struct LabelCounters {
     /// from them.
     #[serde(default)]
     pub bootstrap_refused: u64,
-    /// Trusted frame sets that would have taught the colours, but after which no class of the
-    /// tool lay outside the hand's 99% ellipsoid (the tool's colours the hand's): rolled back,
-    /// nothing learned (0 in reports written before the thirty-ninth session).
+    /// Trusted frame sets that would have taught the colours, but after which every class of the
+    /// tool had its mean within the hand's own spread (squared Mahalanobis distance 3 of the
+    /// hand's: the tool taught the hand's colours): rolled back, nothing learned, and no trusted
+    /// frame set taught for fifteen frame sets (0 in reports written before the thirty-ninth
+    /// session).
     #[serde(default)]
     pub learn_refused: u64,
     /// Pixels that looked like cast shadows (darker, chromaticity unchanged), over all views.
