@@ -31,14 +31,13 @@ fn root(runs: &mut [Run], mut i: usize) -> usize {
 }
 
 /// Fills the holes of at most `max_area` pixels in the `w`×`h` window at (`x0`, `y0`) of `buf`
-/// (row stride `stride`; zero is background, and so is everything outside the window) whose every
-/// 4-neighbour outside them satisfies `rim` with `fill`; returns the pixels filled.
+/// (row stride `stride`; zero is background, and so is everything outside the window) with
+/// `fill`; returns the pixels filled.
 pub(crate) fn fill_holes(
     buf: &mut [u8],
     stride: usize,
     (x0, y0, w, h): (usize, usize, usize, usize),
     (max_area, fill): (usize, u8),
-    rim: impl Fn(u8) -> bool,
 ) -> usize {
     if max_area == 0 || w < 3 || h < 3 {
         return 0;
@@ -90,7 +89,7 @@ pub(crate) fn fill_holes(
             j += 1;
         }
     }
-    // Per component root: its area and whether it leaks (or its rim fails `rim`).
+    // Per component root: its area and whether it leaks.
     let mut area = vec![(0, false); runs.len()];
     for i in 0..runs.len() {
         let Run { y, a, b, .. } = runs[i];
@@ -100,16 +99,9 @@ pub(crate) fn fill_holes(
             Some(Some((f, l))) => a < *f || b > l + 1,
         };
         let leaks = y == 0 || y + 1 == h || outside(y.checked_sub(1)) || outside(Some(y + 1));
-        // The rim: the foreground ending the run on either side, and above and below it.
-        let here = row(y).start;
-        let mut rim_ok = rim(buf[here + a - 1]) && rim(buf[here + b]);
-        for n in [y.wrapping_sub(1), y + 1].into_iter().filter(|&n| n < h) {
-            let start = row(n).start;
-            rim_ok &= buf[start + a..start + b].iter().all(|&p| p == 0 || rim(p));
-        }
         let r = root(&mut runs, i);
         area[r].0 += b - a;
-        area[r].1 |= leaks || !rim_ok;
+        area[r].1 |= leaks;
     }
     let mut filled = 0;
     for i in 0..runs.len() {
@@ -142,7 +134,7 @@ mod tests {
 
     fn filled(rows: &[&str], max_area: usize) -> Vec<String> {
         let (mut buf, w, h) = parse(rows);
-        fill_holes(&mut buf, w, (0, 0, w, h), (max_area, 255), |_| true);
+        fill_holes(&mut buf, w, (0, 0, w, h), (max_area, 255));
         show(&buf, w)
     }
 
@@ -206,18 +198,17 @@ mod tests {
                 }
             }
         }
-        let n = fill_holes(&mut buf, w, (1, 0, 6, 6), (10, 9), |_| true);
+        let n = fill_holes(&mut buf, w, (1, 0, 6, 6), (10, 9));
         assert_eq!(n, 4);
         assert_eq!(&buf[2 * w..3 * w], &[0, 0, 7, 9, 9, 7, 0, 0]);
         // A window that cuts the ring: what it holds of the hole reaches its edge, and leaks.
         let mut cut = buf.clone();
         cut[2 * w + 3..2 * w + 5].fill(0);
-        assert_eq!(fill_holes(&mut cut, w, (1, 0, 6, 3), (10, 9), |_| true), 0);
+        assert_eq!(fill_holes(&mut cut, w, (1, 0, 6, 3), (10, 9)), 0);
     }
 
     /// The holes by a flood fill from the window's border over 4-connected background, each
-    /// remaining component measured and its rim read (no neighbour of label 3): what
-    /// `fill_holes` must fill.
+    /// remaining component measured: what `fill_holes` must fill.
     fn flood_filled(buf: &[u8], w: usize, h: usize, max_area: usize) -> Vec<u8> {
         let mut comp = vec![usize::MAX; w * h];
         let mut out = buf.to_vec();
@@ -251,15 +242,7 @@ mod tests {
                     push(k + w);
                 }
             }
-            // Its rim: every 4-neighbour not of it is foreground, and must not be label 3.
-            let rim_ok = members.iter().all(|&k| {
-                let (x, y) = (k % w, k / w);
-                [(x.wrapping_sub(1), y), (x + 1, y), (x, y.wrapping_sub(1)), (x, y + 1)]
-                    .into_iter()
-                    .filter(|&(i, j)| i < w && j < h)
-                    .all(|(i, j)| buf[j * w + i] != 3)
-            });
-            if !leaks && rim_ok && members.len() <= max_area {
+            if !leaks && members.len() <= max_area {
                 for k in members {
                     out[k] = 5;
                 }
@@ -285,7 +268,7 @@ mod tests {
             let max_area = next(12);
             let expected = flood_filled(&buf, w, h, max_area);
             let mut got = buf.clone();
-            let n = fill_holes(&mut got, w, (0, 0, w, h), (max_area, 5), |p| p != 3);
+            let n = fill_holes(&mut got, w, (0, 0, w, h), (max_area, 5));
             assert_eq!(got, expected, "round {round}: {w}x{h}, at most {max_area}");
             assert_eq!(n, got.iter().zip(&buf).filter(|(a, b)| a != b).count());
             filled_any += usize::from(n > 0);

@@ -890,7 +890,7 @@ fn fill_evidence_holes(labels: &mut GrayImage, scalpel: &PixelBox) {
     let (x0, y0) = (scalpel.lo.0.saturating_sub(HOLE_MARGIN_PX), scalpel.lo.1.saturating_sub(HOLE_MARGIN_PX));
     let (x1, y1) = ((scalpel.hi.0 + HOLE_MARGIN_PX + 1).min(w), (scalpel.hi.1 + HOLE_MARGIN_PX + 1).min(h));
     let max_area = (HOLE_AREA * (w * h) as f64) as usize;
-    crate::holes::fill_holes(labels.as_mut(), w, (x0, y0, x1 - x0, y1 - y0), (max_area, label::UNKNOWN), |_| true);
+    crate::holes::fill_holes(labels.as_mut(), w, (x0, y0, x1 - x0, y1 - y0), (max_area, label::UNKNOWN));
 }
 
 /// Where [`band_labels`] takes the fit's evidence: within `px` pixels of the tool's outline, the
