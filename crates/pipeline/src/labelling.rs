@@ -363,6 +363,11 @@ pub struct LabelCounters {
     /// is background without a test: outside the box's rectangle, or the last hull's stretches).
     #[serde(default)]
     pub pixels_tested: u64,
+    /// Pixels that passed the foreground tests only at half their tolerances and joined the
+    /// foreground they touch (the segmenter's hysteresis, `SegmentParams::weak_share`), over
+    /// every view and frame set, before the clean-up.
+    #[serde(default)]
+    pub weak_joined: u64,
     /// Frame sets whose hull's thin parts were searched for the tool (nothing trusted from the
     /// track: it was lost, or its prediction's fit refused).
     #[serde(default)]
@@ -850,6 +855,8 @@ impl Labelling {
             shadow_tolerance: p.shadow_tolerance * WEAK_SCALE,
             chroma_tolerance: p.chroma_tolerance * WEAK_SCALE,
             chroma_noise: p.chroma_noise * WEAK_SCALE,
+            // Every pixel of the scaled test, joined to the foreground or not: the hull confirms.
+            weak_share: 1.0,
             ..p.clone()
         };
         self.weak = Some(Segmenter::from_dataset(ds, weak).context("setting up the weak foreground test")?);
@@ -1009,6 +1016,7 @@ impl Labelling {
         self.counters.segmented_near_hull += u64::from(near_hull);
         self.counters.reached_past_hull += u64::from(near_hull && reached);
         self.counters.pixels_tested += self.segmented.pixels;
+        self.counters.weak_joined += tested.iter().map(|t| t.joined).sum::<u64>();
         // Set again once this frame set's hull is carved.
         self.last_blocks = None;
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;

@@ -1,4 +1,7 @@
 //! Diagnostic: the geometric labeller on a dataset's truth foreground (labels dropped).
+//!
+//! `label_probe DATASET [FRAMES] [SEGMENT_OUT]`: masks from `hullcut segment --out SEGMENT_OUT`
+//! when given; `PROBE_VOTES=K` carves the hull k-of-N (`HullParams::carve_votes`, 1 by default).
 use hullcut_dataset::{Dataset, label};
 use hullcut_hull::{Aabb, HullParams, carve, silhouettes};
 use hullcut_pose::labels::thin_parts;
@@ -40,7 +43,8 @@ fn main() {
         let t = truth.iter().find(|t| t.frame == f).expect("truth frame");
         let centre = Point3::from(t.tool_to_world.fixed_view::<3, 1>(0, 3).into_owned());
         let bx = Aabb { min: centre - Vector3::new(0.25, 0.25, 0.25), max: centre + Vector3::new(0.25, 0.25, 0.25) };
-        let occ = carve(&views, &HullParams::new(bx, 0.003125)).expect("carve");
+        let votes = std::env::var("PROBE_VOTES").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+        let occ = carve(&views, &HullParams { carve_votes: votes, ..HullParams::new(bx, 0.003125) }).expect("carve");
         let (_, comps) = thin_parts(&occ, 0.007);
         let axis = t.tool_to_world.fixed_view::<3, 1>(0, 0).into_owned();
         for (k, c) in comps.iter().take(5).enumerate() {

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 use crate::error::CaptureError;
 
 use super::classes::ClassLut;
-use super::{ENC_SHADOW, SegmentParams};
+use super::{ENC_SHADOW, ENC_WEAK, ENC_WEAK_DARK, SegmentParams};
 
 /// Pixels used for the exposure estimate: every `GAIN_STEP`-th pixel of every `GAIN_STEP`-th row.
 const GAIN_STEP: usize = 16;
@@ -75,6 +75,9 @@ pub(crate) struct Thresholds {
     kappa: u16,
     /// ν, Q16 (1 rounds to 65535/65536: at most one grey level less).
     chroma_noise: u16,
+    /// The weak share of every tolerance, Q16; 0: no weak pixels ([`SegmentParams::weak_share`]
+    /// 1).
+    weak: u16,
 }
 
 impl Thresholds {
@@ -87,6 +90,7 @@ impl Thresholds {
             deep: q16(params.shadow_depth.max(params.shadow_tolerance)),
             kappa: q16(params.chroma_tolerance),
             chroma_noise: q16(params.chroma_noise),
+            weak: if params.weak_share < 1.0 { q16(params.weak_share).max(1) } else { 0 },
         }
     }
 }
@@ -262,7 +266,8 @@ impl BackgroundModel {
 
     /// [`BackgroundModel::foreground_row`] for each row of a window `w` pixels wide from column
     /// `x0`, row `y0`, of an image `full_w` pixels wide (`raw`, RGB): `labels` holds the window's
-    /// rows, `active[j]` is set to whether row `j` has any foreground. With `stretches`, only the
+    /// rows, `active[j]` is set to whether row `j` has any foreground, `kinds[j]` to what it may
+    /// hold ([`RowKinds`]). With `stretches`, only the
     /// columns `a..b` of image row `y` that `stretches[y]` names are tested (within the window;
     /// a row beyond `stretches` has none); the rest of the window is background. Compiled for
     /// the widest vector instructions the processor has (pulp's run-time dispatch: the same
@@ -278,9 +283,11 @@ impl BackgroundModel {
         lut: &ClassLut,
         labels: &mut [u8],
         active: &mut [bool],
+        kinds: &mut [RowKinds],
     ) {
         if w == 0 {
             active.fill(false);
+            kinds.fill(RowKinds::default());
             return;
         }
         pulp::Arch::new().dispatch(WindowPass {
@@ -295,13 +302,15 @@ impl BackgroundModel {
             lut,
             labels,
             active,
+            kinds,
         });
     }
 
     /// Foreground test and colour classes for the `out.len()` pixels from pixel index `start`
     /// (`y · width + x`, within one row; `row_rgb` holds their colours): `out[i]` = 0 for
-    /// background, else the encoded class of the pixel's colour. Returns whether any is
-    /// foreground.
+    /// background, else the encoded class of the pixel's colour (or [`test_pixel`]'s code for a
+    /// possible shadow or a weak pixel). Returns whether any is not background, and what the
+    /// pixels hold (columns from the first of `out`).
     ///
     /// Bounds (all u16): s ≤ 765; 2Eₛ ≤ 1530; γ·Eₛ = hi(γ·2Eₛ) ≤ 1.99·765 < 1530; β·γEₛ + 3τ ≤
     /// 1530 + 765; ê_c·s = hi(ê_c·s) ≤ s; Σ_c |c − ê_c·s| ≤ 3·765; κ·s + ν·3τ ≤ 765 + 765.
@@ -314,13 +323,13 @@ impl BackgroundModel {
         t: Thresholds,
         lut: &ClassLut,
         out: &mut [u8],
-    ) -> bool {
+    ) -> (bool, RowKinds) {
         let w = out.len();
         let range = start..start + w;
         let (hr, hg, hb) =
             (&self.chroma_r[range.clone()], &self.chroma_g[range.clone()], &self.chroma_b[range.clone()]);
         let (es2, tol3) = (&self.sum2[range.clone()], &self.tol3[range]);
-        let mut any = false;
+        let (mut any, mut bits, mut sure) = (false, 0, (u32::MAX, 0));
         let chunks = w / LANES;
         for c in 0..chunks {
             let span = c * LANES..(c + 1) * LANES;
@@ -336,9 +345,13 @@ impl BackgroundModel {
                 t,
                 o,
             );
-            if fg {
+            if fg != 0 {
                 any = true;
-                classify(p, lut, o);
+                bits |= fg & (WEAK_BIT | SURE_BIT);
+                if fg & SURE_BIT != 0 {
+                    classify(p, lut, o);
+                    sure = (sure.0.min((c * LANES) as u32), ((c + 1) * LANES) as u32);
+                }
             }
         }
         // The last pixels of a row whose width is not a multiple of LANES, one at a time.
@@ -350,8 +363,12 @@ impl BackgroundModel {
                 _ => code,
             };
             any |= code != 0;
+            bits |= (code & WEAK_BIT) | (u8::from(code == SURE) * SURE_BIT);
+            if code == SURE {
+                sure = (sure.0.min(x as u32), x as u32 + 1);
+            }
         }
-        any
+        (any, RowKinds { bits, sure: if sure.0 < sure.1 { sure } else { (0, 0) } })
     }
 }
 
@@ -369,6 +386,7 @@ struct WindowPass<'a> {
     lut: &'a ClassLut,
     labels: &'a mut [u8],
     active: &'a mut [bool],
+    kinds: &'a mut [RowKinds],
 }
 
 /// The columns of a window's row that are tested: image row `y`'s stretch in `stretches` (none
@@ -387,8 +405,8 @@ impl pulp::WithSimd for WindowPass<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let WindowPass { model, raw, full_w, x0, y0, w, stretches, t, lut, labels, active } = self;
-        for ((j, row_labels), any) in labels.chunks_exact_mut(w).enumerate().zip(active.iter_mut()) {
+        let WindowPass { model, raw, full_w, x0, y0, w, stretches, t, lut, labels, active, kinds } = self;
+        for (((j, row_labels), any), kind) in labels.chunks_exact_mut(w).enumerate().zip(active.iter_mut()).zip(kinds) {
             let (a, b) = tested_columns(stretches, y0 + j, x0, w);
             // A stretch is tested in whole vector steps where the window has room (the pixels
             // one at a time cost several times as much), the pixels beyond it cleared after.
@@ -401,11 +419,19 @@ impl pulp::WithSimd for WindowPass<'_> {
                 (a, b)
             };
             let start = (y0 + j) * full_w + x0 + c;
-            let found =
+            let (found, found_kinds) =
                 model.foreground_row(&raw[3 * start..3 * (start + d - c)], start, t, lut, &mut row_labels[c..d]);
             row_labels[..a].fill(0);
             row_labels[b..].fill(0);
             *any = found && ((c, d) == (a, b) || row_labels[a..b].iter().any(|&l| l != 0));
+            *kind = if *any {
+                RowKinds {
+                    bits: found_kinds.bits,
+                    sure: (found_kinds.sure.0 + c as u32, found_kinds.sure.1 + c as u32),
+                }
+            } else {
+                RowKinds::default()
+            };
         }
     }
 }
@@ -413,29 +439,66 @@ impl pulp::WithSimd for WindowPass<'_> {
 /// [`test_pixel`]'s answer for a pixel that is foreground.
 const SURE: u8 = 2;
 
+/// What one row of a window may hold ([`BackgroundModel::foreground_window`]): every row that
+/// holds a kind of pixel says so, and some may say so that do not.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct RowKinds {
+    /// [`WEAK_BIT`]: weak pixels ([`ENC_WEAK`], [`ENC_WEAK_DARK`]); [`SURE_BIT`]: sure foreground.
+    pub bits: u8,
+    /// The window's columns `from..to` that hold every sure foreground pixel of the row (empty
+    /// without any).
+    pub sure: (u32, u32),
+}
+
+/// The bit of [`test_pixel`]'s codes that only the weak ones set.
+pub(crate) const WEAK_BIT: u8 = 4;
+/// The bit [`test_lanes`] sets in its answer where some pixel is [`SURE`] (no code sets it).
+pub(crate) const SURE_BIT: u8 = 8;
+const _: () = assert!(
+    ENC_WEAK & WEAK_BIT != 0
+        && ENC_WEAK_DARK & WEAK_BIT != 0
+        && SURE & WEAK_BIT == 0
+        && ENC_SHADOW & WEAK_BIT == 0
+        && (ENC_WEAK | ENC_WEAK_DARK | SURE | ENC_SHADOW) & SURE_BIT == 0
+);
+
 /// The foreground test for one pixel (see the module docs): 0 background, [`SURE`] foreground,
 /// [`ENC_SHADOW`] darker than the background by between β_shadow and the shadow depth with its
-/// chromaticity unchanged (a cast shadow, or a dark object of the background's colour).
+/// chromaticity unchanged (a cast shadow, or a dark object of the background's colour); else,
+/// with a weak share ([`SegmentParams::weak_share`]), [`ENC_WEAK`] brighter or of another
+/// chromaticity than that share of the tolerances allows, [`ENC_WEAK_DARK`] only darker than
+/// that share of β_shadow allows.
 #[inline(always)]
 fn test_pixel([r, g, b]: [u16; 3], m: [u16; 5], t: Thresholds) -> u8 {
     let [hr, hg, hb, es2, tol3] = m;
     let s = r + g + b;
     let ges = mulhi(t.gain, es2);
-    let brighter = s.saturating_sub(ges) > mulhi(t.beta, ges) + tol3;
+    let lighter = s.saturating_sub(ges);
+    let bright_tol = mulhi(t.beta, ges) + tol3;
+    let brighter = lighter > bright_tol;
     let dark = ges.saturating_sub(s);
-    let darker = dark > mulhi(t.shadow, ges) + tol3;
+    let dark_tol = mulhi(t.shadow, ges) + tol3;
+    let darker = dark > dark_tol;
     let deeper = dark > mulhi(t.deep, ges) + tol3;
     let dc = r.abs_diff(mulhi(hr, s)) + g.abs_diff(mulhi(hg, s)) + b.abs_diff(mulhi(hb, s));
     let tc = mulhi(t.kappa, s) + mulhi(t.chroma_noise, tol3);
     let sure = brighter | deeper | (dc > tc);
-    SURE * u8::from(sure) + ENC_SHADOW * u8::from(darker & !sure)
+    let tested = (t.weak != 0) & !sure & !darker;
+    let weak = tested & ((lighter > mulhi(t.weak, bright_tol)) | (dc > mulhi(t.weak, tc)));
+    let weak_dark = tested & !weak & (dark > mulhi(t.weak, dark_tol));
+    SURE * u8::from(sure)
+        + ENC_SHADOW * u8::from(darker & !sure)
+        + ENC_WEAK * u8::from(weak)
+        + ENC_WEAK_DARK * u8::from(weak_dark)
 }
 
-/// The foreground test for `LANES` pixels (1 = foreground), written for the auto-vectorizer:
-/// fixed-size arrays, planar inputs, no branches. Returns whether any pixel is foreground
-/// (reduced in registers: reading `out` back would stall on store forwarding).
+/// The foreground test for `LANES` pixels ([`test_pixel`]'s codes), written for the
+/// auto-vectorizer: fixed-size arrays, planar inputs, no branches. Returns the codes' bitwise or
+/// (reduced in registers: reading `out` back would stall on store forwarding): 0 where every pixel
+/// is background, [`WEAK_BIT`] set where some pixel is weak, [`SURE_BIT`] where some is sure
+/// foreground.
 #[inline(always)]
-fn test_lanes(p: &[u8; 3 * LANES], m: [&[u16]; 5], t: Thresholds, out: &mut [u8; LANES]) -> bool {
+fn test_lanes(p: &[u8; 3 * LANES], m: [&[u16]; 5], t: Thresholds, out: &mut [u8; LANES]) -> u8 {
     let [hr, hg, hb, es2, tol3] = m;
     let (Ok(hr), Ok(hg), Ok(hb), Ok(es2), Ok(tol3)) = (
         <&[u16; LANES]>::try_from(hr),
@@ -444,16 +507,16 @@ fn test_lanes(p: &[u8; 3 * LANES], m: [&[u16]; 5], t: Thresholds, out: &mut [u8;
         <&[u16; LANES]>::try_from(es2),
         <&[u16; LANES]>::try_from(tol3),
     ) else {
-        return false;
+        return 0;
     };
     let mut acc = 0u8;
     for i in 0..LANES {
         let px = [u16::from(p[3 * i]), u16::from(p[3 * i + 1]), u16::from(p[3 * i + 2])];
         let f = test_pixel(px, [hr[i], hg[i], hb[i], es2[i], tol3[i]], t);
         out[i] = f;
-        acc |= f;
+        acc |= f | (u8::from(f == SURE) * SURE_BIT);
     }
-    acc != 0
+    acc
 }
 
 /// Replaces sure foreground by encoded colour classes.
@@ -532,8 +595,8 @@ mod tests {
     fn the_dispatched_window_pass_labels_every_pixel_as_the_one_pixel_test_does() -> Result<(), CaptureError> {
         // Possible shadows down to 0.5 of the background's brightness (the loop's setting).
         let params = SegmentParams { shadow_depth: 0.5, ..SegmentParams::default() };
-        // Pixels seen as background, possible shadow and sure foreground.
-        let mut seen = [0usize; 3];
+        // Pixels seen as background, possible shadow, sure foreground and weak.
+        let mut seen = [0usize; 4];
         // Widths that are and are not multiples of the vector step, windows at odd offsets.
         for (seed, (w, h)) in [(1, (64, 9)), (2, (97, 13)), (3, (37, 21))].into_iter() {
             let empty: Vec<RgbImage> = (0..3).map(|k| noisy(w, h, seed * 10 + k, [120, 110, 90], 6)).collect();
@@ -559,7 +622,8 @@ mod tests {
                     windows.into_iter().flat_map(|win| [(win, None), (win, Some(&stretches[..]))])
                 {
                     let rows = h as usize - y0;
-                    let (mut labels, mut active) = (vec![7u8; ww * rows], vec![true; rows]);
+                    let (mut labels, mut active, mut kinds) =
+                        (vec![7u8; ww * rows], vec![true; rows], vec![RowKinds::default(); rows]);
                     model.foreground_window(
                         scene.as_raw(),
                         w as usize,
@@ -569,9 +633,10 @@ mod tests {
                         &lut,
                         &mut labels,
                         &mut active,
+                        &mut kinds,
                     );
                     for j in 0..rows {
-                        let mut any = false;
+                        let (mut any, mut any_weak) = (false, false);
                         for i in 0..ww {
                             let k = (y0 + j) * w as usize + x0 + i;
                             let tested = stretches.is_none_or(|s| {
@@ -590,13 +655,26 @@ mod tests {
                                 y0 + j
                             );
                             any |= code != 0;
+                            any_weak |= code == ENC_WEAK || code == ENC_WEAK_DARK;
+                            if code == SURE {
+                                let (from, to) = kinds[j].sure;
+                                assert!(kinds[j].bits & SURE_BIT != 0, "row {} has sure pixels", y0 + j);
+                                assert!(
+                                    (from as usize..to as usize).contains(&i),
+                                    "({}, {}) in {from}..{to}",
+                                    x0 + i,
+                                    y0 + j
+                                );
+                            }
                             seen[match code {
                                 0 => 0,
                                 ENC_SHADOW => 1,
+                                ENC_WEAK | ENC_WEAK_DARK => 3,
                                 _ => 2,
                             }] += 1;
                         }
                         assert_eq!(active[j], any, "row {}", y0 + j);
+                        assert!(kinds[j].bits & WEAK_BIT != 0 || !any_weak, "row {} has weak pixels", y0 + j);
                     }
                 }
             }

@@ -473,16 +473,27 @@ fn a_pale_hand_over_wood_is_foreground_with_half_the_noise_allowance_and_the_woo
         }
         Ok((f64::from(hand) / f64::from(inside), f64::from(wood) / f64::from(outside)))
     };
-    let (half, half_wood) = shares(SegmentParams::default())?;
-    let (whole, whole_wood) = shares(SegmentParams { chroma_noise: 1.0, ..SegmentParams::default() })?;
+    // The tests alone (no hysteresis), then with it.
+    let alone = SegmentParams { weak_share: 1.0, ..SegmentParams::default() };
+    let (half, half_wood) = shares(alone.clone())?;
+    let (whole, whole_wood) = shares(SegmentParams { chroma_noise: 1.0, ..alone })?;
+    let (joined, joined_wood) = shares(SegmentParams { chroma_noise: 1.0, ..SegmentParams::default() })?;
     println!(
-        "pale hand found: {half:.3} with half the allowance, {whole:.3} with all of it; wood: {half_wood:.5}, {whole_wood:.5}"
+        "pale hand found: {half:.3} with half the allowance, {whole:.3} with all of it, {joined:.3} with all of it and \
+         the pixels that pass at half the tolerances joining it; wood: {half_wood:.5}, {whole_wood:.5}, {joined_wood:.5}"
     );
     assert!(half > 0.95, "{half}");
     assert!(whole < 0.2, "{whole}");
     assert!(half_wood < 1e-3, "{half_wood}");
+    // The hysteresis finds the hand that the whole allowance hides, and no wood.
+    assert!(joined > 0.95, "{joined}");
+    assert!(joined_wood < 1e-3, "{joined_wood}");
     // Outside 0..1 is refused, naming the setting.
     let bad = Segmenter::new(SegmentParams { chroma_noise: 1.5, ..SegmentParams::default() }, &backgrounds);
     assert!(bad.is_err_and(|e| e.to_string().contains("chroma_noise")));
+    for share in [0.0, -0.5, 1.5, f64::NAN] {
+        let bad = Segmenter::new(SegmentParams { weak_share: share, ..SegmentParams::default() }, &backgrounds);
+        assert!(bad.is_err_and(|e| e.to_string().contains("weak_share")), "{share}");
+    }
     Ok(())
 }
