@@ -7,12 +7,36 @@ use super::classes::ClassLut;
 use super::{ENC_SCALPEL, ENC_SHADOW, ENC_UNKNOWN, ENC_WEAK, ENC_WEAK_DARK};
 
 /// Where the window lies in its image: the image's raw RGB bytes, its width, and the window's
-/// first column and row.
+/// first column and row; the background model's mean image (raw RGB, the image's size) and the
+/// image's exposure gain against it.
 pub(crate) struct ImageWindow<'a> {
     pub raw: &'a [u8],
     pub full_w: usize,
     pub x0: usize,
     pub y0: usize,
+    pub background: &'a [u8],
+    pub gain: f32,
+}
+
+impl ImageWindow<'_> {
+    /// The first byte of window pixel `i`'s colour (`w` the window's width).
+    fn at(&self, i: usize, w: usize) -> usize {
+        3 * ((self.y0 + i / w) * self.full_w + self.x0 + i % w)
+    }
+
+    /// Whether window pixel `j`'s colour lies nearer to pixel `i`'s (L1) than to its own
+    /// background's: a pixel of the object `i` belongs to, not a streak of a textured table beside
+    /// it.
+    fn like(&self, j: usize, i: usize, w: usize) -> bool {
+        let (a, b) = (self.at(j, w), self.at(i, w));
+        let (mut to_object, mut to_background) = (0.0f32, 0.0f32);
+        for c in 0..3 {
+            let p = f32::from(self.raw[a + c]);
+            to_object += (p - f32::from(self.raw[b + c])).abs();
+            to_background += (p - self.gain * f32::from(self.background[a + c])).abs();
+        }
+        to_object < to_background
+    }
 }
 
 /// Which rows of a window may hold what.
@@ -26,7 +50,8 @@ pub(crate) struct Rows<'a> {
 /// Resolves the weak pixels of `labels` (the window's encoded labels, `w` wide; `rows` says
 /// which rows may hold any, and which anything, brought up to date): a weak pixel
 /// 8-connected to an object pixel (unknown, hand or scalpel) with two or more object pixels
-/// beside it, through weak pixels that join too,
+/// beside it, through weak pixels that join too, each one's colour nearer to the pixel it is
+/// reached from than to its own background's ([`ImageWindow::like`]),
 /// becomes an object of its colour's class ([`ENC_WEAK`]) or a possible shadow
 /// ([`ENC_WEAK_DARK`], with `shadows`; without, it stays background and connects nothing); every
 /// other weak pixel becomes background. Except the rim: a joined pixel next to a sure one (of
@@ -55,8 +80,7 @@ pub(crate) fn grow_into_weak(
     // A weak pixel's code where it joins, marked JOINED; 0 where it cannot join.
     let joined = |labels: &[u8], i: usize| -> u8 {
         if labels[i] == ENC_WEAK {
-            let (x, y) = (i % w, i / w);
-            let k = 3 * ((image.y0 + y) * image.full_w + image.x0 + x);
+            let k = image.at(i, w);
             lut.get(image.raw[k], image.raw[k + 1], image.raw[k + 2]) | JOINED
         } else if shadows {
             ENC_SHADOW | JOINED
@@ -73,7 +97,12 @@ pub(crate) fn grow_into_weak(
     };
     // `stack` ends up holding every joined pixel: a queue read from `next`.
     stack.clear();
-    let join = |labels: &mut [u8], i: usize, stack: &mut Vec<u32>| {
+    // Weak pixel `i` reached from pixel `from`: it joins only where its colour is nearer to that
+    // pixel's than to its background's.
+    let join = |labels: &mut [u8], i: usize, from: usize, stack: &mut Vec<u32>| {
+        if !image.like(i, from, w) {
+            return;
+        }
         let v = joined(labels, i);
         labels[i] = v;
         if v != 0 {
@@ -99,8 +128,11 @@ pub(crate) fn grow_into_weak(
             continue;
         };
         for i in y * w + a.saturating_sub(1)..=y * w + (b + 1).min(w - 1) {
-            if is_weak(labels[i]) && first_around(w, h, i, |j| seeds(labels, j)).is_some() {
-                join(labels, i, stack);
+            if !is_weak(labels[i]) {
+                continue;
+            }
+            if let Some(from) = first_around(w, h, i, |j| seeds(labels, j) && image.like(i, j, w)) {
+                join(labels, i, from, stack);
             }
         }
     }
@@ -111,7 +143,7 @@ pub(crate) fn grow_into_weak(
         for v in y.saturating_sub(1)..=(y + 1).min(h - 1) {
             for j in v * w + x.saturating_sub(1)..=v * w + (x + 1).min(w - 1) {
                 if is_weak(labels[j]) {
-                    join(labels, j, stack);
+                    join(labels, j, i as usize, stack);
                 }
             }
         }
@@ -247,7 +279,9 @@ mod tests {
         let raw: Vec<u8> = (0..w * h).flat_map(|_| colour).collect();
         let mut active: Vec<bool> = labels.chunks(w).map(|r| r.iter().any(|&v| v != 0)).collect();
         let kinds = kinds_of(&labels, w, |_| false);
-        let image = ImageWindow { raw: &raw, full_w: w, x0: 0, y0: 0 };
+        // A white background: every colour the tests use lies nearer to its neighbours'.
+        let white = vec![255; raw.len()];
+        let image = ImageWindow { raw: &raw, full_w: w, x0: 0, y0: 0, background: &white, gain: 1.0 };
         let rows = Rows { active: &mut active, kinds: &kinds };
         let n = grow_into_weak(&mut labels, rows, w, &image, &lut(), shadows, &mut Vec::new());
         (labels, active, n)
@@ -284,6 +318,35 @@ mod tests {
             ]
         );
         assert_eq!(n, 4);
+    }
+
+    #[test]
+    fn a_weak_pixel_of_its_backgrounds_colour_does_not_join() {
+        // A sure block of one colour; beside it a weak patch of nearly its colour and a weak
+        // streak of the table's (a brushed steel table's lines beside a hand).
+        let rows = ["SSSS..", "SSSSww", "SSSSww", "SSSSww", "SSSS..", "wwwww."];
+        let (mut labels, w) = grid(&rows);
+        let h = rows.len();
+        let (object, table, gain) = ([200u8, 120, 90], [120u8, 120, 125], 0.9f32);
+        let background: Vec<u8> = (0..w * h).flat_map(|_| table).collect();
+        let raw: Vec<u8> = (0..w * h)
+            .flat_map(|i| match (i % w, i / w) {
+                (_, 5) => [114, 110, 116],
+                (x, _) if x >= 4 => [190, 118, 92],
+                _ => object,
+            })
+            .collect();
+        let mut active: Vec<bool> = labels.chunks(w).map(|r| r.iter().any(|&v| v != 0)).collect();
+        let kinds = kinds_of(&labels, w, |_| false);
+        let image = ImageWindow { raw: &raw, full_w: w, x0: 0, y0: 0, background: &background, gain };
+        let rows = Rows { active: &mut active, kinds: &kinds };
+        let n = grow_into_weak(&mut labels, rows, w, &image, &lut(), true, &mut Vec::new());
+        // The patch joins but for its rim: (4, 1) and (4, 3) touch the sure block and the
+        // background above and below.
+        let joined: Vec<usize> = (0..w * h).filter(|&i| labels[i] == ENC_SCALPEL).collect();
+        assert_eq!(joined, [w + 5, 2 * w + 4, 2 * w + 5, 3 * w + 5]);
+        assert_eq!(n, 4);
+        assert!(labels[5 * w..].iter().all(|&v| v == 0), "the streak stays background");
     }
 
     #[test]
@@ -355,7 +418,9 @@ mod tests {
             // Rows said to hold what they do not too (the foreground test may say so).
             let extra: Vec<bool> = (0..h).map(|_| next() % 4 == 0).collect();
             let kinds = kinds_of(&out, w, |y| extra[y]);
-            let image = ImageWindow { raw: &raw, full_w: w, x0: 0, y0: 0 };
+            // A white background: every colour the tests use lies nearer to its neighbours'.
+            let white = vec![255; raw.len()];
+            let image = ImageWindow { raw: &raw, full_w: w, x0: 0, y0: 0, background: &white, gain: 1.0 };
             let n = grow_into_weak(
                 &mut out,
                 Rows { active: &mut active, kinds: &kinds },

@@ -96,7 +96,10 @@ pub struct SegmentParams {
     /// Hysteresis: a pixel that the tests call background at their full tolerances but not at
     /// this share of each (brightness, chromaticity) is foreground where it touches foreground
     /// (a foreground pixel with two or more foreground pixels beside it), 8-connected through
-    /// other such pixels; one that is only darker than this share of the shadow tolerance allows
+    /// other such pixels, each one's colour nearer (L1) to the pixel it is reached from than to
+    /// its own background's (a streak of a brushed steel table beside the hand is not reached,
+    /// and lost the tool's track for 40-65 frame sets where it was); one that is only darker
+    /// than this share of the shadow tolerance allows
     /// becomes a possible shadow there ([`SHADOW_LIKE`], when `shadow_depth` asks for them; else
     /// it stays background). Such pixels next to sure foreground and to background, the rim that
     /// every edge's partly covered pixels make, stay background. A hand or blade close to its
@@ -613,7 +616,8 @@ impl CameraSegmenter {
                     &mut s.row_kinds,
                 );
                 if params.weak_share < 1.0 {
-                    let image = hysteresis::ImageWindow { raw, full_w, x0, y0 };
+                    let background = model.mean_image().as_raw();
+                    let image = hysteresis::ImageWindow { raw, full_w, x0, y0, background, gain: gain as f32 };
                     let shadows = params.shadow_depth > params.shadow_tolerance;
                     let rows = hysteresis::Rows { active: &mut s.act0, kinds: &s.row_kinds };
                     joined = hysteresis::grow_into_weak(&mut s.labels, rows, w, &image, lut, shadows, &mut s.stack);
