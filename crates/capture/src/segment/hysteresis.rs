@@ -51,8 +51,8 @@ pub(crate) struct Rows<'a> {
 /// which rows may hold any, and which anything, brought up to date): a weak pixel
 /// 8-connected to an object pixel (unknown, hand or scalpel) with two or more object pixels
 /// beside it, through weak pixels that join too, each one's colour nearer to the pixel it is
-/// reached from than to its own background's ([`ImageWindow::like`]),
-/// becomes an object of its colour's class ([`ENC_WEAK`]) or a possible shadow
+/// reached from than to its own background's ([`ImageWindow::like`]), becomes an object of its
+/// colour's class ([`ENC_WEAK`]) or a possible shadow
 /// ([`ENC_WEAK_DARK`], with `shadows`; without, it stays background and connects nothing); every
 /// other weak pixel becomes background. Except the rim: a joined pixel next to a sure one (of
 /// its 8) and to background (of its 4) goes back to background, for every object's edge pixels,

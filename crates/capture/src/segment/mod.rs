@@ -99,9 +99,8 @@ pub struct SegmentParams {
     /// other such pixels, each one's colour nearer (L1) to the pixel it is reached from than to
     /// its own background's (a streak of a brushed steel table beside the hand is not reached,
     /// and lost the tool's track for 40-65 frame sets where it was); one that is only darker
-    /// than this share of the shadow tolerance allows
-    /// becomes a possible shadow there ([`SHADOW_LIKE`], when `shadow_depth` asks for them; else
-    /// it stays background). Such pixels next to sure foreground and to background, the rim that
+    /// than this share of the shadow tolerance allows becomes a possible shadow there
+    /// ([`SHADOW_LIKE`], when `shadow_depth` asks for them; else it stays background). Such pixels next to sure foreground and to background, the rim that
     /// every edge's partly covered pixels make, stay background. A hand or blade close to its
     /// background's colour is seen at the full tolerances in patches only, and every view's gap
     /// carves the hull: a grey latex glove over a grey table lost a tenth of its pixels over
