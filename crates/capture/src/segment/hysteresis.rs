@@ -73,8 +73,8 @@ pub(crate) fn grow_into_weak(
     }
     let h = labels.len() / w;
     let Rows { active, kinds } = rows;
-    let weak_rows: Vec<bool> = (0..h).map(|y| kinds[y].bits & WEAK_BIT != 0).collect();
-    if !weak_rows.iter().any(|&r| r) {
+    let weak_row = |y: usize| kinds[y].bits & WEAK_BIT != 0;
+    if !(0..h).any(weak_row) {
         return 0;
     }
     // A weak pixel's code where it joins, marked JOINED; 0 where it cannot join.
@@ -113,18 +113,16 @@ pub(crate) fn grow_into_weak(
     // lone pixel of noise, or a pair, seeds nothing: over a textured table its weak neighbours
     // would make a speck that the clean-up keeps). Only the columns within a pixel of a sure
     // object pixel in the rows around are looked at (as the foreground test bounds them).
-    let spans: Vec<Option<(usize, usize)>> = (0..h)
-        .map(|y| {
-            let (from, to) = kinds[y].sure;
-            (kinds[y].bits & SURE_BIT != 0 && from < to).then(|| (from as usize, (to as usize - 1).min(w - 1)))
-        })
-        .collect();
+    let span = |y: usize| {
+        let (from, to) = kinds[y].sure;
+        (kinds[y].bits & SURE_BIT != 0 && from < to).then(|| (from as usize, (to as usize - 1).min(w - 1)))
+    };
     let seeds = |labels: &[u8], j: usize| {
         is_object(labels[j]) && count_around(labels, w, h, j, SEED_NEIGHBOURS, is_object) >= SEED_NEIGHBOURS
     };
-    for y in (0..h).filter(|&y| weak_rows[y]) {
+    for y in (0..h).filter(|&y| weak_row(y)) {
         let rows = y.saturating_sub(1)..=(y + 1).min(h - 1);
-        let Some((a, b)) = rows.filter_map(|v| spans[v]).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))) else {
+        let Some((a, b)) = rows.filter_map(span).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))) else {
             continue;
         };
         for i in y * w + a.saturating_sub(1)..=y * w + (b + 1).min(w - 1) {
@@ -160,7 +158,7 @@ pub(crate) fn grow_into_weak(
         }
     }
     // Weak pixels and the rim to background, the joined ones unmarked: without branches.
-    for y in (0..h).filter(|&y| weak_rows[y]) {
+    for y in (0..h).filter(|&y| weak_row(y)) {
         let row = &mut labels[y * w..(y + 1) * w];
         let mut any = 0;
         for v in row.iter_mut() {
