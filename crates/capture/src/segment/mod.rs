@@ -260,13 +260,23 @@ struct Scratch {
     row_kinds: Vec<background::RowKinds>,
 }
 
-/// Working encoding → label.
-const DECODE: [u8; 8] = [label::BACKGROUND, SHADOW_LIKE, label::UNKNOWN, label::HAND, label::SCALPEL, 0, 0, 0];
-
-/// Working encoding → label: 0 → 0, 1 → [`SHADOW_LIKE`], 2 → 255, 3 → 1, 4 → 2.
+/// Working encoding → label: 0 → 0, 1 → [`SHADOW_LIKE`], 2 → 255, 3 → 1, 4 → 2 (5 and above,
+/// never decoded, → 0). Written as byte masks, not a table, so that a row of them vectorizes (a
+/// table lookup per pixel kept the clean-up's last pass scalar).
 #[inline(always)]
 fn decode(v: u8) -> u8 {
-    DECODE[usize::from(v & 7)]
+    let all = |b: bool| u8::from(b).wrapping_neg();
+    (all(v == ENC_SHADOW) & SHADOW_LIKE)
+        | (all(v == ENC_UNKNOWN) & label::UNKNOWN)
+        | (all(v.wrapping_sub(ENC_HAND) < 2) & v.wrapping_sub(ENC_HAND - label::HAND))
+}
+
+/// The closing's pixel: the raw foreground's label `a` where it has one, else the dilation's `d`
+/// where the closing `c` kept the pixel; without branches.
+#[inline(always)]
+fn closed(a: u8, d: u8, c: u8) -> u8 {
+    let raw = u8::from(a != 0).wrapping_neg();
+    (a & raw) | (d & !raw & u8::from(c != 0).wrapping_neg())
 }
 
 #[derive(Debug)]
@@ -680,20 +690,9 @@ impl CameraSegmenter {
                     (false, false) => o.fill(0),
                     (true, false) => o.iter_mut().zip(a).for_each(|(o, &a)| *o = decode(a)),
                     // Closed but no raw foreground: every pixel comes from the dilation.
-                    (false, true) => {
-                        o.iter_mut().zip(d).zip(c).for_each(|((o, &d), &c)| *o = decode(if c != 0 { d } else { 0 }))
-                    }
+                    (false, true) => o.iter_mut().zip(d).zip(c).for_each(|((o, &d), &c)| *o = decode(closed(0, d, c))),
                     (true, true) => {
-                        for (((o, &a), &d), &c) in o.iter_mut().zip(a).zip(d).zip(c) {
-                            let v = if a != 0 {
-                                a
-                            } else if c != 0 {
-                                d
-                            } else {
-                                0
-                            };
-                            *o = decode(v);
-                        }
+                        o.iter_mut().zip(a).zip(d).zip(c).for_each(|(((o, &a), &d), &c)| *o = decode(closed(a, d, c)))
                     }
                 }
             }
@@ -767,5 +766,15 @@ mod tests {
             assert_eq!(decode(encode(l)), l);
         }
         assert_eq!(decode(ENC_SHADOW), SHADOW_LIKE);
+        for v in [ENC_WEAK, ENC_WEAK_DARK, 7, 8, 200, 255] {
+            assert_eq!(decode(v), label::BACKGROUND, "{v}");
+        }
+    }
+
+    #[test]
+    fn the_closing_keeps_the_raw_label_else_the_dilations_where_it_closed() {
+        for (a, d, c, want) in [(0, 0, 0, 0), (3, 4, 0, 3), (3, 4, 9, 3), (0, 4, 0, 0), (0, 4, 1, 4), (0, 0, 1, 0)] {
+            assert_eq!(closed(a, d, c), want, "{a} {d} {c}");
+        }
     }
 }

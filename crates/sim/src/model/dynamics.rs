@@ -179,7 +179,7 @@ impl Integrator {
             self.update_active(&f_int, f_ext, [a, b, dt2])
         } else {
             let chunk = self.u.len().div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
-            let arch = pulp::Arch::new();
+            let arch = crate::model::simd_arch();
             // Take the output out so the runs can read `self` while writing it.
             let mut next = std::mem::take(&mut self.next);
             let this = &*self;

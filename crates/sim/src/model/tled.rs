@@ -141,7 +141,7 @@ impl Tled {
             mu,
             slabs: Slabs::default(),
             contiguous: cell_nodes.chunks(LANES).map(crate::model::tled_batch::is_contiguous).collect(),
-            arch: pulp::Arch::new(),
+            arch: crate::model::simd_arch(),
             cell_nodes,
             volume,
             dndx,
