@@ -46,6 +46,10 @@ pub const PIXELS_TESTED_ENTITY: &str = "metrics/segment/pixels_tested";
 /// 0 where in the whole rectangle of the box carved in (the report's
 /// `counters.segmented_near_hull`, frame set by frame set).
 pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
+/// The pixels that passed a frame set's foreground test only at half its tolerances and joined
+/// the foreground they touch, over its views (the segmenter's hysteresis; the report's
+/// `counters.weak_joined`, frame set by frame set).
+pub const WEAK_JOINED_ENTITY: &str = "metrics/segment/weak_joined";
 /// 1 where a frame set's foreground hull was searched for a lost tool, 0 where the search was
 /// paused (`--search-gap`); nothing where the track held the tool (the report's
 /// `labelling.counters.searches` and `searches_paused`, frame set by frame set).
@@ -160,6 +164,7 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     }
     hullcut_viz::log_scalar(rec, PIXELS_TESTED_ENTITY, trace.segmented.pixels as f64)?;
     hullcut_viz::log_scalar(rec, NEAR_HULL_ENTITY, f64::from(u8::from(trace.segmented.near_hull)))?;
+    hullcut_viz::log_scalar(rec, WEAK_JOINED_ENTITY, trace.segmented.weak_joined as f64)?;
     if let Some(searched) = trace.hull_search {
         hullcut_viz::log_scalar(rec, HULL_SEARCHED_ENTITY, f64::from(u8::from(searched)))?;
     }

@@ -86,7 +86,8 @@ use crate::weak::WeakArg;
 /// untrusted fit that agreed with the silhouettes taught the colours (before a trusted one did)
 /// under metrics/appearance/taught, the pixels each frame set's segmentation tested under
 /// metrics/segment/pixels_tested and whether only near the last hull (1) or in the whole
-/// rectangle of the box carved in (0) under metrics/segment/near_hull; on
+/// rectangle of the box carved in (0) under metrics/segment/near_hull, the weak pixels its
+/// hysteresis joined to the foreground under metrics/segment/weak_joined; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -535,9 +536,10 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
 /// hand's, the possible shadows given back to the table, and the pixels an untrusted fit that
 /// agreed with the silhouettes taught the colours (on the frame sets where it did), and what
-/// each frame set's segmentation tested: the pixels, and whether only near the last hull; and
+/// each frame set's segmentation tested: the pixels, whether only near the last hull, and the
+/// weak pixels that joined the foreground; and
 /// whether the foreground's hull was searched for a lost tool (or the search paused).
-pub const SEGMENTING_ENTITIES: [&str; 9] = [
+pub const SEGMENTING_ENTITIES: [&str; 10] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
@@ -546,6 +548,7 @@ pub const SEGMENTING_ENTITIES: [&str; 9] = [
     crate::logging::TAUGHT_ENTITY,
     crate::logging::PIXELS_TESTED_ENTITY,
     crate::logging::NEAR_HULL_ENTITY,
+    crate::logging::WEAK_JOINED_ENTITY,
     crate::logging::HULL_SEARCHED_ENTITY,
 ];
 
