@@ -97,12 +97,9 @@ pub(crate) fn grow_into_weak(
     };
     // `stack` ends up holding every joined pixel: a queue read from `next`.
     stack.clear();
-    // Weak pixel `i` reached from pixel `from`: it joins only where its colour is nearer to that
-    // pixel's than to its background's.
-    let join = |labels: &mut [u8], i: usize, from: usize, stack: &mut Vec<u32>| {
-        if !image.like(i, from, w) {
-            return;
-        }
+    // Weak pixel `i`, whose colour the caller found nearer to the pixel it is reached from than to
+    // its background's ([`ImageWindow::like`]), joins.
+    let join = |labels: &mut [u8], i: usize, stack: &mut Vec<u32>| {
         let v = joined(labels, i);
         labels[i] = v;
         if v != 0 {
@@ -129,8 +126,8 @@ pub(crate) fn grow_into_weak(
             if !is_weak(labels[i]) {
                 continue;
             }
-            if let Some(from) = first_around(w, h, i, |j| seeds(labels, j) && image.like(i, j, w)) {
-                join(labels, i, from, stack);
+            if first_around(w, h, i, |j| seeds(labels, j) && image.like(i, j, w)).is_some() {
+                join(labels, i, stack);
             }
         }
     }
@@ -140,8 +137,8 @@ pub(crate) fn grow_into_weak(
         let (x, y) = (i as usize % w, i as usize / w);
         for v in y.saturating_sub(1)..=(y + 1).min(h - 1) {
             for j in v * w + x.saturating_sub(1)..=v * w + (x + 1).min(w - 1) {
-                if is_weak(labels[j]) {
-                    join(labels, j, i as usize, stack);
+                if is_weak(labels[j]) && image.like(j, i as usize, w) {
+                    join(labels, j, stack);
                 }
             }
         }
