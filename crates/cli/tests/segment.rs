@@ -243,21 +243,23 @@ fn a_grey_blade_over_a_grey_table_on_four_cameras_is_found_by_the_colours_an_agr
 }
 
 #[test]
-fn fits_that_agree_with_the_silhouettes_by_chance_teach_no_colours() {
+fn a_steel_blade_over_brushed_steel_on_four_cameras_is_trusted_and_teaches_the_colours() {
     // The first 40 frame sets of the resection on the random:257 rig (four cameras) in random:263:
-    // a blue glove holding a blue handle, a steel blade over brushed steel. No fit is trusted;
-    // six agree with the silhouettes (frame sets 6, 8, 11, 17, 27, 38), five of them 66-263 mm
-    // off, never two running. Taught by them, the colours took the table's grey for the tool's and
-    // 17 fits of 150 were trusted, all 12 mm off; nothing is taught, and the labels are those of
-    // the untrusted fits.
+    // a blue glove holding a blue handle, a steel blade over brushed steel. Until the forty-first
+    // session no fit was trusted here (six agreed with the silhouettes by chance, five of them
+    // 66-263 mm off, and none might teach: taught by them, the colours took the table's grey for
+    // the tool's). The blade is a possible shadow in patches and only darker between them; since
+    // the forty-second session those pixels join the possible shadows they touch, the hull keeps
+    // the blade, and 32 of the 40 are trusted (`hullcut run`: 26 of them within 5° and 5 mm),
+    // the colours learned from them; no untrusted fit teaches.
     let dir = tempfile::tempdir().expect("tempdir");
     let r = segment(&resection(dir.path(), "random:257", "random:263", "standard", 40), &[]);
     let c = &r["labelling"]["counters"];
-    assert_eq!(c["geometry"], 0, "{c}");
+    assert!(c["geometry"].as_u64().expect("geometry") >= 25, "{c}");
     assert_eq!(c["bootstrapped"], 0, "{c}");
-    assert_eq!(c["learned"], 0, "{c}");
+    assert!(c["learned"].as_u64().expect("learned") >= 1, "{c}");
     assert!(
-        r["labelling"]["appearance"].as_array().is_none_or(|a| a.iter().all(|l| l["rgb"].is_null())),
+        r["labelling"]["appearance"].as_array().is_some_and(|a| a.iter().any(|l| !l["rgb"].is_null())),
         "{}",
         r["labelling"]
     );
@@ -415,8 +417,10 @@ fn a_camera_whose_background_changes_is_degraded_and_counted_not_lost() {
 /// A pale glove whose shaded side matches a steel table in colour and shade (random:71 in
 /// random:109, four cameras): the foreground test misses that side in every view. Confirmed by
 /// the other views' hull, weak foreground fills it (measured 2026-11-28 on the first four frame
-/// sets: foreground IoU 0.704 -> 0.820; over frame sets 40-49 0.813 -> 0.967), and the report
-/// says it was asked for and how many pixels it added.
+/// sets: foreground IoU 0.704 -> 0.820; over frame sets 40-49 0.813 -> 0.967; since the
+/// forty-second session, whose weak dark pixels join the possible shadows they touch and so
+/// find much of that side without it, 0.859 -> 0.881), and the report says it was asked for and
+/// how many pixels it added.
 #[test]
 fn weak_foreground_the_other_views_confirm_fills_a_glove_of_the_tables_colour() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -426,7 +430,7 @@ fn weak_foreground_the_other_views_confirm_fills_a_glove_of_the_tables_colour() 
     let confirmed = segment(&ds, &["--confirm-weak-foreground", "--rrd", &path(&rrd)]);
     let (before, after) = (iou(&plain, "foreground"), iou(&confirmed, "foreground"));
     println!("foreground IoU {before:.4} -> {after:.4}");
-    assert!(after > before + 0.05, "{before} -> {after}");
+    assert!(after > before + 0.015, "{before} -> {after}");
     let (l0, l1) = (&plain["labelling"], &confirmed["labelling"]);
     assert_eq!(
         (l0["confirm_weak_foreground"].as_bool(), l1["confirm_weak_foreground"].as_bool()),

@@ -262,7 +262,8 @@ pub struct Segmented {
     /// Pixels whose foreground was tested, over the views.
     pub pixels: u64,
     /// Pixels that passed the foreground test only at its weak share of the tolerances and
-    /// joined the foreground they touch, over the views (the segmenter's hysteresis; the report's
+    /// joined the foreground, or (only darker) a possible shadow, they touch, over the views (the
+    /// segmenter's hysteresis; the report's
     /// `counters.weak_joined`, frame set by frame set).
     pub weak_joined: u64,
 }
@@ -368,8 +369,9 @@ pub struct LabelCounters {
     #[serde(default)]
     pub pixels_tested: u64,
     /// Pixels that passed the foreground tests only at half their tolerances and joined the
-    /// foreground they touch (the segmenter's hysteresis, `SegmentParams::weak_share`), over
-    /// every view and frame set, before the clean-up.
+    /// foreground they touch (the segmenter's hysteresis, `SegmentParams::weak_share`), or
+    /// (only darker) a possible shadow they touch, over every view and frame set, before the
+    /// clean-up.
     #[serde(default)]
     pub weak_joined: u64,
     /// Frame sets whose hull's thin parts were searched for the tool (nothing trusted from the

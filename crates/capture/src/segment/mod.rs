@@ -100,8 +100,14 @@ pub struct SegmentParams {
     /// its own background's (a streak of a brushed steel table beside the hand is not reached,
     /// and lost the tool's track for 40-65 frame sets where it was); one that is only darker
     /// than this share of the shadow tolerance allows becomes a possible shadow there
-    /// ([`SHADOW_LIKE`], when `shadow_depth` asks for them; else it stays background). Such pixels next to sure foreground and to background, the rim that
-    /// every edge's partly covered pixels make, stay background. A hand or blade close to its
+    /// ([`SHADOW_LIKE`], when `shadow_depth` asks for them; else it stays background). With
+    /// possible shadows asked for, those only darker that no foreground reached but that touch a
+    /// possible shadow (one with two or more beside it) join it, through each other, by the same
+    /// colour rule: a dull tool of the table's shade is a possible shadow in patches, only
+    /// darker between them and along its thin end, and each view's gap carved it from the hull
+    /// (random:2711 in random:2713; the hull then tells it from a shadow on the table). Such
+    /// pixels next to what they joined and to background, the rim that every edge's partly
+    /// covered pixels make, stay background. A hand or blade close to its
     /// background's colour is seen at the full tolerances in patches only, and every view's gap
     /// carves the hull: a grey latex glove over a grey table lost a tenth of its pixels over
     /// seven views, in holes; a steel blade over it a sixth to a third in five of seven views;
@@ -503,7 +509,8 @@ pub struct ViewTested {
     /// objects may reach past the stretches.
     pub reached_past: bool,
     /// Pixels that passed the foreground tests only at their weak share and joined the
-    /// foreground they touch ([`SegmentParams::weak_share`]), before the clean-up.
+    /// foreground, or (only darker) a possible shadow, they touch
+    /// ([`SegmentParams::weak_share`]), before the clean-up.
     pub joined: u64,
 }
 
