@@ -866,8 +866,8 @@ fn run_does_not_trust_a_fit_that_crept_into_the_hands_shadow_on_the_table() {
 /// 2026-11-30: frame set 1 trusted at 0.64, then none, and nothing learned, when only a confidence
 /// of 0.8 taught; 14 trusted (3 off by more than 5° or 5 mm) and 3 frame sets learned from once
 /// the first taught. Since the forty-second session (weak dark pixels join the possible shadows
-/// they touch) 6 are trusted, 3 of them off (12 and 5 off the session before, `hullcut run`):
-/// a loss on this recording, the first trusted fit still teaching.
+/// they touch) 6 are trusted, 3 of them off (12, 5 of them off, with the forty-first session's
+/// code; `hullcut run`): a loss on this recording, the first trusted fit still teaching.
 #[test]
 fn the_first_trusted_fit_on_four_cameras_teaches_the_colours_whatever_its_confidence() {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -263,8 +263,7 @@ pub struct Segmented {
     pub pixels: u64,
     /// Pixels that passed the foreground test only at its weak share of the tolerances and
     /// joined the foreground, or (only darker) a possible shadow, they touch, over the views (the
-    /// segmenter's hysteresis; the report's
-    /// `counters.weak_joined`, frame set by frame set).
+    /// segmenter's hysteresis; the report's `counters.weak_joined`, frame set by frame set).
     pub weak_joined: u64,
 }
 
