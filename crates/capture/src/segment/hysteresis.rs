@@ -136,17 +136,7 @@ pub(crate) fn grow_into_weak(
         }
     }
     let mut next = 0;
-    while let Some(&i) = stack.get(next) {
-        next += 1;
-        let (x, y) = (i as usize % w, i as usize / w);
-        for v in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-            for j in v * w + x.saturating_sub(1)..=v * w + (x + 1).min(w - 1) {
-                if is_weak(labels[j]) && image.like(j, i as usize, w) {
-                    join(labels, j, stack);
-                }
-            }
-        }
-    }
+    spread(labels, w, stack, &mut next, |labels, j, i| is_weak(labels[j]) && image.like(j, i, w), join);
     // Then, with shadows, the weak dark pixels the objects left that touch a possible shadow join
     // it, through each other: a dull tool of the table's shade, darker than the table by about the
     // shadow tolerance, is a possible shadow in patches and weak dark between them and along its
@@ -164,10 +154,14 @@ pub(crate) fn grow_into_weak(
             labels[i] = ENC_SHADOW | JOINED;
             stack.push(i as u32);
         };
-        // Only the weak rows with a possible shadow in or beside them are looked at.
-        let shadow_rows: Vec<bool> = labels.chunks_exact(w).map(|r| r.contains(&ENC_SHADOW)).collect();
-        let near_shadow = |y: usize| shadow_rows[y.saturating_sub(1)..=(y + 1).min(h - 1)].contains(&true);
-        for y in (0..h).filter(|&y| weak_row(y) && near_shadow(y)) {
+        // Only the weak rows with a possible shadow in or beside them are looked at (a joined pixel
+        // is marked, so the rows read as the foreground test left them).
+        let near_shadow =
+            |labels: &[u8], y: usize| labels[y.saturating_sub(1) * w..((y + 2).min(h)) * w].contains(&ENC_SHADOW);
+        for y in (0..h).filter(|&y| weak_row(y)) {
+            if !near_shadow(labels, y) {
+                continue;
+            }
             for i in y * w..(y + 1) * w {
                 if labels[i] == ENC_WEAK_DARK
                     && first_around(w, h, i, |j| shadow_seeds(labels, j) && image.like(i, j, w)).is_some()
@@ -176,17 +170,14 @@ pub(crate) fn grow_into_weak(
                 }
             }
         }
-        while let Some(&i) = stack.get(next) {
-            next += 1;
-            let (x, y) = (i as usize % w, i as usize / w);
-            for v in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                for j in v * w + x.saturating_sub(1)..=v * w + (x + 1).min(w - 1) {
-                    if labels[j] == ENC_WEAK_DARK && image.like(j, i as usize, w) {
-                        join_shadow(labels, j, stack);
-                    }
-                }
-            }
-        }
+        spread(
+            labels,
+            w,
+            stack,
+            &mut next,
+            |labels, j, i| labels[j] == ENC_WEAK_DARK && image.like(j, i, w),
+            join_shadow,
+        );
     }
     // The rim, marked first (the test reads every pixel as it was after the growth): next to what
     // it joined (an object; a possible shadow for those that joined one) and to background.
@@ -213,6 +204,31 @@ pub(crate) fn grow_into_weak(
         active[y] = any != 0;
     }
     grown
+}
+
+/// Grows what joined: for each pixel of `stack` from `*next` on (a queue, `w` the window's width),
+/// every 8-neighbour `j` that `may_join(labels, j, i)` admits (`i` the pixel it is reached from)
+/// is joined by `join`, which pushes what it joins onto `stack`.
+fn spread(
+    labels: &mut [u8],
+    w: usize,
+    stack: &mut Vec<u32>,
+    next: &mut usize,
+    may_join: impl Fn(&[u8], usize, usize) -> bool,
+    join: impl Fn(&mut [u8], usize, &mut Vec<u32>),
+) {
+    let h = labels.len() / w;
+    while let Some(&i) = stack.get(*next) {
+        *next += 1;
+        let (x, y) = (i as usize % w, i as usize / w);
+        for v in y.saturating_sub(1)..=(y + 1).min(h - 1) {
+            for j in v * w + x.saturating_sub(1)..=v * w + (x + 1).min(w - 1) {
+                if may_join(labels, j, i as usize) {
+                    join(labels, j, stack);
+                }
+            }
+        }
+    }
 }
 
 /// The first of the 8-neighbours of pixel `i` of a window `w` x `h` that passes `test` (given its
