@@ -680,12 +680,18 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
         assert!(mean(part) > 0.0, "{part}: {t}");
     }
     assert!(mean("segment_foreground") + mean("segment_evidence") <= mean("segment") + 1e-6, "{t}");
-    // The frame sets whose tool was drawn into the views in the loop (teaching the colours) are
-    // timed apart too: those the labelling counts, some but not all. Those logged with their
-    // images that taught nothing were drawn on the logging thread, timed there.
-    let drawn = t["segment_drawn"]["count"].as_u64().unwrap_or_else(|| panic!("segment_drawn: {t}"));
-    assert_eq!(Some(drawn), l["drawn"].as_u64(), "{t} {l}");
-    assert!((1..24).contains(&drawn), "{drawn} drawn: {t}");
+    // The frame sets whose tool was drawn into the views in the loop are timed apart too: those
+    // the labelling counts. Those logged with their images were drawn on the logging thread,
+    // timed there; the trusted ones that taught the colours on a thread of their own, beside the
+    // loop, each lesson timed there (those taken before the last frame set).
+    let drawn = l["drawn"].as_u64().unwrap_or_else(|| panic!("drawn: {l}"));
+    assert_eq!(t["segment_drawn"]["count"].as_u64().unwrap_or(0), drawn, "{t} {l}");
+    assert!(drawn < 24, "{drawn} drawn: {t}");
+    let lessons = l["lessons"].as_u64().unwrap_or_else(|| panic!("lessons: {l}"));
+    let learned = t["learn"]["count"].as_u64().unwrap_or_else(|| panic!("learn: {t}"));
+    assert!((1..=lessons).contains(&learned), "{learned} of {lessons} lessons timed: {t}");
+    assert!(l["lessons_waited"].as_u64().is_some_and(|w| w <= lessons), "{l}");
+    assert!(mean("learn") > 0.0, "{t}");
     let deferred = l["deferred"].as_u64().unwrap_or_else(|| panic!("deferred: {l}"));
     assert_eq!(t["log_labels"]["count"].as_u64().unwrap_or(0), deferred, "{t} {l}");
     // Every frame set logs where its labels came from; the colours learned from the trusted ones

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use hullcut_capture::segment::ColourLut;
 use hullcut_dataset::FrameSet;
 use hullcut_hull::Occupancy;
-use hullcut_pose::{ToolDrawer, ViewInput};
+use hullcut_pose::{ToolDrawer, ToolRegion, ViewInput};
 use hullcut_rig::Rig;
 use image::GrayImage;
 use nalgebra::Isometry3;
@@ -47,6 +47,22 @@ impl PendingLabels {
     /// its labelling would have drawn: `occupancy` is the hull it handed out with the frame set
     /// ([`crate::labelling::Labelled::occupancy`]).
     pub fn draw(self, set: &FrameSet, occupancy: &Occupancy) -> Vec<Option<GrayImage>> {
+        let sharpen_with = self.sharpen.clone();
+        let (mut masks, tool_regions) = self.draw_plain(occupancy);
+        if let Some(lut) = &sharpen_with {
+            set.views.par_iter().zip(&mut masks).zip(tool_regions.par_iter()).for_each(|((view, mask), region)| {
+                if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
+                    sharpen(lut, &view.image, mask, region);
+                }
+            });
+        }
+        masks.resize(set.views.len(), None);
+        masks
+    }
+
+    /// The label masks (per camera, rig order) before any colour sharpened them, and where the
+    /// tool is drawn in each view.
+    pub(crate) fn draw_plain(self, occupancy: &Occupancy) -> (Vec<Option<GrayImage>>, Vec<Option<ToolRegion>>) {
         let views: Vec<Option<ViewInput>> = self
             .rig
             .cameras
@@ -57,16 +73,6 @@ impl PendingLabels {
         let drawn = self.drawer.draw(&views, occupancy, &self.pose, false);
         let mut masks = drawn.masks;
         to_background(&mut masks, &self.given_back, true);
-        if let Some(lut) = &self.sharpen {
-            set.views.par_iter().zip(&mut masks).zip(drawn.tool_regions.par_iter()).for_each(
-                |((view, mask), region)| {
-                    if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                        sharpen(lut, &view.image, mask, region);
-                    }
-                },
-            );
-        }
-        masks.resize(set.views.len(), None);
-        masks
+        (masks, drawn.tool_regions)
     }
 }

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::backend::Carver;
 use crate::deferred::PendingLabels;
 use crate::error::{Context as _, Error, fail};
+use crate::lesson::{InFlight, LESSON_DELAY, Learned, Lesson, LessonLabels, inside_outline, learn_models};
 use crate::region::{BLOCK_M, CarveRegion, PAD_M};
 
 /// A trusted frame set's geometric labels teach the appearance model when its confidence is at
@@ -71,10 +72,11 @@ const BOOTSTRAP_MIN_PIXELS: usize = 200;
 /// the last one that taught them (trusted, or agreeing before any trusted one did:
 /// [`BOOTSTRAP_FRAMES`]); while none has, the first trusted one teaches. The colours of a hand and a
 /// tool change little from one frame set to the next, and learning needs the fitted tool drawn
-/// into every view, most of the labelling's time. Between them, inside the main job's loop, a
-/// frame set is labelled only as far as the loop needs: the tool's fit and the hull's cells near
-/// it ([`Labelling::label_with`]); the label masks of those logged with their images are drawn
-/// beside the loop ([`Labelling::defer_drawing`]). What was learned is forgotten by the frame sets
+/// into every view, most of the labelling's time: it is done beside the labelling, on a thread of
+/// its own ([`crate::lesson`]). Inside the main job's loop a frame set is labelled only as far as
+/// the loop needs: the tool's fit and the hull's cells near it ([`Labelling::label_with`]); the
+/// label masks of those logged with their images are drawn beside the loop
+/// ([`Labelling::defer_drawing`]). What was learned is forgotten by the frame sets
 /// passed, not by those learned from. Every fifteenth rather than every fifth (2026-12-01, 18
 /// resections of 150 frame sets on random rigs and looks, both tools, five never run before):
 /// 2,370 frame sets trusted instead of 2,301, 169 of them off instead of 185, 34 lobes cut off
@@ -82,7 +84,7 @@ const BOOTSTRAP_MIN_PIXELS: usize = 200;
 /// instead of 0.945 and 0.770 (random:1607 in random:1627: 139 trusted instead of 65, the lobe
 /// cut off; random:199 in random:211: scalpel 0.610 instead of 0.201); every thirtieth halved
 /// random:199's trusted frame sets (61 -> 31). Inside the main job's loop 12 frame sets of 180
-/// are drawn instead of 36.
+/// teach instead of 36.
 const LEARN_EVERY: u64 = 15;
 
 /// Where the tool's track predicts it, the foreground's hull is carved at the leaf within this
@@ -465,8 +467,8 @@ pub struct LabellingReport {
     /// Frame sets and views it learned from.
     pub appearance_sources: hullcut_capture::segment::AppearanceSources,
     /// Frame sets whose fitted tool was drawn into the views to label them: every fitted one
-    /// outside the main job's loop; inside it, those logged with their images and those that may
-    /// teach the colours ([`Labelling::label_with`]). 0 in reports written before it was counted.
+    /// outside the main job's loop; inside it, those whose untrusted fit may teach the colours
+    /// ([`Labelling::label_with`]). 0 in reports written before it was counted.
     #[serde(default)]
     pub drawn: u64,
     /// Fitted frame sets whose label masks were wanted but left to be drawn later, beside the loop
@@ -474,6 +476,15 @@ pub struct LabellingReport {
     /// among `drawn`. 0 in reports written before it was counted.
     #[serde(default)]
     pub deferred: u64,
+    /// Trusted frame sets whose labels taught the colours beside the labelling, on a thread of
+    /// their own (drawn there where they were not drawn at once: not among `drawn`), their
+    /// colours taken two frame sets later; those of them the labelling had to wait for
+    /// (`lessons_waited`). 0 in reports written before they were counted.
+    #[serde(default)]
+    pub lessons: u64,
+    /// See `lessons`.
+    #[serde(default)]
+    pub lessons_waited: u64,
 }
 
 /// One frame set's labels.
@@ -496,12 +507,16 @@ pub struct Labelled {
     /// The geometric labeller's counters and timings.
     pub stats: Option<LabelStats>,
     /// Whether the fitted tool was drawn into the views for these labels (their masks wanted, or
-    /// the frame set may teach the colours: [`Labelling::label_with`]), the costliest frame sets
-    /// to label ([`LabellingReport::drawn`] counts them).
+    /// an untrusted fit may teach the colours: [`Labelling::label_with`]), the costliest frame
+    /// sets to label ([`LabellingReport::drawn`] counts them).
     pub drawn: bool,
     /// The label masks left to be drawn later ([`Labelling::defer_drawing`]; `masks` are `None`
     /// then): the caller draws them when it needs them.
     pub pending: Option<PendingLabels>,
+    /// The time a trusted frame set's lesson took on its own thread, beside the labelling
+    /// ([`crate::lesson`]), where its colours were taken at the start of this frame set's
+    /// labelling, ms.
+    pub lesson_ms: Option<f64>,
 }
 
 impl Labelled {
@@ -588,7 +603,7 @@ pub struct Labelling {
     sharpening: AppearanceModel,
     colours: Option<ColourLut>,
     /// The colours compiled to decide only where sure ([`SHARPEN_LOG_RATIO`]): the fit's hints.
-    sure: Option<ColourLut>,
+    sure: Option<Arc<ColourLut>>,
     /// The sharpening colours where sure and their class also explains them
     /// ([`SURE_MAHALANOBIS2`]): they sharpen the labels near the drawn tool.
     explained: Option<Arc<ColourLut>>,
@@ -614,6 +629,16 @@ pub struct Labelling {
     defer: bool,
     /// Fitted frame sets whose labels were left to be drawn later ([`LabellingReport::deferred`]).
     deferred: u64,
+    /// The thread lessons run on, once one was given ([`crate::lesson`]).
+    learner: Option<rayon::ThreadPool>,
+    /// The lesson on that thread, until its colours are taken.
+    lesson: Option<InFlight>,
+    /// Lessons given ([`LabellingReport::lessons`]), and those waited for.
+    lessons: u64,
+    lessons_waited: u64,
+    /// What the lesson whose colours were taken at the start of the last frame set's labelling
+    /// took on its thread, ms.
+    lesson_ms: Option<f64>,
     /// Frame sets labelled since the colours last learned (what they forget when they next do, and
     /// whether a trusted frame set may teach them: [`LEARN_EVERY`]).
     since_learned: u32,
@@ -738,6 +763,11 @@ impl Labelling {
             drawn: 0,
             defer: false,
             deferred: 0,
+            learner: None,
+            lesson: None,
+            lessons: 0,
+            lessons_waited: 0,
+            lesson_ms: None,
             since_learned: 0,
             since_refused: None,
             since_compiled: 0,
@@ -999,17 +1029,20 @@ impl Labelling {
     }
 
     /// Labels one frame set; without `masks_wanted`, a frame set the tool's fit labels (trusted
-    /// or not) gets no label masks (`None` for every view) unless it may teach the colours (a
-    /// trusted frame set at most every fifteenth frame set; an agreeing untrusted
-    /// one while no trusted one has): its hull and pose are the same either way, and so is every
-    /// frame set after it (the masks of a frame set that does not teach feed nothing that
-    /// follows). With `masks_wanted` and [`Labelling::defer_drawing`], such a frame set's masks
+    /// or not) gets no label masks (`None` for every view) unless its untrusted fit may teach the
+    /// colours (one that agrees with the silhouettes while no trusted one has taught them): its
+    /// hull and pose are the same either way, and so is every frame set after it (the masks of a
+    /// frame set that does not teach feed nothing that follows; a trusted one that teaches, at
+    /// most every fifteenth frame set, hands its lesson to a thread of its own, which draws them
+    /// there: [`crate::lesson`]). With `masks_wanted` and [`Labelling::defer_drawing`], such a frame set's masks
     /// are handed out to be drawn later ([`Labelled::pending`]). A frame set the learned colours
     /// label gets its masks either way.
     pub fn label_with(&mut self, set: &FrameSet, carver: &mut Carver, masks_wanted: bool) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();
         self.taught = None;
+        self.lesson_ms = None;
+        self.take_due_lesson(false)?;
         let mut fg = std::mem::take(&mut self.masks);
         let tested = self
             .segmenter
@@ -1065,11 +1098,12 @@ impl Labelling {
                 stats: None,
                 drawn: false,
                 pending: None,
+                lesson_ms: self.lesson_ms,
             });
         }
         // The fit's hints (the learned colours', the possible shadows) are taken before possible
         // shadows become foreground or background.
-        let sure = self.sure.as_ref().filter(|_| self.method == LabelMethod::Both);
+        let sure = self.sure.as_deref().filter(|_| self.method == LabelMethod::Both);
         let hand_hints = self.hand_hints();
         // The weak foreground the other views confirmed is foreground to the fit, never evidence of
         // the tool's outline (as a shadow on the table, [`TABLE_SHADOW`]): the fat hull near the
@@ -1136,6 +1170,7 @@ impl Labelling {
                 stats: None,
                 drawn: false,
                 pending: None,
+                lesson_ms: self.lesson_ms,
             });
         }
         // The hints for the tool's fit, on the foreground as the hull left it. The shadows the other
@@ -1204,22 +1239,23 @@ impl Labelling {
         self.since_refused = self.since_refused.map(|n| n.saturating_add(1));
         let learn_due = colours
             && (self.counters.learned == 0 || u64::from(self.since_learned) >= LEARN_EVERY)
-            && self.since_refused.is_none_or(|n| u64::from(n) >= LEARN_EVERY);
+            && self.since_refused.is_none_or(|n| u64::from(n) >= LEARN_EVERY)
+            && self.lesson.is_none();
         self.since_compiled = self.since_compiled.saturating_add(1);
         let Some(labeller) = &mut self.tool else { fail!("no tool to label frame {frame} with") };
         let table = table_shadows.then(|| table_shadows_of(&self.rig, &self.unresolved, set, &self.segmenter));
         // Only a frame set after an agreeing one may teach ([`BOOTSTRAP_STEP_M`]): the unoccluded
         // pixels cost a splat per view, and a recording never trusted would pay it every frame set.
         labeller.list_unoccluded(bootstrapping && self.last_agreeing.is_some());
-        // The masks are drawn where they may teach, where an untrusted fit may (the colours label
-        // the other untrusted frame sets, or nothing does), and where they are wanted, unless
-        // they are left to be drawn later.
-        let teach = learn_due || bootstrapping && self.last_agreeing.is_some();
+        // The masks are drawn where an untrusted fit may teach (the colours label the other
+        // untrusted frame sets, or nothing does), and where they are wanted, unless they are
+        // left to be drawn later. A trusted frame set's lesson draws them where they are not.
+        let teach = bootstrapping && self.last_agreeing.is_some();
         let defer = masks_wanted && self.defer && !teach;
         let draw = teach || masks_wanted && !defer;
         labeller.draw_labels(draw);
         let mut labelled = labeller.label(frame, set.timestamp_ns, &occ, &marked_only, &inputs, table.as_ref());
-        let drawer = defer.then(|| labeller.drawer());
+        let drawer = (defer || learn_due).then(|| labeller.drawer());
         drop(inputs);
         (self.hints, self.hinted) = (hints, hinted_store);
         self.counters.searches += u64::from(labelled.stats.from_thin_parts);
@@ -1253,7 +1289,7 @@ impl Labelling {
             && steady
             && labelled.unoccluded.iter().map(Vec::len).sum::<usize>() >= BOOTSTRAP_MIN_PIXELS)
             .then(|| bootstrap_labels(&labelled.masks, &labelled.tool_regions, &labelled.unoccluded));
-        let mut learn_from = None;
+        let mut drawn_lesson = None;
         let mut sharpen_later = None;
         let (mut masks, source) = if trusted {
             let sharpen_all = |masks: &mut [Option<GrayImage>], lut: Option<&ColourLut>| {
@@ -1266,25 +1302,13 @@ impl Labelling {
                     },
                 );
             };
-            // The colours that label and hint are learned from the labels sharpened wherever a
-            // colour is surely the likelier, the sharpening colours from the labels handed out.
-            let likelier = learns.then(|| {
-                // The pixels inside the drawn blade's outline, and its scalpel pixels before any
-                // colour sharpens them.
-                let outline = self.blade_regions(&labelled.masks, estimate.fitted.as_ref());
-                let blade: Vec<Vec<usize>> = labelled
-                    .masks
-                    .par_iter()
-                    .zip(outline.par_iter())
-                    .map(|(mask, inside)| mask.as_ref().map_or_else(Vec::new, |m| scalpel_among(m, inside)))
-                    .collect();
-                let mut masks = labelled.masks.clone();
-                sharpen_all(&mut masks, self.sure.as_ref());
-                (masks, blade, outline)
+            // The labels drawn at once teach as drawn, before any colour sharpened them.
+            drawn_lesson = (learns && drawn).then(|| LessonLabels::Drawn {
+                masks: labelled.masks.clone(),
+                tool_regions: labelled.tool_regions.clone(),
             });
             let mut masks = labelled.masks;
             sharpen_all(&mut masks, self.explained.as_deref());
-            learn_from = likelier;
             sharpen_later = self.explained.clone().filter(|_| colours);
             (masks, LabelSource::Geometry)
         } else if colours && self.colours_label() {
@@ -1303,19 +1327,33 @@ impl Labelling {
             LabelSource::UntrustedGeometry => self.counters.untrusted += 1,
             LabelSource::Unknown => self.counters.unknown += 1,
         }
-        if let Some((likelier, blade, outline)) = learn_from {
-            // Only a trusted fit's labels teach: `masks` are the labels handed out.
-            let passed = self.since_learned;
-            if !self.learn_trusted(set, &likelier, &masks, &outline) {
-                self.judge_hand_hints(set, &blade, passed);
-            }
+        if let (true, Some(fitted)) = (learns, &estimate.fitted) {
+            // Only a trusted fit's labels teach, beside the labelling: drawn here or there.
+            let labels = match (drawn_lesson, &drawer) {
+                (Some(drawn), _) => drawn,
+                (None, Some(drawer)) => LessonLabels::ToDraw {
+                    pending: Box::new(PendingLabels {
+                        drawer: drawer.clone(),
+                        rig: Arc::clone(&self.rig),
+                        pose: fitted.tool_to_world,
+                        masks: if hinting { self.hinted.clone() } else { fg.clone() },
+                        given_back: given_back.clone(),
+                        sharpen: None,
+                    }),
+                    occupancy: labelled.occupancy.clone(),
+                },
+                (None, None) => {
+                    fail!("frame {frame}: a trusted fit to learn the colours from, neither drawn nor to draw")
+                }
+            };
+            self.start_lesson(set, labels, &fitted.tool_to_world)?;
         } else if let Some(taught) = taught {
             // Or, until one has, what an agreeing fit alone decides.
             let outline = self.blade_regions(&taught, estimate.fitted.as_ref());
             self.bootstrap(set, &taught, &outline);
         }
         // Left to be drawn later: the foreground the fit saw (its hints in, as `inputs` had it).
-        let pending = match (drawer, &estimate.fitted, source) {
+        let pending = match (drawer.filter(|_| defer), &estimate.fitted, source) {
             (Some(drawer), Some(fitted), LabelSource::Geometry | LabelSource::UntrustedGeometry) => {
                 self.deferred += 1;
                 Some(PendingLabels {
@@ -1343,6 +1381,7 @@ impl Labelling {
             stats: Some(labelled.stats),
             drawn,
             pending,
+            lesson_ms: self.lesson_ms,
         })
     }
 
@@ -1358,7 +1397,8 @@ impl Labelling {
     /// Whether the label masks of a frame set the tool's fit labels are left to be drawn later
     /// when they are wanted only to be shown (off by default): [`Labelling::label_with`] then
     /// hands them out as [`Labelled::pending`], which draws the same masks, on any thread. A
-    /// frame set that may teach the colours is drawn at once (the colours learn from its masks).
+    /// frame set whose untrusted fit may teach the colours is drawn at once (the colours learn
+    /// from its masks).
     pub fn defer_drawing(&mut self, on: bool) {
         self.defer = on;
     }
@@ -1539,37 +1579,32 @@ impl Labelling {
         handed_out: &[Option<GrayImage>],
         blade: &[Vec<usize>],
     ) {
-        // The labels are background outside each view's window.
-        let windows = &self.windows;
-        // What was learned is forgotten by the frame sets passed since ([`LEARN_EVERY`]).
-        let passed = std::mem::take(&mut self.since_learned).max(1);
-        let learn = |model: &mut AppearanceModel, masks: &[Option<GrayImage>], blade: &[Vec<usize>]| {
-            model.age_by(passed);
-            for (k, (view, mask)) in set.views.iter().zip(masks).enumerate() {
-                if let (Some(view), Some(mask)) = (view, mask) {
-                    let window = Window::of_view(windows, k, mask.width(), mask.height());
-                    let inside = blade.get(k).map_or(&[][..], Vec::as_slice);
-                    model.learn_parts(&view.image, mask, true, window, inside);
-                }
-            }
-            model.sources.geometry_frames += 1;
-        };
-        // The blade is told apart in the colours that label and hint only: in the sharpening
-        // colours a grey blade's class took the hand's dark shadow beside it for the tool.
-        rayon::join(|| learn(&mut self.appearance, likelier, blade), || learn(&mut self.sharpening, handed_out, &[]));
+        // What was learned is forgotten by the frame sets passed since ([`LEARN_EVERY`]); the
+        // labels are background outside each view's window.
+        let passed = std::mem::take(&mut self.since_learned);
+        let images: Vec<Option<&image::RgbImage>> = set.views.iter().map(|v| v.as_ref().map(|v| &v.image)).collect();
+        let models = (&mut self.appearance, &mut self.sharpening);
+        learn_models(models, &images, &self.windows, (likelier, handed_out), blade, passed);
         self.counters.learned += 1;
-        // Each model compiled on its own: one not learned yet (no class) does not make the other
-        // compile every frame set.
-        let refresh = self.counters.learned == 1 || self.since_compiled >= REFRESH_EVERY;
+        let (refresh, colours, explained) = self.compiling(self.counters.learned == 1);
         if refresh {
             self.since_compiled = 0;
         }
-        if refresh || self.colours.is_none() {
+        if colours {
             (self.colours, self.sure) = compile(self.appearance.classes());
         }
-        if refresh || self.explained.is_none() {
+        if explained {
             self.explained = compile_explained(self.sharpening.classes()).map(Arc::new);
         }
+    }
+
+    /// Whether the colours learned next are compiled again: both models now and then
+    /// ([`REFRESH_EVERY`]), and each while it has none compiled (one not learned yet, no class,
+    /// does not make the other compile every frame set); the colours that label and hint, and
+    /// the sharpening colours; `first` where the colours learn for the first time.
+    fn compiling(&self, first: bool) -> (bool, bool, bool) {
+        let refresh = first || self.since_compiled >= REFRESH_EVERY;
+        (refresh, refresh || self.colours.is_none(), refresh || self.explained.is_none())
     }
 
     /// Per view of `masks`, the indices of the pixels inside the blade's outline with the tool at
@@ -1588,20 +1623,11 @@ impl Labelling {
             .collect()
     }
 
-    /// Tallies how much of a learned frame set's drawn blade (`blade`, per view the indices of its
-    /// scalpel pixels within the blade's outline, taken before any colour sharpened the labels)
-    /// the sure colours, as just learned, call the hand's.
-    /// What was tallied before is kept as for the `passed` frame sets since it was.
-    fn judge_hand_hints(&mut self, set: &FrameSet, blade: &[Vec<usize>], passed: u32) {
-        let Some(sure) = &self.sure else { return };
-        let (pixels, hand) = set
-            .views
-            .iter()
-            .zip(blade)
-            .filter_map(|(view, pixels)| {
-                Some((pixels.len() as u64, blade_as_hand(sure, &view.as_ref()?.image, pixels)))
-            })
-            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    /// Tallies a learned frame set's drawn blade: its `pixels` (its scalpel pixels within the
+    /// blade's outline, taken before any colour sharpened the labels) and those of them the sure
+    /// colours, as just learned, call the `hand`'s. What was tallied before is kept as for the
+    /// `passed` frame sets since it was.
+    fn tally_blade(&mut self, (pixels, hand): (u64, u64), passed: u32) {
         let (b, h) = self.tool_as_hand;
         let keep = TOOL_AS_HAND_KEEP.powi(passed.clamp(1, i32::MAX as u32) as i32);
         self.tool_as_hand = (b * keep + pixels as f64, h * keep + hand as f64);
@@ -1677,6 +1703,7 @@ impl Labelling {
             && self.appearance.sources.mask_views == 0
             && self.counters.learned == self.counters.bootstrapped
             && self.counters.bootstrapped < BOOTSTRAP_FRAMES
+            && self.lesson.is_none()
     }
 
     /// Learns `taught` (what an untrusted fit alone decides: [`bootstrap_labels`]) as the colours,
@@ -1698,32 +1725,96 @@ impl Labelling {
         }
     }
 
-    /// Learns a trusted frame set's colours ([`Labelling::learn`]) unless, both labels learned, the
-    /// tool's classes then have the hand's colours ([`tool_taught_the_hand`]): a fit laid over the
-    /// hand, trusted all the same, teaches the tool the hand's colours, and from then on the
-    /// colours call the hand the tool. Then the colours stay as they were, no trusted frame set
-    /// teaches them for [`LEARN_EVERY`] frame sets, and whether learning was refused is returned
-    /// (counted as `learn_refused`). On random:1523 in random:1531 two such fits (34° and 84° off)
-    /// were the first trusted and taught the glove's blue as the blade's: 2 frame sets of 150
-    /// trusted instead of 49 (53 with the rule). On random:1993 in random:1953 (a bare hand, every
-    /// trusted fit off) the colours so learned took the hand's pooled IoU from 0.94 to 0.61.
-    fn learn_trusted(
+    /// Takes what a trusted frame set's lesson taught ([`crate::lesson`]), `since` frame sets
+    /// after it (those labelled in between left out), unless, both labels learned, the tool's
+    /// classes then have the hand's colours ([`tool_taught_the_hand`]): a fit laid over the hand,
+    /// trusted all the same, teaches the tool the hand's colours, and from then on the colours
+    /// call the hand the tool. Then the colours stay as they were, no trusted frame set teaches
+    /// them for [`LEARN_EVERY`] frame sets from the one refused (counted as `learn_refused`). On
+    /// random:1523 in random:1531 two such fits (34° and 84° off) were the first trusted and
+    /// taught the glove's blue as the blade's: 2 frame sets of 150 trusted instead of 49 (53 with
+    /// the rule). On random:1993 in random:1953 (a bare hand, every trusted fit off) the colours
+    /// so learned took the hand's pooled IoU from 0.94 to 0.61.
+    fn take_lesson(&mut self, lesson: &InFlight, learned: Learned, since: u32) {
+        self.lesson_ms = Some(learned.ms);
+        if learned.refused {
+            self.counters.learn_refused += 1;
+            self.since_refused = Some(since);
+            return;
+        }
+        self.appearance = learned.appearance;
+        self.sharpening = learned.sharpening;
+        self.counters.learned += 1;
+        self.since_learned = since;
+        if lesson.refresh {
+            self.since_compiled = since;
+        }
+        if let Some((colours, sure)) = learned.colours {
+            (self.colours, self.sure) = (colours, sure);
+        }
+        if let Some(explained) = learned.explained {
+            self.explained = explained;
+        }
+        if let Some(blade) = learned.blade {
+            self.tally_blade(blade, lesson.passed);
+        }
+    }
+
+    /// Takes the lesson in flight when it is due ([`LESSON_DELAY`]), at the start of a frame
+    /// set's labelling, or now with `now`.
+    fn take_due_lesson(&mut self, now: bool) -> Result<(), Error> {
+        let Some(lesson) = self.lesson.as_mut() else { return Ok(()) };
+        if !now {
+            lesson.since += 1;
+        }
+        if !now && lesson.since < LESSON_DELAY {
+            return Ok(());
+        }
+        let Some(lesson) = self.lesson.take() else { return Ok(()) };
+        let (learned, waited) = lesson.wait()?;
+        self.lessons_waited += u64::from(waited);
+        // Those labelled in between, the one now starting left out.
+        let since = if now { lesson.since } else { lesson.since - 1 };
+        self.take_lesson(&lesson, learned, since);
+        Ok(())
+    }
+
+    /// Hands a trusted frame set's lesson (its `labels`, the tool at `pose`) to the learning
+    /// thread: the colours as they are now, and the frame sets passed since they last learned.
+    fn start_lesson(
         &mut self,
         set: &FrameSet,
-        likelier: &[Option<GrayImage>],
-        handed_out: &[Option<GrayImage>],
-        blade: &[Vec<usize>],
-    ) -> bool {
-        let before = self.colour_state();
-        self.learn(set, likelier, handed_out, blade);
-        // Until both labels have enough samples there are no classes to judge: they gather.
-        let refused = self.appearance.classes().is_some_and(|c| tool_taught_the_hand(&c));
-        if refused {
-            self.roll_back(before);
-            self.counters.learn_refused += 1;
-            self.since_refused = Some(0);
-        }
-        refused
+        labels: LessonLabels,
+        pose: &nalgebra::Isometry3<f64>,
+    ) -> Result<(), Error> {
+        let Some(labeller) = &self.tool else { fail!("frame {}: no tool to learn the colours with", set.frame) };
+        let (refresh, colours, explained) = self.compiling(self.counters.learned == 0);
+        let lesson = Lesson {
+            labels,
+            images: set.views.iter().map(|v| v.as_ref().map(|v| v.image.clone())).collect(),
+            outlines: self.rig.cameras.iter().map(|c| labeller.blade_outline(c, pose)).collect(),
+            windows: self.windows.clone(),
+            sure: self.sure.clone(),
+            explained: self.explained.clone(),
+            appearance: self.appearance.clone(),
+            sharpening: self.sharpening.clone(),
+            passed: self.since_learned,
+            compile: (colours, explained),
+        };
+        let pool = match &self.learner {
+            Some(pool) => pool,
+            None => self.learner.insert(crate::lesson::pool()?),
+        };
+        self.lesson = Some(InFlight::start(pool, set.frame, refresh, lesson));
+        self.lessons += 1;
+        Ok(())
+    }
+
+    /// Takes what the lesson in flight taught, waiting for it (the labelling takes it
+    /// [`LESSON_DELAY`] frame sets after the frame set that taught it, or here): before a report,
+    /// or relabelling by colour, at the end of a recording. An error where its thread failed.
+    pub fn settle(&mut self) -> Result<(), Error> {
+        self.take_due_lesson(true)
     }
 
     /// What [`Labelling::learn`] changes, to roll it back ([`Labelling::roll_back`]).
@@ -1787,6 +1878,8 @@ impl Labelling {
             appearance_sources: self.appearance.sources,
             drawn: self.drawn,
             deferred: self.deferred,
+            lessons: self.lessons,
+            lessons_waited: self.lessons_waited,
         }
     }
 
@@ -1890,7 +1983,7 @@ struct ColourState {
     appearance: AppearanceModel,
     sharpening: AppearanceModel,
     colours: Option<ColourLut>,
-    sure: Option<ColourLut>,
+    sure: Option<Arc<ColourLut>>,
     explained: Option<Arc<ColourLut>>,
     learned: u64,
     since: (u32, u32),
@@ -1917,7 +2010,7 @@ fn tool_apart_from_hand(classes: Option<&ColourClasses>) -> bool {
 /// blade 1.9-2.1 in the hand's metric; the colours so learned took the scalpel's pooled IoU from
 /// 0.39 to 0.79), while a fit laid over the hand taught classes within 0.1-1.4 of it (random:1523
 /// in random:1531, random:1993 in random:1953).
-fn tool_taught_the_hand(classes: &ColourClasses) -> bool {
+pub(crate) fn tool_taught_the_hand(classes: &ColourClasses) -> bool {
     let Some(hand) = classes.classes.iter().find(|c| c.label == label::HAND) else { return false };
     let mut tool = classes.classes.iter().filter(|c| c.label == label::SCALPEL).peekable();
     tool.peek().is_some() && tool.all(|t| hand.mahalanobis2(&t.mean).is_some_and(|m| m <= HAND_SPREAD_MAHALANOBIS2))
@@ -1929,15 +2022,15 @@ const HAND_SPREAD_MAHALANOBIS2: f64 = 3.0;
 
 /// The learned classes compiled two ways: every colour labelled; labelled only where sure
 /// ([`SHARPEN_LOG_RATIO`]).
-fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<ColourLut>) {
+pub(crate) fn compile(classes: Option<ColourClasses>) -> (Option<ColourLut>, Option<Arc<ColourLut>>) {
     let Some(classes) = classes else { return (None, None) };
     let (all, sure) = ColourLut::new_and_confident(&classes, 2.0 * SHARPEN_LOG_RATIO);
-    (Some(all), Some(sure))
+    (Some(all), Some(Arc::new(sure)))
 }
 
 /// The learned classes compiled to label only where sure ([`SHARPEN_LOG_RATIO`]) and explained by
 /// the label's class ([`SURE_MAHALANOBIS2`]).
-fn compile_explained(classes: Option<ColourClasses>) -> Option<ColourLut> {
+pub(crate) fn compile_explained(classes: Option<ColourClasses>) -> Option<ColourLut> {
     let explained = ColourClasses { reject_mahalanobis2: Some(SURE_MAHALANOBIS2), ..classes? };
     Some(ColourLut::confident(&explained, 2.0 * SHARPEN_LOG_RATIO))
 }
@@ -1971,52 +2064,6 @@ fn bootstrap_labels(
             Some(out)
         })
         .collect()
-}
-
-/// The indices (ascending) of the pixels of a `width` x `height` image inside the convex `outline`
-/// (counter-clockwise pixels; none for fewer than three points).
-fn inside_outline(width: u32, height: u32, outline: &[nalgebra::Point2<f64>]) -> Vec<usize> {
-    if outline.len() < 3 {
-        return Vec::new();
-    }
-    let (w, h) = (f64::from(width), f64::from(height));
-    let lo = outline.iter().fold((f64::MAX, f64::MAX), |a, p| (a.0.min(p.x), a.1.min(p.y)));
-    let hi = outline.iter().fold((f64::MIN, f64::MIN), |a, p| (a.0.max(p.x), a.1.max(p.y)));
-    let (x0, y0) = (lo.0.floor().max(0.0), lo.1.floor().max(0.0));
-    let (x1, y1) = (hi.0.ceil().min(w - 1.0), hi.1.ceil().min(h - 1.0));
-    if !(x1 >= x0 && y1 >= y0) {
-        return Vec::new();
-    }
-    let inside = |q: nalgebra::Point2<f64>| {
-        outline.iter().zip(outline.iter().cycle().skip(1)).all(|(a, b)| (b - a).perp(&(q - a)) >= 0.0)
-    };
-    let stride = width as usize;
-    let mut pixels = Vec::new();
-    for y in y0 as usize..=y1 as usize {
-        for x in x0 as usize..=x1 as usize {
-            if inside(nalgebra::Point2::new(x as f64, y as f64)) {
-                pixels.push(y * stride + x);
-            }
-        }
-    }
-    pixels
-}
-
-/// Those of `pixels` (indices) where `mask` is the scalpel.
-fn scalpel_among(mask: &GrayImage, pixels: &[usize]) -> Vec<usize> {
-    let raw = mask.as_raw();
-    pixels.iter().copied().filter(|&k| raw.get(k) == Some(&label::SCALPEL)).collect()
-}
-
-/// How many of `image`'s pixels at `pixels` (indices) `sure` calls the hand's (an index outside
-/// the image counts none).
-fn blade_as_hand(sure: &ColourLut, image: &image::RgbImage, pixels: &[usize]) -> u64 {
-    let raw = image.as_raw();
-    pixels
-        .iter()
-        .filter_map(|&k| raw.get(3 * k..3 * k + 3))
-        .map(|p| u64::from(sure.get([p[0], p[1], p[2]]) == label::HAND))
-        .sum()
 }
 
 /// The fit's hints ([`ToolLabeller::label`]) in the window `win` of `mask` (outside it the mask
@@ -2124,6 +2171,7 @@ mod tests {
     use image::{Rgb, RgbImage};
 
     use super::*;
+    use crate::lesson::{blade_as_hand, scalpel_among};
 
     /// Near the last hull each view is tested in its rows' stretches, but a camera on the MOG2
     /// fallback tests its whole image (its model learns from every pixel): it gets none.
@@ -2244,7 +2292,7 @@ mod tests {
     }
 
     /// A skin-toned hand and a dark blue handle, learned (the thin steel blade was not).
-    fn skin_and_blue() -> ColourLut {
+    fn skin_and_blue() -> Arc<ColourLut> {
         let classes = ColourClasses {
             classes: vec![
                 ColourClass::from_albedo(label::HAND, [200.0, 150.0, 120.0], (0.3, 1.0), 0.05),
@@ -2356,7 +2404,7 @@ mod tests {
             });
             let (x0, y0) = (next(u64::from(w)) as u32, next(u64::from(h)) as u32);
             let win = Window { x0, y0, x1: x0 + next(u64::from(w) + 3) as u32, y1: y0 + 1 + next(u64::from(h)) as u32 };
-            for (sure, hand_hints) in [(Some(&lut), true), (Some(&lut), false), (None, true)] {
+            for (sure, hand_hints) in [(Some(&*lut), true), (Some(&*lut), false), (None, true)] {
                 let mut out = vec![7; 3];
                 fit_hints(sure, hand_hints, &image, &mask, win, &mut out);
                 assert_eq!(out, one_by_one(sure, hand_hints, &image, &mask, win), "round {round}, {w}x{h}, {win:?}");

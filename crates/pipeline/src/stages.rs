@@ -334,9 +334,12 @@ pub struct StageTimes {
     /// Of `segment`, the tool's fit's evidence: its provisional labels around the predicted pose,
     /// and around the hull's thin parts where the hull is searched.
     pub segment_evidence: Vec<Duration>,
-    /// `segment` again, for the frame sets whose fitted tool was drawn into the views (logged
-    /// with their images, or teaching the colours: [`crate::labelling::Labelled::drawn`]) only.
+    /// `segment` again, for the frame sets whose fitted tool was drawn into the views (an
+    /// untrusted fit that may teach the colours: [`crate::labelling::Labelled::drawn`]) only.
     pub segment_drawn: Vec<Duration>,
+    /// A trusted frame set's lesson, the colours learned from it on a thread of its own beside the
+    /// segmentation (one entry per lesson taken: [`crate::labelling::Labelled::lesson_ms`]).
+    pub learn: Vec<Duration>,
     /// Carving the hull.
     pub carve: Vec<Duration>,
     /// The labels' grids and surfaces.
@@ -359,13 +362,14 @@ pub struct StageTimes {
 }
 
 impl StageTimes {
-    fn fields(&self) -> [(&'static str, &Vec<Duration>); 14] {
+    fn fields(&self) -> [(&'static str, &Vec<Duration>); 15] {
         [
             ("read", &self.read),
             ("segment", &self.segment),
             ("segment_foreground", &self.segment_foreground),
             ("segment_evidence", &self.segment_evidence),
             ("segment_drawn", &self.segment_drawn),
+            ("learn", &self.learn),
             ("carve", &self.carve),
             ("surface", &self.surface),
             ("pose", &self.pose),
@@ -386,6 +390,7 @@ impl StageTimes {
             &mut self.segment_foreground,
             &mut self.segment_evidence,
             &mut self.segment_drawn,
+            &mut self.learn,
             &mut self.carve,
             &mut self.surface,
             &mut self.pose,
@@ -611,6 +616,8 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
                 &read_rx,
                 (&hull_tx, &depth),
             );
+            // The colours still being learned are taken before the report.
+            let result = result.and_then(|()| labelling.as_mut().map_or(Ok(()), Labelling::settle));
             ((labelling.as_ref().map(Labelling::report), region.counts), result)
         })?
     };
@@ -927,6 +934,7 @@ fn hull_frame_set(
         if labelled.drawn {
             work.times.segment_drawn.push(segment);
         }
+        work.times.learn.extend(labelled.lesson_ms.map(|ms| Duration::from_secs_f64(ms * 1e-3)));
         work.times.segment_foreground.push(Duration::from_secs_f64(labelled.foreground_ms * 1e-3));
         work.times
             .segment_evidence

@@ -136,6 +136,7 @@ pub fn run(out: &Path, quick: bool) -> anyhow::Result<()> {
             let (Some(hand), Some(scalpel)) = (labels.next(), labels.next()) else {
                 anyhow::bail!("{name}: the accuracy report lacks a label");
             };
+            labelling.settle()?;
             let c = labelling.report().counters;
             let row = Row {
                 setup: name.clone(),

@@ -656,7 +656,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             accuracy,
             silhouette_consistency: consistency,
             view_disagreement: disagreement,
-            labelling: labelling.as_ref().map(Labelling::report),
+            labelling: labelling.as_mut().map(|l| l.settle().map(|()| l.report())).transpose()?,
             pose: pose_report,
             timings: Timings {
                 read: StageTiming::from_durations(&t.read),

@@ -308,10 +308,14 @@ struct Timings {
     #[serde(default)]
     segment_evidence: Option<StageTiming>,
     /// `segment` over the frame sets whose fitted tool was drawn into the views in the loop only
-    /// (teaching the colours; those logged with their images that teach nothing are drawn on the
-    /// logging thread: `log_labels`).
+    /// (an untrusted fit that may teach the colours; those logged with their images are drawn on
+    /// the logging thread, `log_labels`, and the trusted ones that teach on the lesson's: `learn`).
     #[serde(default)]
     segment_drawn: Option<StageTiming>,
+    /// A trusted frame set's lesson (its tool drawn, the colours learned from it) on a thread of
+    /// its own beside the segmentation, per lesson (null when none was taken).
+    #[serde(default)]
+    learn: Option<StageTiming>,
     carve: StageTiming,
     surface: StageTiming,
     pose: StageTiming,
@@ -324,9 +328,8 @@ struct Timings {
     tissue_surface: StageTiming,
     /// Rerun logging, meshes and snapshots, on the logging thread.
     log: StageTiming,
-    /// Of `log`, per frame set logged with its images and labelled by the tool's fit without
-    /// teaching the colours: drawing its label masks, left to the logging thread (null when
-    /// there were none).
+    /// Of `log`, per frame set logged with its images and labelled by the tool's fit: drawing its
+    /// label masks, left to the logging thread (null when there were none).
     #[serde(default)]
     log_labels: Option<StageTiming>,
     /// Times the loop waited for the logging queue (without --realtime), per wait.
@@ -1009,6 +1012,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 segment_foreground: (!times.segment_foreground.is_empty()).then(|| timing(&times.segment_foreground)),
                 segment_evidence: (!times.segment_evidence.is_empty()).then(|| timing(&times.segment_evidence)),
                 segment_drawn: (!times.segment_drawn.is_empty()).then(|| timing(&times.segment_drawn)),
+                learn: (!times.learn.is_empty()).then(|| timing(&times.learn)),
                 carve: timing(&times.carve),
                 surface: timing(&times.surface),
                 pose: timing(&times.pose),

@@ -252,6 +252,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         }
         pb.inc(1);
     }
+    // The colours still being learned are taken before relabelling by them.
+    labelling.settle()?;
     let mut relabel_times = Vec::new();
     for (frame, masks, segment_ms, trace) in deferred {
         let mut set = ds.read_frame_set(frame, score)?;
