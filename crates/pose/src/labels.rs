@@ -779,11 +779,11 @@ fn final_labels(
 /// `mask` with all its foreground the hand's (every pixel stored, without a branch, so the pass
 /// vectorizes).
 fn all_hand(mask: &GrayImage) -> GrayImage {
-    let mut out = mask.clone();
-    for p in out.iter_mut() {
-        *p = if *p == label::BACKGROUND { label::BACKGROUND } else { label::HAND };
-    }
-    out
+    // One pass that writes the new image, not a copy and a pass over the copy.
+    let raw = mask.as_raw().iter().map(|&p| if p == label::BACKGROUND { label::BACKGROUND } else { label::HAND });
+    let (w, h) = mask.dimensions();
+    // The sizes agree: a new image is never made.
+    GrayImage::from_raw(w, h, raw.collect()).unwrap_or_else(|| GrayImage::new(w, h))
 }
 
 /// Foreground covered by the drawn tool: scalpel, whatever may hide it; other foreground: hand.
