@@ -754,8 +754,9 @@ fn run_on_a_random_rig_and_look_without_masks_resects_the_lobe() {
     assert_pieces_on_the_table(t, "mean_speed_m_s");
 }
 
-/// The labels of a frame set that is not logged are drawn only where they teach the colours: the
-/// loop needs its hull and the tool's pose, not its masks. How often the images are logged must
+/// The labels of a frame set that is not logged are drawn only where they teach the colours (on
+/// the lesson's thread for a trusted one): the loop needs its hull and the tool's pose, not its
+/// masks. How often the images are logged must
 /// not change what the loop does: the same recording (the first 30 frame sets of the resection on
 /// the random:47 rig in the random:88 look, the pointed scalpel, no masks) logged every frame set
 /// and every seventh gives the same pose frame by frame, the same labelling and the same organ,
@@ -779,15 +780,18 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
     // Learned from every fifteenth trusted frame set at most, not from every one.
     let learned = a["labelling"]["counters"]["learned"].as_u64().expect("learned");
     assert!((1..=3).contains(&learned), "{}", a["labelling"]["counters"]);
-    // Drawn in the loop: the frame sets that may teach, however often the images are logged. The
-    // others logged are drawn on the logging thread: logged every frame set, every fitted one
-    // is drawn in one place or the other (but those untrusted the colours label); every seventh,
-    // only those logged.
+    // Drawn in the loop: the frame sets whose untrusted fit may teach, however often the images
+    // are logged; the trusted ones that teach, beside the loop by their lessons. The others
+    // logged are drawn on the logging thread: logged every frame set, every fitted one is drawn
+    // in one place or the other (but those untrusted the colours label); every seventh, only
+    // those logged.
     let count = |r: &serde_json::Value, k: &str| r["labelling"][k].as_u64().unwrap_or_else(|| panic!("{k}"));
     let fitted = 30 - a["labelling"]["counters"]["unknown"].as_u64().expect("unknown");
     let colour = a["labelling"]["counters"]["colour"].as_u64().expect("colour");
-    assert_eq!(count(&a, "drawn"), count(&b, "drawn"), "{} {}", a["labelling"], b["labelling"]);
-    assert!(count(&a, "drawn") >= learned, "{}", a["labelling"]);
+    for k in ["drawn", "lessons"] {
+        assert_eq!(count(&a, k), count(&b, k), "{k}: {} {}", a["labelling"], b["labelling"]);
+    }
+    assert!(count(&a, "lessons") >= learned, "{}", a["labelling"]);
     let in_either = count(&a, "drawn") + count(&a, "deferred");
     assert!(in_either <= fitted && in_either + colour >= fitted, "{}", a["labelling"]);
     assert!(count(&b, "deferred") > 0 && count(&b, "deferred") < count(&a, "deferred"), "{}", b["labelling"]);

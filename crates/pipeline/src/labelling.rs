@@ -1040,9 +1040,9 @@ impl Labelling {
     /// hull and pose are the same either way, and so is every frame set after it (the masks of a
     /// frame set that does not teach feed nothing that follows; a trusted one that teaches, at
     /// most every fifteenth frame set, hands its lesson to a thread of its own, which draws them
-    /// there: [`crate::lesson`]). With `masks_wanted` and [`Labelling::defer_drawing`], such a frame set's masks
-    /// are handed out to be drawn later ([`Labelled::pending`]). A frame set the learned colours
-    /// label gets its masks either way.
+    /// there: [`crate::lesson`]). With `masks_wanted` and [`Labelling::defer_drawing`], such a
+    /// frame set's masks are handed out to be drawn later ([`Labelled::pending`]). A frame set the
+    /// learned colours label gets its masks either way.
     pub fn label_with(&mut self, set: &FrameSet, carver: &mut Carver, masks_wanted: bool) -> Result<Labelled, Error> {
         let frame = set.frame;
         let clock = Instant::now();

@@ -4,9 +4,10 @@
 //! compiled. The labelling takes what was learned [`LESSON_DELAY`] frame sets later, whether it
 //! runs in the main job's loop or not, waiting for it if it is not done: the labels, fits and
 //! reports are the same whichever thread ran it and however fast. In the loop a frame set that
-//! taught the colours took three times as long to label as the others (19 ms against 6.5 on the
-//! built-in scene's recording, one in fifteen frame sets; docs/benchmarks.md, "The colours
-//! learned beside the loop").
+//! taught the colours took three times as long to label as the others (17-21 ms against 6 on the
+//! built-in scene's recording, one in fifteen frame sets): beside it, the segmentation's p95 fell
+//! by 20-40%, though on two cores the lesson still shares them with the other stages
+//! (docs/benchmarks.md, "The colours learned beside the loop").
 
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, sync_channel};
