@@ -476,10 +476,11 @@ pub struct LabellingReport {
     /// among `drawn`. 0 in reports written before it was counted.
     #[serde(default)]
     pub deferred: u64,
-    /// Trusted frame sets whose labels taught the colours beside the labelling, on a thread of
-    /// their own (drawn there where they were not drawn at once: not among `drawn`), their
-    /// colours taken two frame sets later; those of them the labelling had to wait for
-    /// (`lessons_waited`). 0 in reports written before they were counted.
+    /// Trusted frame sets whose labels taught the colours on a thread of their own (drawn there
+    /// where they were not drawn at once: not among `drawn`), their colours taken two frame sets
+    /// later in the main job's loop ([`Labelling::learn_beside`]), at once elsewhere; those of
+    /// them the loop had to wait for when they were due (`lessons_waited`). 0 in reports written
+    /// before they were counted.
     #[serde(default)]
     pub lessons: u64,
     /// See `lessons`.
@@ -629,6 +630,9 @@ pub struct Labelling {
     defer: bool,
     /// Fitted frame sets whose labels were left to be drawn later ([`LabellingReport::deferred`]).
     deferred: u64,
+    /// Whether lessons are taken [`LESSON_DELAY`] frame sets later, not waited for at once
+    /// ([`Labelling::learn_beside`]).
+    beside: bool,
     /// The thread lessons run on, once one was given ([`crate::lesson`]).
     learner: Option<rayon::ThreadPool>,
     /// The lesson on that thread, until its colours are taken.
@@ -767,6 +771,7 @@ impl Labelling {
             drawn: 0,
             defer: false,
             deferred: 0,
+            beside: false,
             learner: None,
             lesson: None,
             lessons: 0,
@@ -1348,6 +1353,10 @@ impl Labelling {
                 }
             };
             self.start_lesson(set, labels, &fitted.tool_to_world)?;
+            if !self.beside {
+                // Taken at once: the next frame set labels by what this one taught.
+                self.take_due_lesson(true)?;
+            }
         } else if let Some(taught) = taught {
             // Or, until one has, what an agreeing fit alone decides.
             let outline = self.blade_regions(&taught, estimate.fitted.as_ref());
@@ -1402,6 +1411,16 @@ impl Labelling {
     /// from its masks).
     pub fn defer_drawing(&mut self, on: bool) {
         self.defer = on;
+    }
+
+    /// Whether a trusted frame set's colours are learned beside the labelling and taken
+    /// [`LESSON_DELAY`] frame sets later, for a loop that should not wait for them (the main
+    /// job's: [`crate::lesson`]), or waited for before its labelling returns (off by default:
+    /// the commands that label a recording offline, whose next frame set then labels by them).
+    /// The lesson runs on its own thread either way; its results do not depend on the threads'
+    /// timing.
+    pub fn learn_beside(&mut self, on: bool) {
+        self.beside = on;
     }
 
     /// Labels `set` again by the learned colours alone (`None` while none are learned, and with
@@ -1773,7 +1792,8 @@ impl Labelling {
         }
         let Some(lesson) = self.lesson.take() else { return Ok(()) };
         let (learned, waited) = lesson.wait()?;
-        self.lessons_waited += u64::from(waited);
+        // Waited for when due, beside the labelling (taken at once, it is always waited for).
+        self.lessons_waited += u64::from(waited && !now);
         // Those labelled in between, the one now starting left out.
         let since = if now { lesson.since } else { lesson.since - 1 };
         self.take_lesson(&lesson, learned, since);

@@ -1,9 +1,10 @@
 //! The colours learned beside the labelling: a trusted frame set that teaches the colours
 //! ([`crate::labelling`], `LEARN_EVERY`) hands its lesson to a thread of its own: the fitted tool
 //! drawn into every view, its labels sharpened twice and both appearance models taught and
-//! compiled. The labelling takes what was learned [`LESSON_DELAY`] frame sets later, whether it
-//! runs in the main job's loop or not, waiting for it if it is not done: the labels, fits and
-//! reports are the same whichever thread ran it and however fast. In the loop a frame set that
+//! compiled. In the main job's loop (`Labelling::learn_beside`) the labelling takes what was
+//! learned [`LESSON_DELAY`] frame sets later, waiting for it if it is not done, so that the labels,
+//! fits and reports are the same whichever thread ran it and however fast; elsewhere it waits for
+//! it before the frame set's labelling returns, as when it learned on its own path. In the loop a frame set that
 //! taught the colours took three times as long to label as the others (17-21 ms against 6 on the
 //! built-in scene's recording, one in fifteen frame sets): beside it, the segmentation's p95 fell
 //! by 20-40%, though on two cores the lesson still shares them with the other stages

@@ -607,6 +607,7 @@ pub fn spawn(setup: Setup) -> Result<Pipeline, Error> {
             // The masks of the frame sets logged are drawn by the consumer ([`Work::draw_labels`]).
             if let Some(labelling) = labelling.as_mut() {
                 labelling.defer_drawing(true);
+                labelling.learn_beside(true);
             }
             let mut region = CarveRegion::new(hull.workspace, hull.leaf_size);
             let result = hull_stage(

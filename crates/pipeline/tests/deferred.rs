@@ -2,7 +2,8 @@
 //! ([`Labelling::defer_drawing`]), are the masks its labelling would have drawn at once, frame set
 //! after frame set, on three rigs, looks and tools (the second and third seeded random); and
 //! [`Labelling::label`] draws them at once whatever the deferral says. The colours a trusted frame
-//! set teaches beside the labelling are taken two frame sets later, or when settled.
+//! set teaches beside the labelling are taken two frame sets later, or when settled, and at once
+//! where they are not learned beside it.
 
 use hullcut_dataset::Dataset;
 use hullcut_hull::{HullParams, WorkingVolume};
@@ -45,6 +46,9 @@ fn drawn_and_deferred(rig: &str, appearance: Appearance, tool: ToolKind, frames:
     let (_dir, ds, labelling) = recording(rig, appearance, tool, frames);
     let (mut now, mut later) = (labelling(&ds), labelling(&ds));
     later.defer_drawing(true);
+    for l in [&mut now, &mut later] {
+        l.learn_beside(true);
+    }
     let (mut carve_now, mut carve_later) = (Carver::Cpu, Carver::Cpu);
     for frame in ds.frame_numbers() {
         let set = ds.read_frame_set(frame, false).expect("a frame set");
@@ -111,11 +115,12 @@ fn label_masks_drawn_later_are_the_masks_drawn_at_once() {
     }
 }
 
-/// The colours the first trusted frame set teaches are taken two frame sets after it: the two
-/// frame sets labelled after it see none learned, the one after them does (the built-in scene's
-/// look, and a random one on a random rig); settled at once, they are taken at once.
+/// The colours the first trusted frame set teaches beside the labelling are taken two frame sets
+/// after it: the two frame sets labelled after it see none learned, the one after them does (the
+/// built-in scene's look, and a random one on a random rig); settled at once, they are taken at
+/// once; not learned beside it, they are taken before its labelling returns.
 #[test]
-fn the_colours_a_frame_set_teaches_are_taken_two_frame_sets_later_or_when_settled() {
+fn the_colours_taught_beside_the_labelling_are_taken_two_frame_sets_later_or_when_settled() {
     for (rig, appearance, tool) in [
         ("default", Appearance::classic(), ToolKind::Standard),
         ("random:2851", Appearance::random(2857), ToolKind::Pointed),
@@ -123,6 +128,7 @@ fn the_colours_a_frame_set_teaches_are_taken_two_frame_sets_later_or_when_settle
         let (_dir, ds, make) = recording(rig, appearance, tool, 12);
         let frames = ds.frame_numbers();
         let (mut labelling, mut carver) = (make(&ds), Carver::Cpu);
+        labelling.learn_beside(true);
         let learned = |l: &Labelling| l.report().counters.learned;
         // The first frame set that hands a lesson over.
         let mut first = None;
@@ -145,6 +151,7 @@ fn the_colours_a_frame_set_teaches_are_taken_two_frame_sets_later_or_when_settle
             assert_eq!(labelled.lesson_ms.is_some(), k == 1, "{rig}: frame {frame}");
         }
         let (mut settled, mut carver) = (make(&ds), Carver::Cpu);
+        settled.learn_beside(true);
         for &frame in &frames[..=first] {
             let set = ds.read_frame_set(frame, false).expect("a frame set");
             settled.label_with(&set, &mut carver, false).expect("labelled");
@@ -152,5 +159,14 @@ fn the_colours_a_frame_set_teaches_are_taken_two_frame_sets_later_or_when_settle
         settled.settle().expect("settled");
         assert_eq!(learned(&settled), 1, "{rig}: not taken when settled");
         assert!(!settled.learned().iter().all(|c| c.mean.is_none()), "{rig}: no colour learned");
+        // Not learned beside the labelling, they are taken before the frame set's labelling
+        // returns, and the report counts no wait.
+        let (mut at_once, mut carver) = (make(&ds), Carver::Cpu);
+        for &frame in &frames[..=first] {
+            let set = ds.read_frame_set(frame, false).expect("a frame set");
+            at_once.label_with(&set, &mut carver, false).expect("labelled");
+        }
+        assert_eq!(learned(&at_once), 1, "{rig}: not taken at once");
+        assert_eq!(at_once.report().lessons_waited, 0, "{rig}");
     }
 }
