@@ -181,13 +181,7 @@ impl InFlight {
     /// passes run on it, not on the loop's threads).
     pub(crate) fn start(pool: &rayon::ThreadPool, frame: u64, refresh: bool, lesson: Lesson) -> Self {
         let passed = lesson.passed;
-        let (tx, rx) = sync_channel(1);
-        pool.spawn(move || {
-            let learned = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| lesson.run()));
-            // The labelling may be gone (an error ended its recording): nobody is waiting.
-            let _ = tx.send(learned);
-        });
-        InFlight { frame, since: 0, refresh, passed, learned: rx }
+        InFlight { frame, since: 0, refresh, passed, learned: spawn(pool, move || lesson.run()) }
     }
 
     /// What the lesson taught, waited for, and whether it had to be.
@@ -204,6 +198,20 @@ impl InFlight {
             Err(_) => fail!("learning the colours of frame {} panicked", self.frame),
         }
     }
+}
+
+/// Runs `learn` on `pool`; its answer (or its panic) comes back on the receiver.
+fn spawn(
+    pool: &rayon::ThreadPool,
+    learn: impl FnOnce() -> Learned + Send + 'static,
+) -> Receiver<std::thread::Result<Learned>> {
+    let (tx, rx) = sync_channel(1);
+    pool.spawn(move || {
+        let learned = std::panic::catch_unwind(std::panic::AssertUnwindSafe(learn));
+        // The labelling may be gone (an error ended its recording): nobody is waiting.
+        let _ = tx.send(learned);
+    });
+    rx
 }
 
 /// The one thread lessons run on.
@@ -258,4 +266,41 @@ pub(crate) fn blade_as_hand(sure: &ColourLut, image: &RgbImage, pixels: &[usize]
         .filter_map(|&k| raw.get(3 * k..3 * k + 3))
         .map(|p| u64::from(sure.get([p[0], p[1], p[2]]) == label::HAND))
         .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lesson whose thread panics is an error that names the frame set that taught, not a
+    /// crash or a wait for ever; a lesson that ends is taken, waited for or not.
+    #[test]
+    fn a_lesson_that_panics_is_an_error_naming_its_frame_set() {
+        let pool = pool().expect("the learning thread starts");
+        let in_flight = |frame, learn: Box<dyn FnOnce() -> Learned + Send>| InFlight {
+            frame,
+            since: 0,
+            refresh: false,
+            passed: 1,
+            learned: spawn(&pool, learn),
+        };
+        let failed = in_flight(41, Box::new(|| panic!("a lesson that fails")));
+        let e = failed.wait().err().expect("a panic is an error");
+        assert!(e.to_string().contains("frame 41"), "{e}");
+        let learned = || Learned {
+            appearance: AppearanceModel::default(),
+            sharpening: AppearanceModel::default(),
+            colours: None,
+            explained: None,
+            refused: true,
+            blade: None,
+            ms: 1.5,
+        };
+        let done = in_flight(42, Box::new(learned));
+        let (taken, _) = done.wait().expect("taken");
+        assert!(taken.refused && taken.ms == 1.5);
+        // The pool's thread outlives a panic: the next lesson runs.
+        let after = in_flight(43, Box::new(learned));
+        assert!(after.wait().is_ok());
+    }
 }
