@@ -29,7 +29,7 @@ use crate::labelling::{compile, compile_explained, sharpen, tool_taught_the_hand
 /// The colours a trusted frame set teaches label, hint and sharpen from this many frame sets
 /// after it on (1 would be the next): the frame set between gives the lesson's thread the time of
 /// one frame set's labelling to finish before it is waited for.
-pub(crate) const LESSON_DELAY: u32 = 2;
+pub const LESSON_DELAY: u32 = 2;
 
 /// The labels a lesson learns from.
 pub(crate) enum LessonLabels {

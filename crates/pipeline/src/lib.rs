@@ -24,7 +24,7 @@ pub mod budget;
 pub mod deferred;
 pub mod error;
 pub mod labelling;
-mod lesson;
+pub mod lesson;
 pub mod measure;
 pub mod read;
 pub mod region;
