@@ -50,6 +50,10 @@ pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
 /// the foreground they touch, over its views (the segmenter's hysteresis; the report's
 /// `counters.weak_joined`, frame set by frame set).
 pub const WEAK_JOINED_ENTITY: &str = "metrics/segment/weak_joined";
+/// The time a trusted frame set's lesson (its tool drawn, the colours learned from it) took on its
+/// own thread, ms, logged on the frame set whose labelling took its colours (the report's
+/// `timings.learn`, lesson by lesson).
+pub const LESSON_ENTITY: &str = "metrics/segment/lesson_ms";
 /// 1 where a frame set's foreground hull was searched for a lost tool, 0 where the search was
 /// paused (`--search-gap`); nothing where the track held the tool (the report's
 /// `labelling.counters.searches` and `searches_paused`, frame set by frame set).
@@ -165,6 +169,9 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     hullcut_viz::log_scalar(rec, PIXELS_TESTED_ENTITY, trace.segmented.pixels as f64)?;
     hullcut_viz::log_scalar(rec, NEAR_HULL_ENTITY, f64::from(u8::from(trace.segmented.near_hull)))?;
     hullcut_viz::log_scalar(rec, WEAK_JOINED_ENTITY, trace.segmented.weak_joined as f64)?;
+    if let Some(ms) = trace.lesson_ms {
+        hullcut_viz::log_scalar(rec, LESSON_ENTITY, ms)?;
+    }
     if let Some(searched) = trace.hull_search {
         hullcut_viz::log_scalar(rec, HULL_SEARCHED_ENTITY, f64::from(u8::from(searched)))?;
     }

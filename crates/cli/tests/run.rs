@@ -699,6 +699,8 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     let rows = hullcut_viz::rrd_timeline_rows(&dir.path().join("run.rrd")).expect("the recording reads back");
     let rows_of = |e: &str| rows.get(e).copied().unwrap_or(0);
     assert_eq!(rows_of("/labelling/source"), 24, "{rows:?}");
+    // Each lesson taken in the loop is logged on the frame set that took its colours.
+    assert_eq!(rows_of("/metrics/segment/lesson_ms") as u64, learned, "{rows:?}");
     for label in ["hand", "scalpel"] {
         for what in ["colour", "pixels"] {
             let e = format!("/metrics/appearance/{label}/{what}");

@@ -13,9 +13,8 @@ use hullcut_pose::{ToolDrawer, ToolRegion, ViewInput};
 use hullcut_rig::Rig;
 use image::GrayImage;
 use nalgebra::Isometry3;
-use rayon::prelude::*;
 
-use crate::labelling::{sharpen, to_background};
+use crate::labelling::{images_of, sharpen_views, to_background};
 
 /// A fitted frame set's label masks, not yet drawn: what its labelling saw, kept to draw them as
 /// the labelling would have ([`PendingLabels::draw`]).
@@ -50,11 +49,7 @@ impl PendingLabels {
         let sharpen_with = self.sharpen.clone();
         let (mut masks, tool_regions) = self.draw_plain(occupancy);
         if let Some(lut) = &sharpen_with {
-            set.views.par_iter().zip(&mut masks).zip(tool_regions.par_iter()).for_each(|((view, mask), region)| {
-                if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                    sharpen(lut, &view.image, mask, region);
-                }
-            });
+            sharpen_views(lut, &images_of(set), &mut masks, &tool_regions);
         }
         masks.resize(set.views.len(), None);
         masks

@@ -253,6 +253,9 @@ pub struct LabelTrace {
     pub segmented: Segmented,
     /// Whether the foreground's hull was searched for a lost tool in it ([`Labelled::hull_search`]).
     pub hull_search: Option<bool>,
+    /// The time the lesson whose colours its labelling took had taken on its own thread, ms
+    /// ([`Labelled::lesson_ms`]; `None` where none was taken).
+    pub lesson_ms: Option<f64>,
 }
 
 /// What one frame set's segmentation tested.
@@ -1298,23 +1301,15 @@ impl Labelling {
         let mut drawn_lesson = None;
         let mut sharpen_later = None;
         let (mut masks, source) = if trusted {
-            let sharpen_all = |masks: &mut [Option<GrayImage>], lut: Option<&ColourLut>| {
-                let Some(lut) = lut.filter(|_| colours) else { return };
-                set.views.par_iter().zip(masks).zip(labelled.tool_regions.par_iter()).for_each(
-                    |((view, mask), region)| {
-                        if let (Some(view), Some(mask), Some(region)) = (view, mask, region) {
-                            sharpen(lut, &view.image, mask, region);
-                        }
-                    },
-                );
-            };
             // The labels drawn at once teach as drawn, before any colour sharpened them.
             drawn_lesson = (learns && drawn).then(|| LessonLabels::Drawn {
                 masks: labelled.masks.clone(),
                 tool_regions: labelled.tool_regions.clone(),
             });
             let mut masks = labelled.masks;
-            sharpen_all(&mut masks, self.explained.as_deref());
+            if let Some(lut) = self.explained.as_deref().filter(|_| colours) {
+                sharpen_views(lut, &images_of(set), &mut masks, &labelled.tool_regions);
+            }
             sharpen_later = self.explained.clone().filter(|_| colours);
             (masks, LabelSource::Geometry)
         } else if colours && self.colours_label() {
@@ -1602,7 +1597,7 @@ impl Labelling {
         // What was learned is forgotten by the frame sets passed since ([`LEARN_EVERY`]); the
         // labels are background outside each view's window.
         let passed = std::mem::take(&mut self.since_learned);
-        let images: Vec<Option<&image::RgbImage>> = set.views.iter().map(|v| v.as_ref().map(|v| &v.image)).collect();
+        let images = images_of(set);
         let models = (&mut self.appearance, &mut self.sharpening);
         learn_models(models, &images, &self.windows, (likelier, handed_out), blade, passed);
         self.counters.learned += 1;
@@ -1680,6 +1675,7 @@ impl Labelling {
             taught: self.taught(),
             segmented: self.segmented(),
             hull_search: labelled.hull_search(),
+            lesson_ms: labelled.lesson_ms,
         }
     }
 
@@ -2208,6 +2204,25 @@ fn apply_hints(mask: &mut GrayImage, win: Window, hints: &[u8]) {
             *p = if *p != label::BACKGROUND && decides { h } else { *p };
         }
     }
+}
+
+/// Per view, its image (`None` for a missing view).
+pub(crate) fn images_of(set: &FrameSet) -> Vec<Option<&image::RgbImage>> {
+    set.views.iter().map(|v| v.as_ref().map(|v| &v.image)).collect()
+}
+
+/// [`sharpen`] in every view that has an image, a mask and a drawn tool (`regions`), in parallel.
+pub(crate) fn sharpen_views(
+    lut: &ColourLut,
+    images: &[Option<&image::RgbImage>],
+    masks: &mut [Option<GrayImage>],
+    regions: &[Option<ToolRegion>],
+) {
+    masks.par_iter_mut().zip(images).zip(regions).for_each(|((mask, image), region)| {
+        if let (Some(mask), Some(image), Some(region)) = (mask, image, region) {
+            sharpen(lut, image, mask, region);
+        }
+    });
 }
 
 /// Gives the foreground near the drawn tool (`region`, grown by [`SHARPEN_PX`]) the label of its

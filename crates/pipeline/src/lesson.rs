@@ -20,11 +20,10 @@ use hullcut_hull::Occupancy;
 use hullcut_pose::ToolRegion;
 use image::{GrayImage, RgbImage};
 use nalgebra::Point2;
-use rayon::prelude::*;
 
 use crate::deferred::PendingLabels;
 use crate::error::{Context as _, Error, fail};
-use crate::labelling::{compile, compile_explained, sharpen, tool_taught_the_hand};
+use crate::labelling::{compile, compile_explained, sharpen_views, tool_taught_the_hand};
 
 /// The colours a trusted frame set teaches label, hint and sharpen from this many frame sets
 /// after it on (1 would be the next): the frame set between gives the lesson's thread the time of
@@ -92,14 +91,11 @@ impl Lesson {
             LessonLabels::Drawn { masks, tool_regions } => (masks, tool_regions),
             LessonLabels::ToDraw { pending, occupancy } => pending.draw_plain(&occupancy),
         };
+        let images: Vec<Option<&RgbImage>> = self.images.iter().map(Option::as_ref).collect();
         let sharpened = |lut: Option<&ColourLut>| {
             let mut out = masks.clone();
             if let Some(lut) = lut {
-                out.par_iter_mut().zip(&self.images).zip(&regions).for_each(|((mask, image), region)| {
-                    if let (Some(mask), Some(image), Some(region)) = (mask, image, region) {
-                        sharpen(lut, image, mask, region);
-                    }
-                });
+                sharpen_views(lut, &images, &mut out, &regions);
             }
             out
         };
@@ -112,7 +108,6 @@ impl Lesson {
             .map(|(m, o)| m.as_ref().map_or_else(Vec::new, |m| inside_outline(m.width(), m.height(), o)))
             .collect();
         let (mut appearance, mut sharpening) = (self.appearance, self.sharpening);
-        let images: Vec<Option<&RgbImage>> = self.images.iter().map(Option::as_ref).collect();
         learn_models(
             (&mut appearance, &mut sharpening),
             &images,

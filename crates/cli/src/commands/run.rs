@@ -87,7 +87,9 @@ use crate::weak::WeakArg;
 /// under metrics/appearance/taught, the pixels each frame set's segmentation tested under
 /// metrics/segment/pixels_tested and whether only near the last hull (1) or in the whole
 /// rectangle of the box carved in (0) under metrics/segment/near_hull, the weak pixels its
-/// hysteresis joined to the foreground under metrics/segment/weak_joined; on
+/// hysteresis joined to the foreground under metrics/segment/weak_joined, the time each
+/// trusted frame set's lesson (the colours learned from it beside the loop) took under
+/// metrics/segment/lesson_ms; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
 /// frame sets is written without rerun's chunk index, which would grow in memory all run long:
 /// the viewer reads it from the start). REPORT (JSON) with --report: per-stage timings, sustained
@@ -542,7 +544,7 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 /// each frame set's segmentation tested: the pixels, whether only near the last hull, and the
 /// weak pixels that joined the foreground; and
 /// whether the foreground's hull was searched for a lost tool (or the search paused).
-pub const SEGMENTING_ENTITIES: [&str; 10] = [
+pub const SEGMENTING_ENTITIES: [&str; 11] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
@@ -552,6 +554,7 @@ pub const SEGMENTING_ENTITIES: [&str; 10] = [
     crate::logging::PIXELS_TESTED_ENTITY,
     crate::logging::NEAR_HULL_ENTITY,
     crate::logging::WEAK_JOINED_ENTITY,
+    crate::logging::LESSON_ENTITY,
     crate::logging::HULL_SEARCHED_ENTITY,
 ];
 

@@ -272,8 +272,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                     taught: trace.taught,
                     // Relabelling segments nothing again: the first pass's pixels.
                     segmented: trace.segmented,
-                    // Nor searches the hull again.
+                    // Nor searches the hull again, nor takes a lesson.
                     hull_search: trace.hull_search,
+                    lesson_ms: trace.lesson_ms,
                 },
             ),
             None => (masks, trace),
