@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Point2, Point3, Vector2, Vector3};
 use rayon::prelude::*;
 
 use crate::ToolError;
-use crate::evidence::{project, project_batch, project_camera_point};
+use crate::evidence::{BATCH, ProjectedBatch, project, project_batch, project_camera_point};
 use crate::geometry::convex_hull;
 use crate::table_shadow::TableShadows;
 use crate::template::Template;
@@ -1120,75 +1120,91 @@ fn clear_hand<'a>(
     hints: &[u8],
     scalpel: &PixelBox,
 ) {
-    let (w, h) = (labels.width() as usize, labels.height() as usize);
     // Cells projecting outside the scalpel pixels' box are skipped after one projection, and
     // each cell looks only at the scalpel pixels' stretch of each row (pixels only leave the
     // scalpel below, so the stretches found before hold every pixel that may change).
     if scalpel.is_empty() {
         return;
     }
-    let PixelBox { lo, hi, rows } = scalpel;
-    let (lo, hi) = (*lo, *hi);
-    let f = cam.fx.max(cam.fy);
-    // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
-    // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
-    // within 1.005 of its bounding radius, itself within the run's ρ, and no cell is nearer than
-    // z - ρ): a run whose disc, so widened, misses the box holds no cell that reaches it (a
-    // micro-pixel of slack for rounding).
-    let (lo_x, lo_y, hi_x, hi_y) = (lo.0 as f64, lo.1 as f64, hi.0 as f64, hi.1 as f64);
-    let run_reaches = |run: &CellRun| {
-        let pc = cam.world_to_camera(&run.centre);
-        let z = pc.z;
-        cam.project_ball_in_camera(&pc, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
-            let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
-            let (ja, jb) = ((uv.y - reach).ceil().max(lo_y), (uv.y + reach).floor().min(hi_y));
-            uv.x + reach >= lo_x
-                && uv.x - reach <= hi_x
-                && ja <= jb
-                && rows[ja as usize..=jb as usize]
-                    .iter()
-                    .any(|&(a, b)| a as f64 <= uv.x + reach && b as f64 >= uv.x - reach)
-        })
-    };
-    let raw = labels.as_mut();
-    let groups = [(&hand.hand.cells, &hand.hand.runs, false), (&hand.hand.doubtful, &hand.hand.doubtful_runs, true)];
-    // The reaching runs' cells, their centres projected a run at a time ([`project_batch`]).
-    for (cells, runs, doubtful) in groups {
-        for run in runs.iter().filter(|run| run_reaches(run)) {
-            let run = &cells[run.start..run.end];
-            let at = project_batch(cam, radius, run.len(), |k| run[k].centre());
-            for (k, c) in run.iter().enumerate().filter(|&(k, _)| at.ok[k]) {
-                let (uv, z) = (Point2::new(at.u[k], at.v[k]), at.z[k]);
-                let r = 0.87 * c.size * f / z;
-                // Missing the box by a whole stretch: nothing below would be visited.
-                if uv.x + r < lo_x || uv.x - r > hi_x || uv.y + r < lo_y || uv.y - r > hi_y {
-                    continue;
-                }
-                // The disc's pixels within the box (the test above keeps these in it).
-                let (i0, j0) = (ceil_within(uv.x - r, lo_x, hi_x), ceil_within(uv.y - r, lo_y, hi_y));
-                let (i1, j1) = (floor_within(uv.x + r, lo_x, hi_x), floor_within(uv.y + r, lo_y, hi_y));
-                if i0 > i1 || j0 > j1 {
-                    continue;
-                }
-                let nearest = z - 0.87 * c.size;
-                for j in j0..=j1.min(h - 1) {
-                    let (a, b) = rows[j];
-                    for i in i0.max(a)..=i1.min(w - 1).min(b) {
-                        let k = j * w + i;
-                        if raw[k] != label::SCALPEL
-                            || hints[k] == label::SCALPEL
-                            || (hand.tool_colour_decides && hints[k] == TOOL_COLOURED_SHADOW)
-                        {
-                            continue;
-                        }
-                        // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
-                        // pixel unless it lies behind the tool there.
-                        let takes = match hand.tool.and_then(|t| t.at(i, j)) {
-                            Some(d) => !doubtful && nearest <= d + hand.margin,
-                            None => true,
-                        };
-                        if takes {
-                            raw[k] = label::HAND;
+    // Compiled for the widest vector instructions the processor has (pulp's run-time dispatch):
+    // the cells' projections and discs, a batch at a time, are the same IEEE operations in the
+    // same order on any of them, so the same labels.
+    pulp::Arch::new().dispatch(ClearHand { labels, cam, radius, hand, hints, scalpel });
+}
+
+/// [`clear_hand`]'s arguments, for pulp's dispatch.
+struct ClearHand<'a, 'b> {
+    labels: &'b mut GrayImage,
+    cam: &'b Camera,
+    radius: f64,
+    hand: &'b HandInFront<'a>,
+    hints: &'b [u8],
+    scalpel: &'b PixelBox,
+}
+
+impl pulp::WithSimd for ClearHand<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let ClearHand { labels, cam, radius, hand, hints, scalpel } = self;
+        let (w, h) = (labels.width() as usize, labels.height() as usize);
+        let PixelBox { lo, hi, rows } = scalpel;
+        let (lo, hi) = (*lo, *hi);
+        let f = cam.fx.max(cam.fy);
+        // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
+        // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
+        // within 1.005 of its bounding radius, itself within the run's ρ, and no cell is nearer than
+        // z - ρ): a run whose disc, so widened, misses the box holds no cell that reaches it (a
+        // micro-pixel of slack for rounding).
+        let bounds = (lo.0 as f64, lo.1 as f64, hi.0 as f64, hi.1 as f64);
+        let (lo_x, lo_y, hi_x, hi_y) = bounds;
+        let run_reaches = |run: &CellRun| {
+            let pc = cam.world_to_camera(&run.centre);
+            let z = pc.z;
+            cam.project_ball_in_camera(&pc, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
+                let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
+                let (ja, jb) = ((uv.y - reach).ceil().max(lo_y), (uv.y + reach).floor().min(hi_y));
+                uv.x + reach >= lo_x
+                    && uv.x - reach <= hi_x
+                    && ja <= jb
+                    && rows[ja as usize..=jb as usize]
+                        .iter()
+                        .any(|&(a, b)| a as f64 <= uv.x + reach && b as f64 >= uv.x - reach)
+            })
+        };
+        let raw = labels.as_mut();
+        let groups =
+            [(&hand.hand.cells, &hand.hand.runs, false), (&hand.hand.doubtful, &hand.hand.doubtful_runs, true)];
+        // The reaching runs' cells, their centres projected a run at a time ([`project_batch`]).
+        for (cells, runs, doubtful) in groups {
+            for run in runs.iter().filter(|run| run_reaches(run)) {
+                let run = &cells[run.start..run.end];
+                let at = project_batch(cam, radius, run.len(), |k| run[k].centre());
+                let discs = CellDiscs::within(&at, run.len(), |k| run[k].size, f, bounds);
+                for (k, c) in run.iter().enumerate().filter(|&(k, _)| discs.keep[k]) {
+                    let (i0, i1) = (discs.i0[k] as usize, discs.i1[k] as usize);
+                    let (j0, j1) = (discs.j0[k] as usize, discs.j1[k] as usize);
+                    let nearest = at.z[k] - 0.87 * c.size;
+                    for j in j0..=j1.min(h - 1) {
+                        let (a, b) = rows[j];
+                        for i in i0.max(a)..=i1.min(w - 1).min(b) {
+                            let k = j * w + i;
+                            if raw[k] != label::SCALPEL
+                                || hints[k] == label::SCALPEL
+                                || (hand.tool_colour_decides && hints[k] == TOOL_COLOURED_SHADOW)
+                            {
+                                continue;
+                            }
+                            // A doubtful cell keeps its hands off the drawn tool; any other cell takes the
+                            // pixel unless it lies behind the tool there.
+                            let takes = match hand.tool.and_then(|t| t.at(i, j)) {
+                                Some(d) => !doubtful && nearest <= d + hand.margin,
+                                None => true,
+                            };
+                            if takes {
+                                raw[k] = label::HAND;
+                            }
                         }
                     }
                 }
@@ -1197,16 +1213,70 @@ fn clear_hand<'a>(
     }
 }
 
-/// `x.ceil()` clamped to `[lo, hi]` (whole numbers at least 0): the least whole number in the
-/// range at or above `x`, or `hi + 1` where there is none (`lo` for NaN), without the library
-/// call `ceil` is where the build does not assume SSE4.1 (four roundings per hand cell in
-/// [`clear_hand`]).
-#[inline]
-fn ceil_within(x: f64, lo: f64, hi: f64) -> usize {
+/// A batch of projected cells' discs ([`clear_hand`]: radius `0.87 · size · f / z` around the
+/// centre's pixel) within the scalpel pixels' box, their pixel bounds (`i0..=i1` columns,
+/// `j0..=j1` rows) and whether to visit them (`keep`: projected, its disc meets the box by a
+/// whole pixel). Branch-free over the batch's lanes, written for the auto-vectorizer.
+struct CellDiscs {
+    i0: [u32; BATCH],
+    i1: [u32; BATCH],
+    j0: [u32; BATCH],
+    j1: [u32; BATCH],
+    keep: [bool; BATCH],
+}
+
+impl CellDiscs {
+    /// The discs of the first `len` cells of `at` (their sizes `size(k)`), against the box
+    /// `(lo_x, lo_y, hi_x, hi_y)`; each bound as [`ceil_within_u32`] or
+    /// [`floor_within_u32`] gives it.
+    #[inline(always)]
+    // The misses are negated as written cell by cell (`!(a < b)` holds for NaN, `a >= b` not).
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    fn within(
+        at: &ProjectedBatch,
+        len: usize,
+        size: impl Fn(usize) -> f64,
+        f: f64,
+        (lo_x, lo_y, hi_x, hi_y): (f64, f64, f64, f64),
+    ) -> Self {
+        let len = len.min(BATCH);
+        let mut sizes = [0.0; BATCH];
+        for (k, s) in sizes.iter_mut().enumerate().take(len) {
+            *s = size(k);
+        }
+        let mut out =
+            CellDiscs { i0: [0; BATCH], i1: [0; BATCH], j0: [0; BATCH], j1: [0; BATCH], keep: [false; BATCH] };
+        for k in 0..BATCH {
+            let (u, v) = (at.u[k], at.v[k]);
+            let r = 0.87 * sizes[k] * f / at.z[k];
+            // Missing the box by a whole stretch: nothing would be visited.
+            let meets = !(u + r < lo_x) & !(u - r > hi_x) & !(v + r < lo_y) & !(v - r > hi_y);
+            let (i0, j0) = (ceil_within_u32(u - r, lo_x, hi_x), ceil_within_u32(v - r, lo_y, hi_y));
+            let (i1, j1) = (floor_within_u32(u + r, lo_x, hi_x), floor_within_u32(v + r, lo_y, hi_y));
+            (out.i0[k], out.i1[k], out.j0[k], out.j1[k]) = (i0, i1, j0, j1);
+            out.keep[k] = at.ok[k] & meets & (i0 <= i1) & (j0 <= j1);
+        }
+        out
+    }
+}
+
+/// `x.ceil()` clamped to `[lo, hi]` (whole numbers from 0 to below 2³², pixel coordinates): the
+/// least whole number in the range at or above `x`, or `hi + 1` where there is none (`lo` for
+/// NaN), without the library call `ceil` is where the build does not assume SSE4.1, and in 32
+/// bits, which vectorize (four roundings per hand cell in [`clear_hand`]).
+#[inline(always)]
+fn ceil_within_u32(x: f64, lo: f64, hi: f64) -> u32 {
     // Whole numbers in [lo, hi + 1] convert exactly, and truncation is the floor there.
     let v = x.max(lo).min(hi + 1.0);
-    let t = v as usize;
-    t + usize::from((t as f64) < v)
+    let t = v as u32;
+    t + u32::from((t as f64) < v)
+}
+
+/// `x.floor()` clamped to `[lo, hi]` (whole numbers from 0 to below 2³²; `hi` for NaN): see
+/// [`ceil_within_u32`].
+#[inline(always)]
+fn floor_within_u32(x: f64, lo: f64, hi: f64) -> u32 {
+    x.min(hi).max(lo) as u32
 }
 
 /// `x.ceil()`, the same value for every `x` (infinities and NaN as they are; 0 where the library
@@ -1240,13 +1310,6 @@ fn floor(x: f64) -> f64 {
 
 /// 2^52: every `f64` at least this large in magnitude is a whole number.
 const TWO_52: f64 = 4_503_599_627_370_496.0;
-
-/// `x.floor()` clamped to `[lo, hi]` (whole numbers at least 0; `hi` for NaN): see
-/// [`ceil_within`].
-#[inline]
-fn floor_within(x: f64, lo: f64, hi: f64) -> usize {
-    x.min(hi).max(lo) as usize
-}
 
 /// Foreground covered by the projected scalpel cells of `hull` (the thin parts): scalpel; other
 /// foreground: hand.
@@ -1420,6 +1483,34 @@ impl ToolField {
         if gap.norm_squared() > slack * slack { Lookup::Decided(false) } else { Lookup::Node(index) }
     }
 
+    /// Whether every cell of `cells` (world frame; `to_tool` takes them to the tool's) is beyond
+    /// [`near_tool`]'s reach (`margin` plus the cell's half-diagonal plus the spacing) from the
+    /// tool as [`ToolField::within`] decides it, told from the ball around their centres' box:
+    /// where that ball lies farther than the largest reach outside the box in which points have
+    /// grid nodes (the grid's nodes widened by half a spacing), no centre has a node, and each
+    /// one's distance ([`ToolField::at`]: `pad` plus that to the grid's nodes) is beyond its
+    /// reach. A micrometre of slack covers the rounding of the transform. Far from the tool
+    /// (most of the hand and the arm), a chunk of cells is decided so without a lookup each.
+    fn beyond_reach(&self, cells: &[hullcut_hull::Cell], to_tool: &Isometry3<f64>, margin: f64) -> bool {
+        let Some(first) = cells.first() else { return true };
+        let (mut lo, mut hi, mut size) = (first.centre(), first.centre(), first.size);
+        for c in cells {
+            let centre = c.centre();
+            lo = lo.inf(&centre);
+            hi = hi.sup(&centre);
+            size = size.max(c.size);
+        }
+        let ball = (hi - lo).norm() / 2.0;
+        let centre = to_tool * nalgebra::center(&lo, &hi);
+        let half = Vector3::repeat(self.spacing / 2.0);
+        let extent = Vector3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing;
+        let (grid_lo, grid_hi) = (self.origin - half, self.origin + extent - half);
+        let gap = (grid_lo - centre).sup(&(centre - grid_hi)).sup(&Vector3::zeros()).norm();
+        let reach = margin + 0.87 * size + self.spacing;
+        // Not a number anywhere: not decided here.
+        gap - ball > reach + 1e-6
+    }
+
     /// Whether grid node `index` (from [`ToolField::lookup`]) is within `reach` of the tool.
     fn node_within(&self, index: usize, reach: f64) -> bool {
         f64::from(self.distance[index]) <= reach
@@ -1460,12 +1551,16 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
         // them lives on the stack (no allocation per chunk, frame set after frame set).
         let mut read = [(0usize, 0usize); NEAR_TOOL_CHUNK];
         let mut reads = 0;
-        for (k, c) in cells.iter_mut().enumerate() {
-            match field.lookup(&(to_tool * c.centre()), reach(c)) {
-                Lookup::Decided(near) => c.scalpel = near,
-                Lookup::Node(index) => {
-                    read[reads] = (k, index);
-                    reads += 1;
+        if field.beyond_reach(cells, &to_tool, margin) {
+            cells.iter_mut().for_each(|c| c.scalpel = false);
+        } else {
+            for (k, c) in cells.iter_mut().enumerate() {
+                match field.lookup(&(to_tool * c.centre()), reach(c)) {
+                    Lookup::Decided(near) => c.scalpel = near,
+                    Lookup::Node(index) => {
+                        read[reads] = (k, index);
+                        reads += 1;
+                    }
                 }
             }
         }
@@ -2449,6 +2544,57 @@ mod tests {
         assert_eq!(field.within(&nan, 0.01), field.at(&nan) <= 0.01);
     }
 
+    /// A chunk of cells that [`ToolField::beyond_reach`] decides at once holds no cell
+    /// [`ToolField::within`] finds near, one at a time; clusters just beyond the reach and far
+    /// from it are decided so.
+    #[test]
+    fn a_chunk_decided_beyond_reach_holds_no_cell_within_it() {
+        let points: Vec<Point3<f64>> =
+            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
+        let field = ToolField::new(&points, 0.001, 0.022);
+        let pose = Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.3, -0.2, 0.9));
+        let to_tool = pose.inverse();
+        let mut seed = 23u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let margin = 0.002;
+        let (mut decided, mut open_far) = (0, 0);
+        for trial in 0..3000 {
+            // A cluster about a point up to 0.1 m from the grid, 1-30 mm across.
+            let at = Point3::new(next() * 0.37 - 0.11, next() * 0.23 - 0.11, next() * 0.24 - 0.12);
+            let spread = 0.001 + 0.029 * next();
+            let cells: Vec<hullcut_hull::Cell> = (0..1 + trial % 64)
+                .map(|_| {
+                    let size = if next() < 0.8 { 0.004 } else { 0.008 };
+                    let offset = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5) * spread;
+                    let centre = pose * (at + offset);
+                    hullcut_hull::Cell {
+                        min: centre - Vector3::repeat(size / 2.0),
+                        size,
+                        hand: false,
+                        scalpel: false,
+                        solid: true,
+                        refuted_by: None,
+                    }
+                })
+                .collect();
+            let near = cells
+                .iter()
+                .filter(|c| field.within(&(to_tool * c.centre()), margin + 0.87 * c.size + field.spacing))
+                .count();
+            if field.beyond_reach(&cells, &to_tool, margin) {
+                assert_eq!(near, 0, "trial {trial}: a chunk decided beyond reach holds {near} near cells");
+                decided += 1;
+            } else if near == 0 {
+                open_far += 1;
+            }
+        }
+        assert!(decided > 1000 && open_far > 50, "{decided} decided at once, {open_far} far and left to the cells");
+        assert!(field.beyond_reach(&[], &to_tool, margin));
+    }
+
     /// The hull's cells near the tool, labelled a chunk at a time with the grid read in a pass
     /// of its own, are those [`ToolField::within`] finds one cell at a time; every other cell is
     /// the hand's unless `not_hand` marks it.
@@ -2509,12 +2655,60 @@ mod tests {
         }
         for v in values {
             let (lo, hi) = (3.0, 31.0);
-            assert_eq!(ceil_within(v, lo, hi), v.ceil().max(lo).min(hi + 1.0) as usize, "ceil {v:?}");
-            assert_eq!(floor_within(v, lo, hi), v.floor().min(hi).max(lo) as usize, "floor {v:?}");
+            assert_eq!(ceil_within_u32(v, lo, hi), v.ceil().max(lo).min(hi + 1.0) as u32, "ceil {v:?}");
+            assert_eq!(floor_within_u32(v, lo, hi), v.floor().min(hi).max(lo) as u32, "floor {v:?}");
             let r = v.round();
             let library = (r >= 0.0 && r < n as f64).then_some(r as usize);
             assert_eq!(round_below(v, n), library, "round {v:?}");
         }
+    }
+
+    #[test]
+    fn a_batch_of_cell_discs_is_bounded_as_cell_by_cell() {
+        // Centres scattered in and around a box, some unprojected, some at NaN; partial batches.
+        let mut s = 11u64;
+        let mut next = move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let bounds = (40.0, 30.0, 300.0, 200.0);
+        let (lo_x, lo_y, hi_x, hi_y) = bounds;
+        let (mut kept, mut missed) = (0, 0);
+        for round in 0..400 {
+            let len = 1 + round % BATCH;
+            let mut at = ProjectedBatch { u: [0.0; BATCH], v: [0.0; BATCH], z: [0.0; BATCH], ok: [false; BATCH] };
+            let mut sizes = [0.0; BATCH];
+            for k in 0..len {
+                at.u[k] = 400.0 * next() - 30.0;
+                at.v[k] = 300.0 * next() - 30.0;
+                at.z[k] = 0.2 + next();
+                at.ok[k] = next() > 0.1;
+                sizes[k] = 0.002 + 0.02 * next();
+                if next() < 0.02 {
+                    at.u[k] = f64::NAN;
+                }
+            }
+            let f = 300.0 + 600.0 * next();
+            let discs = CellDiscs::within(&at, len, |k| sizes[k], f, bounds);
+            for k in 0..BATCH {
+                let (u, v) = (at.u[k], at.v[k]);
+                let r = 0.87 * sizes[k] * f / at.z[k];
+                let misses = u + r < lo_x || u - r > hi_x || v + r < lo_y || v - r > hi_y;
+                let i0 = (u - r).ceil().max(lo_x).min(hi_x + 1.0) as u32;
+                let j0 = (v - r).ceil().max(lo_y).min(hi_y + 1.0) as u32;
+                let i1 = (u + r).floor().min(hi_x).max(lo_x) as u32;
+                let j1 = (v + r).floor().min(hi_y).max(lo_y) as u32;
+                let keep = k < len && at.ok[k] && !misses && i0 <= i1 && j0 <= j1;
+                assert_eq!(discs.keep[k], keep, "round {round}, cell {k}");
+                if keep {
+                    assert_eq!((discs.i0[k], discs.i1[k], discs.j0[k], discs.j1[k]), (i0, i1, j0, j1));
+                    kept += 1;
+                } else if k < len {
+                    missed += 1;
+                }
+            }
+        }
+        assert!(kept > 500 && missed > 500, "{kept} discs kept, {missed} not");
     }
 
     #[test]
