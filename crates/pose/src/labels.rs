@@ -1413,7 +1413,9 @@ struct ToolField {
 
 /// `v` rounded to the nearest integer (halves away from zero, as [`f64::round`]) when that is
 /// in `0..n`, without a call to the library's rounding (the build assumes no SSE4.1): the
-/// truncation toward zero is one instruction, and `v` less its integer part is exact.
+/// truncation toward zero is one instruction, and `v` less its integer part is exact. The
+/// point-by-point definition [`ToolField::lookup_batch`] rounds by, lane by lane (tested).
+#[cfg(test)]
 fn round_below(v: f64, n: usize) -> Option<usize> {
     // Rounds to -1 or below, or is not a number; and at or past `n`.
     if v.is_nan() || v <= -0.5 || v >= n as f64 {
@@ -1425,6 +1427,7 @@ fn round_below(v: f64, n: usize) -> Option<usize> {
 }
 
 /// What [`ToolField::lookup`] tells of a point without reading the grid.
+#[cfg(test)]
 #[derive(Debug, Clone, Copy)]
 enum Lookup {
     /// Within reach or not, from the tool's box alone (or the grid's bound beyond it).
@@ -1473,7 +1476,8 @@ impl ToolField {
     }
 
     /// [`ToolField::within`] as far as it goes without reading the grid: decided, or the grid
-    /// node to read.
+    /// node to read. The point-by-point definition of [`ToolField::lookup_batch`] (tested).
+    #[cfg(test)]
     fn lookup(&self, p: &Point3<f64>, reach: f64) -> Lookup {
         let Some(index) = self.node(p) else { return Lookup::Decided(self.at(p) <= reach) };
         let (lo, hi) = &self.bounds;
@@ -1483,32 +1487,48 @@ impl ToolField {
         if gap.norm_squared() > slack * slack { Lookup::Decided(false) } else { Lookup::Node(index) }
     }
 
-    /// Whether every cell of `cells` (world frame; `to_tool` takes them to the tool's) is beyond
-    /// [`near_tool`]'s reach (`margin` plus the cell's half-diagonal plus the spacing) from the
-    /// tool as [`ToolField::within`] decides it, told from the ball around their centres' box:
-    /// where that ball lies farther than the largest reach outside the box in which points have
-    /// grid nodes (the grid's nodes widened by half a spacing), no centre has a node, and each
-    /// one's distance ([`ToolField::at`]: `pad` plus that to the grid's nodes) is beyond its
-    /// reach. A micrometre of slack covers the rounding of the transform. Far from the tool
-    /// (most of the hand and the arm), a chunk of cells is decided so without a lookup each.
-    fn beyond_reach(&self, cells: &[hullcut_hull::Cell], to_tool: &Isometry3<f64>, margin: f64) -> bool {
-        let Some(first) = cells.first() else { return true };
-        let (mut lo, mut hi, mut size) = (first.centre(), first.centre(), first.size);
-        for c in cells {
-            let centre = c.centre();
-            lo = lo.inf(&centre);
-            hi = hi.sup(&centre);
-            size = size.max(c.size);
+    /// [`ToolField::lookup`] of a batch of points, branch-free over the batch's lanes (written
+    /// for the auto-vectorizer): the same operations in the same order as point by point
+    /// ([`round_below`] for each coordinate, the box's gap, and [`ToolField::at`] beyond the
+    /// grid), so the same answers (test `a_batch_looks_the_grid_up_as_point_by_point`).
+    #[inline(always)]
+    // The refusals are negated as written point by point (`!(v <= -0.5)` holds for NaN).
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    fn lookup_batch(&self, p: &PointBatch) -> LookedUp {
+        let (lo, hi) = &self.bounds;
+        let [nx, ny, nz] = self.dims;
+        let (fx, fy, fz) = (nx as f64, ny as f64, nz as f64);
+        let mut out = LookedUp { near: [false; BATCH], read: [false; BATCH], node: [0; BATCH] };
+        // As `round_below`: the nearest whole number when it is in `0..n`.
+        let round = |v: f64, n: usize, nf: f64| {
+            let whole = v as usize;
+            let rounded = whole + usize::from(v - whole as f64 >= 0.5);
+            let inside = !v.is_nan() & !(v <= -0.5) & !(v >= nf) & (rounded < n);
+            (rounded, inside)
+        };
+        for k in 0..BATCH {
+            let (kx, ky, kz) = (
+                (p.x[k] - self.origin.x) / self.spacing,
+                (p.y[k] - self.origin.y) / self.spacing,
+                (p.z[k] - self.origin.z) / self.spacing,
+            );
+            let ((x, in_x), (y, in_y), (z, in_z)) = (round(kx, nx, fx), round(ky, ny, fy), round(kz, nz, fz));
+            let in_grid = in_x & in_y & in_z;
+            let node = z.wrapping_mul(ny).wrapping_add(y).wrapping_mul(nx).wrapping_add(x);
+            // Inside the grid: the gap to the box of the points filling the tool.
+            let gap = |lo: f64, v: f64, hi: f64| (lo - v).max(v - hi).max(0.0);
+            let (gx, gy, gz) = (gap(lo.x, p.x[k], hi.x), gap(lo.y, p.y[k], hi.y), gap(lo.z, p.z[k], hi.z));
+            let slack = p.reach[k] + 2.0 * self.spacing;
+            let far = gx * gx + gy * gy + gz * gz > slack * slack;
+            // Beyond it: `pad` plus the distance to the grid.
+            let outside = |v: f64, nf: f64| (-v).max(v - (nf - 1.0)).max(0.0);
+            let (dx, dy, dz) = (outside(kx, fx), outside(ky, fy), outside(kz, fz));
+            let at = self.pad + (dx * dx + dy * dy + dz * dz).sqrt() * self.spacing;
+            out.read[k] = in_grid & !far;
+            out.near[k] = !in_grid & (at <= p.reach[k]);
+            out.node[k] = if in_grid { node } else { 0 };
         }
-        let ball = (hi - lo).norm() / 2.0;
-        let centre = to_tool * nalgebra::center(&lo, &hi);
-        let half = Vector3::repeat(self.spacing / 2.0);
-        let extent = Vector3::new(self.dims[0] as f64, self.dims[1] as f64, self.dims[2] as f64) * self.spacing;
-        let (grid_lo, grid_hi) = (self.origin - half, self.origin + extent - half);
-        let gap = (grid_lo - centre).sup(&(centre - grid_hi)).sup(&Vector3::zeros()).norm();
-        let reach = margin + 0.87 * size + self.spacing;
-        // Not a number anywhere: not decided here.
-        gap - ball > reach + 1e-6
+        out
     }
 
     /// Whether grid node `index` (from [`ToolField::lookup`]) is within `reach` of the tool.
@@ -1517,6 +1537,7 @@ impl ToolField {
     }
 
     /// The index of the grid node nearest `p` (tool frame), `None` beyond the grid.
+    #[cfg(test)]
     fn node(&self, p: &Point3<f64>) -> Option<usize> {
         let k = (p - self.origin) / self.spacing;
         let (x, y, z) =
@@ -1526,6 +1547,7 @@ impl ToolField {
 
     /// Distance from `p` (tool frame) to the tool, to within the grid's spacing; beyond the grid,
     /// a lower bound (`pad` plus the distance to the grid).
+    #[cfg(test)]
     fn at(&self, p: &Point3<f64>) -> f64 {
         if let Some(index) = self.node(p) {
             return f64::from(self.distance[index]);
@@ -1550,20 +1572,7 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
         // reads (scattered over a field of megabytes) in flight together; the chunk's list of
         // them lives on the stack (no allocation per chunk, frame set after frame set).
         let mut read = [(0usize, 0usize); NEAR_TOOL_CHUNK];
-        let mut reads = 0;
-        if field.beyond_reach(cells, &to_tool, margin) {
-            cells.iter_mut().for_each(|c| c.scalpel = false);
-        } else {
-            for (k, c) in cells.iter_mut().enumerate() {
-                match field.lookup(&(to_tool * c.centre()), reach(c)) {
-                    Lookup::Decided(near) => c.scalpel = near,
-                    Lookup::Node(index) => {
-                        read[reads] = (k, index);
-                        reads += 1;
-                    }
-                }
-            }
-        }
+        let reads = pulp::Arch::new().dispatch(NearChunk { field, to_tool: &to_tool, margin, cells, read: &mut read });
         for &(k, index) in &read[..reads] {
             cells[k].scalpel = field.node_within(index, reach(&cells[k]));
         }
@@ -1573,6 +1582,66 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
         }
     });
     out
+}
+
+/// The first pass of one chunk of [`near_tool`]: each cell's centre taken to the tool's frame,
+/// [`ToolField::lookup`] a batch of [`BATCH`] at a time ([`ToolField::lookup_batch`]), the
+/// decided cells labelled, the others' grid nodes listed in `read` (returns how many). Compiled
+/// for the widest vector instructions the processor has (pulp's run-time dispatch): the same
+/// IEEE operations in the same order on any of them, so the same labels.
+struct NearChunk<'a> {
+    field: &'a ToolField,
+    to_tool: &'a Isometry3<f64>,
+    margin: f64,
+    cells: &'a mut [hullcut_hull::Cell],
+    read: &'a mut [(usize, usize); NEAR_TOOL_CHUNK],
+}
+
+impl pulp::WithSimd for NearChunk<'_> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> usize {
+        let NearChunk { field, to_tool, margin, cells, read } = self;
+        let mut reads = 0;
+        for (b, batch) in cells.chunks_mut(BATCH).enumerate() {
+            let mut points = PointBatch::default();
+            for (k, c) in batch.iter().enumerate() {
+                let p = to_tool * c.centre();
+                (points.x[k], points.y[k], points.z[k]) = (p.x, p.y, p.z);
+                points.reach[k] = margin + 0.87 * c.size + field.spacing;
+            }
+            let looked = field.lookup_batch(&points);
+            for (k, c) in batch.iter_mut().enumerate() {
+                if looked.read[k] {
+                    read[reads] = (b * BATCH + k, looked.node[k]);
+                    reads += 1;
+                } else {
+                    c.scalpel = looked.near[k];
+                }
+            }
+        }
+        reads
+    }
+}
+
+/// Up to [`BATCH`] points (tool frame) and their reaches, planar, for
+/// [`ToolField::lookup_batch`]; past the batch's points, zeros.
+#[derive(Debug, Clone, Copy, Default)]
+struct PointBatch {
+    x: [f64; BATCH],
+    y: [f64; BATCH],
+    z: [f64; BATCH],
+    reach: [f64; BATCH],
+}
+
+/// [`ToolField::lookup_batch`]'s answers: point `k` is [`Lookup::Node`]`(node[k])` where
+/// `read[k]`, else [`Lookup::Decided`]`(near[k])`.
+#[derive(Debug, Clone, Copy)]
+struct LookedUp {
+    near: [bool; BATCH],
+    read: [bool; BATCH],
+    node: [usize; BATCH],
 }
 
 /// Cells per task of [`near_tool`].
@@ -2519,6 +2588,58 @@ mod tests {
         assert!(band_rows(&square, f64::NAN, 100, 100).is_empty() && band_rows(&square, -1.0, 100, 100).is_empty());
     }
 
+    /// Points inside the grid, beyond it, far away, on its bounds and not numbers, in batches
+    /// full and partial: every lane answers as [`ToolField::lookup`] does point by point.
+    #[test]
+    fn a_batch_looks_the_grid_up_as_point_by_point() {
+        let points: Vec<Point3<f64>> =
+            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
+        let field = ToolField::new(&points, 0.001, 0.022);
+        let mut seed = 31u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut read, mut near, mut far) = (0, 0, 0);
+        for round in 0..20_000 {
+            let len = 1 + round % BATCH;
+            let mut batch = PointBatch::default();
+            for k in 0..len {
+                let mut p = if next() < 0.5 {
+                    [next() * 0.4 - 0.12, next() * 0.2 - 0.09, next() * 0.2 - 0.1]
+                } else {
+                    // About the tool.
+                    [next() * 0.21 - 0.03, next() * 0.07 - 0.03, next() * 0.06 - 0.03]
+                };
+                match (next() * 40.0) as usize {
+                    // On a grid node's rounding edge, or the grid's last half-spacing.
+                    0 => p[0] = field.origin.x + ((next() * 200.0).floor() + 0.5) * field.spacing,
+                    1 => p[1] = field.origin.y + (field.dims[1] as f64 - 0.5) * field.spacing,
+                    2 => p[2] = f64::NAN,
+                    3 => p[0] = 1e300,
+                    _ => {}
+                }
+                (batch.x[k], batch.y[k], batch.z[k]) = (p[0], p[1], p[2]);
+                batch.reach[k] = [0.004, 0.01, 0.03, 0.06][(next() * 4.0) as usize % 4];
+            }
+            let looked = field.lookup_batch(&batch);
+            for k in 0..len {
+                let p = Point3::new(batch.x[k], batch.y[k], batch.z[k]);
+                match field.lookup(&p, batch.reach[k]) {
+                    Lookup::Node(index) => {
+                        assert!(looked.read[k] && looked.node[k] == index, "{p:?}: node {index}");
+                        read += 1;
+                    }
+                    Lookup::Decided(is_near) => {
+                        assert!(!looked.read[k] && looked.near[k] == is_near, "{p:?}: decided {is_near}");
+                        if is_near { near += 1 } else { far += 1 }
+                    }
+                }
+            }
+        }
+        assert!(read > 10_000 && near > 1_000 && far > 10_000, "{read} read, {near} near, {far} far");
+    }
+
     #[test]
     fn the_tools_nearness_reads_the_grid_as_the_distance_does_wherever_the_point() {
         // A slender tool (a blade-like strip of points) and points inside the grid, beyond it
@@ -2542,57 +2663,6 @@ mod tests {
         assert!(near > 10_000 && far > 10_000, "{near} near, {far} far");
         let nan = Point3::new(f64::NAN, 0.0, 0.0);
         assert_eq!(field.within(&nan, 0.01), field.at(&nan) <= 0.01);
-    }
-
-    /// A chunk of cells that [`ToolField::beyond_reach`] decides at once holds no cell
-    /// [`ToolField::within`] finds near, one at a time; clusters just beyond the reach and far
-    /// from it are decided so.
-    #[test]
-    fn a_chunk_decided_beyond_reach_holds_no_cell_within_it() {
-        let points: Vec<Point3<f64>> =
-            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
-        let field = ToolField::new(&points, 0.001, 0.022);
-        let pose = Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.3, -0.2, 0.9));
-        let to_tool = pose.inverse();
-        let mut seed = 23u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let margin = 0.002;
-        let (mut decided, mut open_far) = (0, 0);
-        for trial in 0..3000 {
-            // A cluster about a point up to 0.1 m from the grid, 1-30 mm across.
-            let at = Point3::new(next() * 0.37 - 0.11, next() * 0.23 - 0.11, next() * 0.24 - 0.12);
-            let spread = 0.001 + 0.029 * next();
-            let cells: Vec<hullcut_hull::Cell> = (0..1 + trial % 64)
-                .map(|_| {
-                    let size = if next() < 0.8 { 0.004 } else { 0.008 };
-                    let offset = Vector3::new(next() - 0.5, next() - 0.5, next() - 0.5) * spread;
-                    let centre = pose * (at + offset);
-                    hullcut_hull::Cell {
-                        min: centre - Vector3::repeat(size / 2.0),
-                        size,
-                        hand: false,
-                        scalpel: false,
-                        solid: true,
-                        refuted_by: None,
-                    }
-                })
-                .collect();
-            let near = cells
-                .iter()
-                .filter(|c| field.within(&(to_tool * c.centre()), margin + 0.87 * c.size + field.spacing))
-                .count();
-            if field.beyond_reach(&cells, &to_tool, margin) {
-                assert_eq!(near, 0, "trial {trial}: a chunk decided beyond reach holds {near} near cells");
-                decided += 1;
-            } else if near == 0 {
-                open_far += 1;
-            }
-        }
-        assert!(decided > 1000 && open_far > 50, "{decided} decided at once, {open_far} far and left to the cells");
-        assert!(field.beyond_reach(&[], &to_tool, margin));
     }
 
     /// The hull's cells near the tool, labelled a chunk at a time with the grid read in a pass
