@@ -1500,9 +1500,10 @@ impl ToolField {
         let (fx, fy, fz) = (nx as f64, ny as f64, nz as f64);
         let mut out = LookedUp { near: [false; BATCH], read: [false; BATCH], node: [0; BATCH] };
         // As `round_below`: the nearest whole number when it is in `0..n`.
+        // Lanes out of range are refused, their sums free to wrap (a saturated `usize::MAX`).
         let round = |v: f64, n: usize, nf: f64| {
             let whole = v as usize;
-            let rounded = whole + usize::from(v - whole as f64 >= 0.5);
+            let rounded = whole.wrapping_add(usize::from(v - whole as f64 >= 0.5));
             let inside = !v.is_nan() & !(v <= -0.5) & !(v >= nf) & (rounded < n);
             (rounded, inside)
         };
