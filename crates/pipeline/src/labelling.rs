@@ -658,6 +658,8 @@ pub struct Labelling {
     rig: Arc<hullcut_rig::Rig>,
     label_frames: Vec<u64>,
     counters: LabelCounters,
+    /// The foreground masks, handed back to the segmenter frame set after frame set
+    /// ([`Segmenter::keep_masks`]: nothing below writes foreground outside a view's window).
     masks: Vec<Option<GrayImage>>,
     /// The foreground masks before the hull resolved their possible shadows (for
     /// [`TableShadows`]), kept from frame set to frame set so that copying them allocates nothing.
@@ -713,7 +715,10 @@ impl Labelling {
         // background's colour, breaks into short runs that two neighbours would erase, and the
         // tool's fit needs them (the hull and the fit ignore lone noise).
         let params = SegmentParams { shadow_depth: SHADOW_DEPTH, min_neighbors: 1, ..SegmentParams::default() };
-        let segmenter = Segmenter::from_dataset(ds, params).context("setting up segmentation")?;
+        let mut segmenter = Segmenter::from_dataset(ds, params).context("setting up segmentation")?;
+        // The foreground masks are kept from frame set to frame set (`masks`), and the passes
+        // over them below change only foreground, which lies in each view's window.
+        segmenter.keep_masks(true);
         let mut appearance = AppearanceModel::default();
         for &frame in label_frames {
             if !ds.has_masks() {

@@ -293,6 +293,9 @@ struct CameraSegmenter {
     /// Size of the MOG2 stream, fixed by its first frame.
     size: Option<(u32, u32)>,
     last_gain: f64,
+    /// The mask this camera last wrote (its first pixel's address and its length) and the
+    /// window it wrote in: outside it, that mask is background ([`Segmenter::keep_masks`]).
+    written: Option<((usize, usize), Window)>,
 }
 
 /// Segments the images of a rig's cameras; see the module docs.
@@ -301,6 +304,9 @@ pub struct Segmenter {
     params: SegmentParams,
     lut: ClassLut,
     cameras: Vec<CameraSegmenter>,
+    /// Whether the masks handed back are those this segmenter wrote, background outside their
+    /// windows ([`Segmenter::keep_masks`]).
+    kept: bool,
 }
 
 impl Segmenter {
@@ -337,11 +343,11 @@ impl Segmenter {
                     Model::Background(m, _) => Some((m.width(), m.height())),
                     Model::Mog2(_) => None,
                 };
-                Ok(CameraSegmenter { camera, model, scratch: Scratch::default(), size, last_gain: 1.0 })
+                Ok(CameraSegmenter { camera, model, scratch: Scratch::default(), size, last_gain: 1.0, written: None })
             })
             .collect::<Result<Vec<_>, CaptureError>>()?;
         let lut = ClassLut::new(params.classes.as_ref(), encode);
-        Ok(Self { params, lut, cameras })
+        Ok(Self { params, lut, cameras, kept: false })
     }
 
     /// A segmenter for a dataset's cameras: from their `<cam>/background*.png` images, or, for a
@@ -361,6 +367,17 @@ impl Segmenter {
             })
             .collect::<Result<Vec<_>, CaptureError>>()?;
         Self::with_sources(params, sources)
+    }
+
+    /// With `kept`, the caller promises that the masks it hands to
+    /// [`Self::segment_frame_set_stretches`] (and the calls built on it) are the ones this
+    /// segmenter last wrote for those views, with nothing but background written outside each
+    /// one's window since (changing the foreground inside it is fine): the segmenter then clears
+    /// only what the last window held outside the new one, instead of every pixel outside the
+    /// new window (six full masks a frame set). A mask it did not write last (another buffer)
+    /// is cleared whole as without. Off by default.
+    pub fn keep_masks(&mut self, kept: bool) {
+        self.kept = kept;
     }
 
     /// The settings.
@@ -421,7 +438,7 @@ impl Segmenter {
             *out = GrayImage::new(image.width(), image.height());
         }
         let (w, h) = image.dimensions();
-        cam.run(image, &self.params, &self.lut, out, Window::whole(w, h), None).map(|_| ())
+        cam.run(image, &self.params, &self.lut, (out, false), Window::whole(w, h), None).map(|_| ())
     }
 
     /// Segments every view of a frame set, cameras in parallel; `None` where the view is missing.
@@ -476,7 +493,7 @@ impl Segmenter {
             return Err(CaptureError::UnknownCamera { camera: set.views.len() - 1, cameras: self.cameras.len() });
         }
         masks.resize(set.views.len(), None);
-        let (params, lut) = (&self.params, &self.lut);
+        let (params, lut, kept) = (&self.params, &self.lut, self.kept);
         self.cameras
             .par_iter_mut()
             .zip(set.views.par_iter())
@@ -493,7 +510,7 @@ impl Segmenter {
                     _ => mask.insert(GrayImage::new(w, h)),
                 };
                 let stretches = stretches.get(k).and_then(Option::as_deref);
-                cam.run(&view.image, params, lut, out, Window::of_view(windows, k, w, h), stretches)
+                cam.run(&view.image, params, lut, (out, kept), Window::of_view(windows, k, w, h), stretches)
             })
             .collect()
     }
@@ -570,7 +587,7 @@ impl CameraSegmenter {
         image: &RgbImage,
         params: &SegmentParams,
         lut: &ClassLut,
-        out: &mut GrayImage,
+        (out, kept): (&mut GrayImage, bool),
         window: Window,
         stretches: Option<&[(u32, u32)]>,
     ) -> Result<ViewTested, CaptureError> {
@@ -675,15 +692,22 @@ impl CameraSegmenter {
         // 4. Closing: pixels the closing adds take the label of the dilation (scalpel first).
         // Rows inactive in a buffer count as zero there (their bytes are stale).
         let full: &mut [u8] = out;
-        // Outside the window: background. `out` is the window's part of each row below.
-        for (y, row) in full.chunks_exact_mut(full_w.max(1)).enumerate() {
+        // Outside the window: background. `out` is the window's part of each row below. A mask
+        // this camera wrote last, kept ([`Segmenter::keep_masks`]), is background outside the
+        // window it was written in: only that window's pixels outside this one are cleared.
+        let written = (full.as_ptr() as usize, full.len());
+        let held = self.written.filter(|&(a, _)| kept && a == written).map(|(_, held)| held);
+        let held = held.unwrap_or_else(|| Window::whole(full_w as u32, (full.len() / full_w.max(1)) as u32));
+        let (hx0, hx1) = ((held.x0 as usize).min(full_w), (held.x1 as usize).min(full_w));
+        for (y, row) in full.chunks_exact_mut(full_w.max(1)).enumerate().take(held.y1 as usize).skip(held.y0 as usize) {
             if y < y0 || y >= y0 + h {
-                row.fill(0);
+                row[hx0..hx1.max(hx0)].fill(0);
             } else {
-                row[..x0].fill(0);
-                row[x0 + w..].fill(0);
+                row[hx0..x0.clamp(hx0, hx1.max(hx0))].fill(0);
+                row[(x0 + w).clamp(hx0, hx1.max(hx0))..hx1.max(hx0)].fill(0);
             }
         }
+        self.written = Some((written, window));
         let mut out = WindowRows { full, full_w, x0, y0, w };
         if params.close_radius > 0 {
             let r = params.close_radius as usize;

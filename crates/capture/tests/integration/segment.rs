@@ -235,6 +235,56 @@ fn a_window_segments_its_pixels_as_the_whole_image_does_and_nothing_else() -> Re
     Ok(())
 }
 
+/// Kept masks ([`Segmenter::keep_masks`]) handed back frame set after frame set come out as a
+/// segmenter that clears every pixel outside the window gives them, over windows that move,
+/// grow, shrink, vanish and cover the whole image in turn, their foreground changed in between
+/// inside the window (as the labelling does); a mask that is not the one last written (a new
+/// buffer full of foreground) is cleared whole.
+#[test]
+fn kept_masks_come_out_as_masks_cleared_whole() -> Result<()> {
+    let params = SegmentParams { open_radius: 1, close_radius: 2, ..with_palette() };
+    let mut plain = segmenter(params.clone())?;
+    let mut keeping = segmenter(params)?;
+    keeping.keep_masks(true);
+    let (set, _) = frame_set(4);
+    let (mut kept, mut fresh) = (Vec::new(), Vec::new());
+    let mut seed = 41u64;
+    let mut next = |n: u32| {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((seed >> 33) % u64::from(n)) as u32
+    };
+    let mut foreground = 0u64;
+    for step in 0..40 {
+        let windows: Vec<Option<Window>> = (0..CAMERAS)
+            .map(|_| match next(8) {
+                0 => None,
+                1 => Some(Window { x0: 5, y0: 5, x1: 5, y1: 5 }),
+                _ => {
+                    let (x0, y0) = (next(W), next(H));
+                    Some(Window { x0, y0, x1: x0 + 1 + next(W), y1: y0 + 1 + next(H) })
+                }
+            })
+            .collect();
+        if step == 25 {
+            // Another buffer, full of foreground, where camera 0's kept mask was.
+            kept[0] = Some(GrayImage::from_pixel(W, H, image::Luma([label::HAND])));
+        }
+        keeping.segment_frame_set_within(&set, &mut kept, &windows)?;
+        plain.segment_frame_set_within(&set, &mut fresh, &windows)?;
+        for (camera, (k, f)) in kept.iter_mut().zip(fresh.iter_mut()).enumerate() {
+            let (k, f) = (k.as_mut().expect("present"), f.as_mut().expect("present"));
+            assert!(k == f, "step {step}, camera {camera}: the kept mask differs from one cleared whole");
+            foreground += k.iter().filter(|&&p| p != label::BACKGROUND).count() as u64;
+            // The labelling changes the foreground between frame sets, and only the foreground.
+            for p in k.iter_mut().chain(f.iter_mut()).filter(|p| **p != label::BACKGROUND) {
+                *p = label::UNKNOWN;
+            }
+        }
+    }
+    assert!(foreground > 100_000, "{foreground} foreground pixels compared");
+    Ok(())
+}
+
 /// Stretches of rows test only their pixels: around each row's foreground (grown by the
 /// clean-up's reach and more) they give the whole image's mask and report nothing reaching past
 /// them, and the pixels they hold as tested; cut through the objects they report it; without
