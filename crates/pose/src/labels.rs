@@ -1532,6 +1532,13 @@ impl ToolField {
         out
     }
 
+    /// How near the tool a cell's centre must lie for [`near_tool`] to call the cell near: the
+    /// `margin`, plus the cell's half-diagonal, plus the grid's rounding.
+    #[inline(always)]
+    fn reach(&self, margin: f64, c: &hullcut_hull::Cell) -> f64 {
+        margin + 0.87 * c.size + self.spacing
+    }
+
     /// Whether grid node `index` (from [`ToolField::lookup`]) is within `reach` of the tool.
     fn node_within(&self, index: usize, reach: f64) -> bool {
         f64::from(self.distance[index]) <= reach
@@ -1567,7 +1574,6 @@ impl ToolField {
 fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: f64, not_hand: &[bool]) -> Occupancy {
     let to_tool = pose.inverse();
     let mut out = occ.clone();
-    let reach = |c: &hullcut_hull::Cell| margin + 0.87 * c.size + field.spacing;
     out.cells.par_chunks_mut(NEAR_TOOL_CHUNK).enumerate().for_each(|(n, cells)| {
         // The cells the tool's box leaves in reach read the grid in a pass of their own, its
         // reads (scattered over a field of megabytes) in flight together; the chunk's list of
@@ -1575,7 +1581,7 @@ fn near_tool(occ: &Occupancy, field: &ToolField, pose: &Isometry3<f64>, margin: 
         let mut read = [(0usize, 0usize); NEAR_TOOL_CHUNK];
         let reads = pulp::Arch::new().dispatch(NearChunk { field, to_tool: &to_tool, margin, cells, read: &mut read });
         for &(k, index) in &read[..reads] {
-            cells[k].scalpel = field.node_within(index, reach(&cells[k]));
+            cells[k].scalpel = field.node_within(index, field.reach(margin, &cells[k]));
         }
         let first = n * NEAR_TOOL_CHUNK;
         for (k, c) in cells.iter_mut().enumerate() {
@@ -1610,7 +1616,7 @@ impl pulp::WithSimd for NearChunk<'_> {
             for (k, c) in batch.iter().enumerate() {
                 let p = to_tool * c.centre();
                 (points.x[k], points.y[k], points.z[k]) = (p.x, p.y, p.z);
-                points.reach[k] = margin + 0.87 * c.size + field.spacing;
+                points.reach[k] = field.reach(margin, c);
             }
             let looked = field.lookup_batch(&points);
             for (k, c) in batch.iter_mut().enumerate() {
@@ -2076,6 +2082,23 @@ impl CellRun {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A reproducible stream of numbers in [0, 1).
+    fn numbers(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// The field of a slender tool: a blade-like strip of points 150 by 12 mm, a 1 mm grid
+    /// padded by 22 mm.
+    fn slender_tool_field() -> ToolField {
+        let points: Vec<Point3<f64>> =
+            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
+        ToolField::new(&points, 0.001, 0.022)
+    }
 
     #[test]
     fn rounding_without_the_library_is_the_library_s() {
@@ -2593,14 +2616,8 @@ mod tests {
     /// full and partial: every lane answers as [`ToolField::lookup`] does point by point.
     #[test]
     fn a_batch_looks_the_grid_up_as_point_by_point() {
-        let points: Vec<Point3<f64>> =
-            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
-        let field = ToolField::new(&points, 0.001, 0.022);
-        let mut seed = 31u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let field = slender_tool_field();
+        let mut next = numbers(31);
         let (mut read, mut near, mut far) = (0, 0, 0);
         for round in 0..20_000 {
             let len = 1 + round % BATCH;
@@ -2645,14 +2662,8 @@ mod tests {
     fn the_tools_nearness_reads_the_grid_as_the_distance_does_wherever_the_point() {
         // A slender tool (a blade-like strip of points) and points inside the grid, beyond it
         // and far away, with reaches from a leaf's to a coarse octree cell's.
-        let points: Vec<Point3<f64>> =
-            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
-        let field = ToolField::new(&points, 0.001, 0.022);
-        let mut seed = 5u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let field = slender_tool_field();
+        let mut next = numbers(5);
         let (mut near, mut far) = (0, 0);
         for _ in 0..200_000 {
             let p = Point3::new(next() * 0.4 - 0.12, next() * 0.2 - 0.09, next() * 0.2 - 0.1);
@@ -2671,15 +2682,9 @@ mod tests {
     /// the hand's unless `not_hand` marks it.
     #[test]
     fn cells_near_the_tool_are_those_within_reach_one_by_one() {
-        let points: Vec<Point3<f64>> =
-            (0..150).flat_map(|i| (0..12).map(move |j| Point3::new(i as f64 * 0.001, j as f64 * 0.001, 0.0))).collect();
-        let field = ToolField::new(&points, 0.001, 0.022);
+        let field = slender_tool_field();
         let pose = Isometry3::new(Vector3::new(0.02, -0.01, 0.03), Vector3::new(0.3, -0.2, 0.9));
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = numbers(11);
         // More cells than one chunk holds, of a leaf's size and a coarse cell's, about the tool.
         let cells: Vec<hullcut_hull::Cell> = (0..3 * NEAR_TOOL_CHUNK + 77)
             .map(|_| {
@@ -2737,11 +2742,7 @@ mod tests {
     #[test]
     fn a_batch_of_cell_discs_is_bounded_as_cell_by_cell() {
         // Centres scattered in and around a box, some unprojected, some at NaN; partial batches.
-        let mut s = 11u64;
-        let mut next = move || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = numbers(11);
         let bounds = (40.0, 30.0, 300.0, 200.0);
         let (lo_x, lo_y, hi_x, hi_y) = bounds;
         let (mut kept, mut missed) = (0, 0);
@@ -2924,11 +2925,7 @@ mod tests {
         };
         let judged = |cells: &HandCells| judged_within(cells, &scalpel);
         let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];
-        let mut seed = 23u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = numbers(23);
         let (mut taking, mut idle) = (0, 0);
         for k in 0..3000 {
             let size = 0.002 + 0.01 * next();
@@ -2979,11 +2976,7 @@ mod tests {
         // A distorted camera, a thin diagonal tool drawn 0.5 m away, and hull cells of many sizes
         // in front of it, behind it, beside it and near the camera.
         let (camera, tool) = diagonal_tool();
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = numbers(11);
         let cells: Vec<hullcut_hull::Cell> = (0..3000)
             .map(|_| {
                 let size = 0.002 + 0.01 * next();
