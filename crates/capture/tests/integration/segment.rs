@@ -481,22 +481,26 @@ fn mog2_fallback_finds_objects_entering_a_learnt_scene() -> Result<()> {
     Ok(())
 }
 
-/// Wood (133, 99, 67) with sensor noise of σ ≈ 2.3 levels per channel (the spread that makes
-/// τ = 7), and inside a disc a pale hand of about the wood's brightness (127, 96, 86): its
-/// chromaticity differs from the wood's by 0.108 of its channel sum, the median of the pale hand
-/// over wood that the whole noise allowance hid (a never-seen recording, rig random:409 in look
-/// random:421: Σ|c − ê·s| ≈ 33 levels against κ·s + 3τ ≈ 39.5).
-fn pale_hand_over_wood(seed: u64, hand: bool) -> RgbImage {
+/// Sensor noise, grey levels: the sum of four uniform deviates on ±2, σ = sqrt(4 · 16/12) ≈ 2.3.
+fn sensor_noise(seed: u64) -> impl FnMut() -> f64 {
     let mut state = seed;
-    let mut noise = move || {
-        // The sum of four uniform deviates on ±2: σ = sqrt(4 · 16/12) ≈ 2.3 levels.
+    move || {
         (0..4)
             .map(|_| {
                 state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 (state >> 40) as f64 / f64::from(1u32 << 24) * 4.0 - 2.0
             })
             .sum::<f64>()
-    };
+    }
+}
+
+/// Wood (133, 99, 67) with sensor noise of σ ≈ 2.3 levels per channel (the spread that makes
+/// τ = 7), and inside a disc a pale hand of about the wood's brightness (127, 96, 86): its
+/// chromaticity differs from the wood's by 0.108 of its channel sum, the median of the pale hand
+/// over wood that the whole noise allowance hid (a never-seen recording, rig random:409 in look
+/// random:421: Σ|c − ê·s| ≈ 33 levels against κ·s + 3τ ≈ 39.5).
+fn pale_hand_over_wood(seed: u64, hand: bool) -> RgbImage {
+    let mut noise = sensor_noise(seed);
     RgbImage::from_fn(160, 120, |x, y| {
         let inside = hand && (f64::from(x) - 80.0).hypot(f64::from(y) - 60.0) < 30.0;
         let base = if inside { [127.0, 96.0, 86.0] } else { [133.0, 99.0, 67.0] };
@@ -545,5 +549,92 @@ fn a_pale_hand_over_wood_is_foreground_with_half_the_noise_allowance_and_the_woo
         let bad = Segmenter::new(SegmentParams { weak_share: share, ..SegmentParams::default() }, &backgrounds);
         assert!(bad.is_err_and(|e| e.to_string().contains("weak_share")), "{share}");
     }
+    Ok(())
+}
+
+/// Wood with sensor noise as [`pale_hand_over_wood`]'s, and a blue hand (a rectangle from the
+/// image's left edge) with five patches in it: the wood shifted towards the hand's colour (its
+/// chromaticity 0.04 of the channel sum from the wood's, background pixel by pixel), the wood
+/// itself (a gap in the hand), the wood 6% brighter (background pixel by pixel), the wood
+/// shifted as far towards green (some 65° away from the hand's colour: the table under a light of
+/// another colour, not the hand), and the first patch's colour again at the image's left edge
+/// (not enclosed).
+fn hand_with_patches(seed: u64, hand: bool) -> RgbImage {
+    let mut noise = sensor_noise(seed);
+    let wood = [133.0, 99.0, 67.0];
+    RgbImage::from_fn(200, 120, |x, y| {
+        let base = match hand_patch(x, y) {
+            Some(Patch::Pale | Patch::Open) if hand => [127.0, 99.0, 73.0],
+            Some(Patch::Brighter) if hand => wood.map(|c| c * 1.06),
+            Some(Patch::Away) if hand => [127.0, 105.0, 67.0],
+            None if hand && x < 180 && (20..100).contains(&y) => [60.0, 110.0, 200.0],
+            _ => wood,
+        };
+        image::Rgb(base.map(|c: f64| (c + noise()).round().clamp(0.0, 255.0) as u8))
+    })
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Patch {
+    Pale,
+    Gap,
+    Brighter,
+    Away,
+    Open,
+}
+
+/// Which patch of [`hand_with_patches`] a pixel lies in.
+fn hand_patch(x: u32, y: u32) -> Option<Patch> {
+    let square = |x0: u32, y0: u32| (x0..x0 + 14).contains(&x) && (y0..y0 + 14).contains(&y);
+    [
+        (40, 35, Patch::Pale),
+        (80, 35, Patch::Gap),
+        (120, 35, Patch::Brighter),
+        (150, 65, Patch::Away),
+        (0, 65, Patch::Open),
+    ]
+    .into_iter()
+    .find(|&(x0, y0, _)| square(x0, y0))
+    .map(|(_, _, p)| p)
+}
+
+/// Holes enclosed by the hand whose pixels pass as background one by one are filled where their
+/// mean colour is not their background's (of a chromaticity towards the hand's, or brighter), and
+/// left where it is (a gap showing the wood), where it leans away from the hand's, or where the
+/// hole is open to the image's edge.
+#[test]
+fn holes_of_another_colour_than_their_background_are_filled_and_gaps_are_not() -> Result<()> {
+    let backgrounds = vec![(0..3).map(|k| hand_with_patches(21 + k, false)).collect::<Vec<_>>()];
+    let frame = hand_with_patches(7, true);
+    let shares = |fill_holes: bool| -> Result<Vec<(Patch, f64)>> {
+        let mask = Segmenter::new(SegmentParams { fill_holes, ..SegmentParams::default() }, &backgrounds)?
+            .segment(0, &frame)?;
+        Ok([Patch::Pale, Patch::Gap, Patch::Brighter, Patch::Away, Patch::Open]
+            .into_iter()
+            .map(|patch| {
+                // The patch less its rim (the closing may reach a pixel into a gap).
+                let inner = |x: u32, y: u32| (0..9).all(|k| hand_patch(x + k % 3 - 1, y + k / 3 - 1) == Some(patch));
+                let (mut fg, mut n) = (0u32, 0u32);
+                for (_, _, p) in mask.enumerate_pixels().filter(|&(x, y, _)| x > 0 && y > 0 && inner(x, y)) {
+                    (fg, n) = (fg + u32::from(p.0[0] != label::BACKGROUND), n + 1);
+                }
+                (patch, f64::from(fg) / f64::from(n.max(1)))
+            })
+            .collect())
+    };
+    let (without, with) = (shares(false)?, shares(true)?);
+    println!("foreground share of each patch without the hole filling {without:?}, with it {with:?}");
+    let share = |v: &[(Patch, f64)], p: Patch| v.iter().find(|(q, _)| *q == p).map_or(f64::NAN, |(_, s)| *s);
+    // Pixel by pixel the pale and brighter patches are background (a few noisy pixels aside).
+    assert!(share(&without, Patch::Pale) < 0.5, "{without:?}");
+    assert!(share(&without, Patch::Brighter) < 0.3, "{without:?}");
+    assert!(share(&without, Patch::Open) < 0.3, "{without:?}");
+    assert!(share(&without, Patch::Away) < 0.5, "{without:?}");
+    // As holes they are not the wood; the gap is, and the open patch is no hole.
+    assert!(share(&with, Patch::Pale) > 0.99, "{with:?}");
+    assert!(share(&with, Patch::Brighter) > 0.99, "{with:?}");
+    assert!(share(&with, Patch::Gap) < 0.01, "{with:?}");
+    assert!(share(&with, Patch::Open) < 0.3, "{with:?}");
+    assert_eq!(share(&with, Patch::Away), share(&without, Patch::Away), "{with:?}");
     Ok(())
 }
