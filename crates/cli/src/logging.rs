@@ -50,6 +50,10 @@ pub const NEAR_HULL_ENTITY: &str = "metrics/segment/near_hull";
 /// the foreground they touch, over its views (the segmenter's hysteresis; the report's
 /// `counters.weak_joined`, frame set by frame set).
 pub const WEAK_JOINED_ENTITY: &str = "metrics/segment/weak_joined";
+/// The background pixels enclosed by a frame set's foreground that it filled as holes whose mean
+/// colour is not their background's, over its views (`SegmentParams::fill_holes`; the report's
+/// `counters.holes_filled`, frame set by frame set).
+pub const HOLES_FILLED_ENTITY: &str = "metrics/segment/holes_filled";
 /// The time a trusted frame set's lesson (its tool drawn, the colours learned from it) took on its
 /// own thread, ms, logged on the frame set whose labelling took its colours (the report's
 /// `timings.learn`, lesson by lesson).
@@ -169,6 +173,7 @@ pub fn log_labelling(rec: &RecordingStream, trace: &LabelTrace) -> anyhow::Resul
     hullcut_viz::log_scalar(rec, PIXELS_TESTED_ENTITY, trace.segmented.pixels as f64)?;
     hullcut_viz::log_scalar(rec, NEAR_HULL_ENTITY, f64::from(u8::from(trace.segmented.near_hull)))?;
     hullcut_viz::log_scalar(rec, WEAK_JOINED_ENTITY, trace.segmented.weak_joined as f64)?;
+    hullcut_viz::log_scalar(rec, HOLES_FILLED_ENTITY, trace.segmented.holes_filled as f64)?;
     if let Some(ms) = trace.lesson_ms {
         hullcut_viz::log_scalar(rec, LESSON_ENTITY, ms)?;
     }

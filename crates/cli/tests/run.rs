@@ -819,7 +819,12 @@ fn how_often_the_images_are_logged_changes_nothing_the_loop_does() {
         // The hull's meshes are made for the frame sets logged, and logged with them.
         assert_eq!(rows.get("/world/hull/hand/mesh").copied(), Some(logged), "{}: {rows:?}", d.display());
         // What segmentation tested, every frame set however often the images are.
-        for entity in ["/metrics/segment/pixels_tested", "/metrics/segment/near_hull", "/metrics/segment/weak_joined"] {
+        for entity in [
+            "/metrics/segment/pixels_tested",
+            "/metrics/segment/near_hull",
+            "/metrics/segment/weak_joined",
+            "/metrics/segment/holes_filled",
+        ] {
             assert_eq!(rows.get(entity).copied(), Some(30), "{entity} in {}: {rows:?}", d.display());
         }
     }

@@ -270,6 +270,10 @@ pub struct Segmented {
     /// joined the foreground, or (only darker) a possible shadow, they touch, over the views (the
     /// segmenter's hysteresis; the report's `counters.weak_joined`, frame set by frame set).
     pub weak_joined: u64,
+    /// Background pixels enclosed by the foreground that filled it as holes of another colour
+    /// than their background's, over the views (`SegmentParams::fill_holes`; the report's
+    /// `counters.holes_filled`, frame set by frame set).
+    pub holes_filled: u64,
 }
 
 impl LabelSource {
@@ -378,6 +382,10 @@ pub struct LabelCounters {
     /// clean-up.
     #[serde(default)]
     pub weak_joined: u64,
+    /// Background pixels enclosed by the foreground, filled as holes whose mean colour is not
+    /// their background's (`SegmentParams::fill_holes`), over every view and frame set.
+    #[serde(default)]
+    pub holes_filled: u64,
     /// Frame sets whose hull's thin parts were searched for the tool (nothing trusted from the
     /// track: it was lost, or its prediction's fit refused).
     #[serde(default)]
@@ -1073,11 +1081,13 @@ impl Labelling {
             near_hull,
             pixels: tested.iter().map(|t| t.pixels).sum(),
             weak_joined: tested.iter().map(|t| t.joined).sum(),
+            holes_filled: tested.iter().map(|t| t.filled).sum(),
         };
         self.counters.segmented_near_hull += u64::from(near_hull);
         self.counters.reached_past_hull += u64::from(near_hull && reached);
         self.counters.pixels_tested += self.segmented.pixels;
         self.counters.weak_joined += self.segmented.weak_joined;
+        self.counters.holes_filled += self.segmented.holes_filled;
         // Set again once this frame set's hull is carved.
         self.last_blocks = None;
         self.fill_weak(set, carver, &mut fg).with_context(|| format!("confirming weak foreground in frame {frame}"))?;

@@ -87,7 +87,9 @@ use crate::weak::WeakArg;
 /// under metrics/appearance/taught, the pixels each frame set's segmentation tested under
 /// metrics/segment/pixels_tested and whether only near the last hull (1) or in the whole
 /// rectangle of the box carved in (0) under metrics/segment/near_hull, the weak pixels its
-/// hysteresis joined to the foreground under metrics/segment/weak_joined, the time each
+/// hysteresis joined to the foreground under metrics/segment/weak_joined, the pixels enclosed
+/// by its foreground filled as holes not of their background's colour under
+/// metrics/segment/holes_filled, the time each
 /// trusted frame set's lesson (the colours learned from it beside the loop) took under
 /// metrics/segment/lesson_ms; on
 /// the `frame` and `capture_time` timelines (a file of more than 3,600
@@ -541,10 +543,10 @@ pub const WEAK_ENTITY: &str = crate::logging::WEAK_CONFIRMED_ENTITY;
 /// labels came from, the colours learned by then, the share of the drawn blade they call the
 /// hand's, the possible shadows given back to the table, and the pixels an untrusted fit that
 /// agreed with the silhouettes taught the colours (on the frame sets where it did), and what
-/// each frame set's segmentation tested: the pixels, whether only near the last hull, and the
-/// weak pixels that joined the foreground; and
+/// each frame set's segmentation tested: the pixels, whether only near the last hull, the
+/// weak pixels that joined the foreground and the holes filled in it; and
 /// whether the foreground's hull was searched for a lost tool (or the search paused).
-pub const SEGMENTING_ENTITIES: [&str; 11] = [
+pub const SEGMENTING_ENTITIES: [&str; 12] = [
     "labelling/source",
     "metrics/appearance/LABEL/colour",
     "metrics/appearance/LABEL/pixels",
@@ -554,6 +556,7 @@ pub const SEGMENTING_ENTITIES: [&str; 11] = [
     crate::logging::PIXELS_TESTED_ENTITY,
     crate::logging::NEAR_HULL_ENTITY,
     crate::logging::WEAK_JOINED_ENTITY,
+    crate::logging::HOLES_FILLED_ENTITY,
     crate::logging::LESSON_ENTITY,
     crate::logging::HULL_SEARCHED_ENTITY,
 ];
