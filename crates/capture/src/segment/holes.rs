@@ -1,8 +1,9 @@
 //! Holes: background pixels of a window's mask enclosed by its foreground (4-connected through
 //! each other, touching no edge of the window), with more objects than possible shadows beside
 //! them, are tested as a whole: the mean colour of their pixels clear of the hole's edge against
-//! their background's mean, and filled where the means tell them apart and the hole's colour
-//! leans towards the objects' around it (see [`super::SegmentParams::fill_holes`]).
+//! their background's mean, and filled where the hole is brighter, or where the means tell them
+//! apart in chromaticity and the hole's colour leans towards the objects' around it (see
+//! [`super::SegmentParams::fill_holes`]).
 //!
 //! A pixel's test allows for the sensor's noise; over a hole's n pixels the noise falls by √n,
 //! and a hand of nearly its background's colour, background pixel by pixel, is not background on
@@ -106,8 +107,11 @@ impl HoleRule {
         let chroma: f64 = hole.iter().map(|d| d.abs()).sum();
         let dot = |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
         // Its colour leans towards the objects' around it (within 60°), not elsewhere (the
-        // table in their soft shadow, lit by the room's light of another colour).
-        let towards = dot(&hole, &ring) >= 0.5 * (dot(&hole, &hole) * dot(&ring, &ring)).sqrt();
+        // table in their soft shadow, lit by the room's light of another colour); objects of
+        // about the background's chromaticity (a grey glove over a grey table) give no direction,
+        // and such a hole is filled only where brighter.
+        let distinct = ring.iter().map(|d| d.abs()).sum::<f64>() > self.chroma;
+        let towards = distinct && dot(&hole, &ring) >= 0.5 * (dot(&hole, &hole) * dot(&ring, &ring)).sqrt();
         chroma > self.chroma && towards && (ratio >= 1.0 - self.darker || chroma > self.dark_chroma)
     }
 }
@@ -508,6 +512,10 @@ mod tests {
         let away = Sums { ring: [1000, 1000, 1060], ..sums([1060, 1000, 940], grey) };
         assert!(!rule.fills(&away, 1.0));
         assert!(rule.fills(&Sums { ring: [1100, 1000, 1000], ..away }, 1.0));
+        // Objects around it of about the background's chromaticity: no direction to lean in.
+        let grey = Sums { ring: [1010, 1000, 990], ..sums([1060, 1000, 940], grey) };
+        assert!(!rule.fills(&grey, 1.0));
+        assert!(rule.fills(&Sums { image: [1070, 1070, 1070], ..grey }, 1.0));
         // Too few pixels clear of its edge to tell.
         assert!(!rule.fills(&Sums { inner: MIN_INNER - 1, objects: 5, ..shaded }, 1.0));
         assert!(rule.fills(&Sums { inner: MIN_INNER, objects: 5, ..shaded }, 1.0));

@@ -128,8 +128,9 @@ pub struct SegmentParams {
     /// hole's edge, filled where those pixels' mean colour is brighter than their background's
     /// mean (exposure compensated) by more than the weak share of the brightness tolerance, or
     /// differs from it in chromaticity by more than the weak share of κ, towards the colour of
-    /// the objects around the hole (within 60°), and is not darker than the shadow tolerance
-    /// allows with less than κ (a shadow seen through a gap). Each pixel's test allows for the
+    /// the objects around the hole (within 60°; objects within that share of the background's
+    /// chromaticity give no direction), and is not darker than the shadow tolerance allows with
+    /// less than κ (a shadow seen through a gap). Each pixel's test allows for the
     /// sensor's noise, which falls by √n over a hole's n pixels: a pale hand over a grey
     /// backdrop was background pixel by pixel in holes of up to 138 pixels (random:2473 in
     /// random:2593), each carving the hull through the hand, while a gap between the fingers
