@@ -233,25 +233,15 @@ impl Holes {
                     tally(p, x0 + x, yy);
                 }
             }
-        }
-        let at = |r: &Run, x: u32| pixel(x as usize, r.y as usize);
-        for i in 0..n {
-            let root = find(&mut self.parent, i as u32) as usize;
-            if self.open[root] {
-                continue;
-            }
-            let r = self.runs[i];
-            let s = &mut self.sums[root];
             // Its inner pixels only: one with an object beside it is partly covered by it, of a
             // colour between the object's and the background's, and a small gap between the
             // fingers is mostly such pixels.
-            let y = r.y as usize;
             for x in r.x0 + 1..r.x1.saturating_sub(1) {
                 let xi = x as usize;
                 if out.row(y - 1)[xi] != label::BACKGROUND || out.row(y + 1)[xi] != label::BACKGROUND {
                     continue;
                 }
-                let k = at(&r, x);
+                let k = pixel(xi, y);
                 for c in 0..3 {
                     s.image[c] += u64::from(behind.raw[k + c]);
                     s.background[c] += u64::from(behind.background[k + c]);
@@ -268,7 +258,7 @@ impl Holes {
             let r = self.runs[i];
             let row = out.row(r.y as usize);
             for x in r.x0..r.x1 {
-                let k = at(&r, x);
+                let k = pixel(x as usize, r.y as usize);
                 let e = lut.get(behind.raw[k], behind.raw[k + 1], behind.raw[k + 2]);
                 row[x as usize] = decode(if e == 0 { ENC_UNKNOWN } else { e });
             }
