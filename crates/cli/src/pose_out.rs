@@ -130,6 +130,10 @@ pub struct FrameError {
     /// span of turns about its long axis that fit as well, degrees (45: its plane is not fixed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     roll_span_deg: Option<f64>,
+    /// How well the silhouettes hold the fit's turn about the blade's long axis: its standard
+    /// deviation for a pixel of noise on every residual, degrees ([`hullcut_pose::Diagnostics::roll_sd_deg`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    roll_sd_deg: Option<f64>,
     /// The camera set aside before the fit was judged: its residuals made up half the fit's cost
     /// or more, and the tool was fitted again without it ([`hullcut_pose::Diagnostics::view_set_aside`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -332,6 +336,7 @@ impl PoseReport {
             from_hull: e.diagnostics.from_hull,
             iterations: e.diagnostics.iterations,
             roll_span_deg: e.diagnostics.roll_span_deg,
+            roll_sd_deg: e.diagnostics.roll_sd_deg,
             set_aside,
         });
     }
@@ -654,12 +659,21 @@ mod tests {
         let mut unfixed = report(5, 8);
         for frame in 10..13 {
             let sight = vec![Some(Sight::Seen), Some(Sight::EdgeOn)];
-            let diagnostics =
-                hullcut_pose::Diagnostics { sight, roll_span_deg: Some(45.0), ..hullcut_pose::Diagnostics::default() };
+            let diagnostics = hullcut_pose::Diagnostics {
+                sight,
+                roll_span_deg: Some(45.0),
+                roll_sd_deg: (frame == 12).then_some(7.5),
+                ..hullcut_pose::Diagnostics::default()
+            };
             unfixed.push(&estimate(frame, false, None, diagnostics), None, None);
         }
         let json = serde_json::to_value(&unfixed).expect("serializes");
         assert_eq!(json["unfixed_plane_frames"], 3);
+        // The turn's deviation is reported where the fit gave one.
+        let frames = json["per_frame"].as_array().expect("per frame");
+        let of = |frame: u64| frames.iter().find(|f| f["frame"] == frame).expect("the frame");
+        assert_eq!(of(12)["roll_sd_deg"], 7.5);
+        assert!(of(11).get("roll_sd_deg").is_none(), "{}", of(11));
         let hint = unfixed.rig_hint().expect("more than half edge-on, a fifth refused");
         assert!(hint.contains("fix its turn about its long axis (3 frame sets refused where they did not)"), "{hint}");
         assert_eq!(report(4, 8).rig_hint(), None, "under half edge-on");

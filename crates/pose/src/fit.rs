@@ -58,6 +58,12 @@ pub(crate) struct Fit {
     pub cost: f64,
     /// Levenberg–Marquardt iterations taken.
     pub iterations: usize,
+    /// How far the fit's turn about the blade's long axis (through the blade's centre) may be
+    /// off for a pixel of independent noise on every residual, degrees: the square root of that
+    /// turn's entry of the inverse of the last Gauss–Newton normal matrix (pose alone, outline
+    /// offset held), which lets the other five parameters follow. Infinite where the views leave
+    /// the blade free to turn (the matrix singular).
+    pub roll_sd_deg: f64,
     /// Fraction of sampled outline pixels within [`AGREE_PX`] of the projected tool's outline.
     pub explained: f64,
     /// Fraction of the tool's projected interior points within [`AGREE_PX`] of foreground.
@@ -308,6 +314,19 @@ fn residuals_of(
     tally
 }
 
+/// The standard deviation of a turn about `axis` (world, unit) for a pixel of noise on every
+/// residual, degrees, from a Gauss–Newton normal matrix over the twist and the outline offset
+/// ([`Fit::roll_sd_deg`]): the pose's 6x6 block inverted, infinite where it is singular.
+fn turn_sd_deg(normal: &SMatrix<f64, PARAMS, PARAMS>, axis: &Vector3<f64>) -> f64 {
+    let pose_block: SMatrix<f64, 6, 6> = normal.fixed_view::<6, 6>(0, 0).into_owned();
+    let along = SVector::<f64, 6>::new(axis.x, axis.y, axis.z, 0.0, 0.0, 0.0);
+    pose_block
+        .cholesky()
+        .map(|c| along.dot(&c.solve(&along)))
+        .filter(|v| v.is_finite() && *v >= 0.0)
+        .map_or(f64::INFINITY, |v| v.sqrt().to_degrees())
+}
+
 fn fraction(k: usize, n: usize) -> f64 {
     if n == 0 { 0.0 } else { k as f64 / n as f64 }
 }
@@ -405,6 +424,7 @@ pub(crate) fn fit(
     let mut iterations = 0;
     let mut rp = Vec::new();
     let mut jac: Vec<Row> = Vec::new();
+    let mut normal = SMatrix::<f64, PARAMS, PARAMS>::zeros();
     while iterations < max_iterations && !r.is_empty() {
         iterations += 1;
         let pivot = pose * template.blade_centre;
@@ -416,6 +436,7 @@ pub(crate) fn fit(
             g += row * *res;
             a += row * row.transpose();
         }
+        normal = a;
         if !offset_free {
             a.row_mut(PARAMS - 1).fill(0.0);
             a.column_mut(PARAMS - 1).fill(0.0);
@@ -466,6 +487,7 @@ pub(crate) fn fit(
         pose,
         cost,
         iterations,
+        roll_sd_deg: turn_sd_deg(&normal, &(pose.rotation * template.long_axis())),
         explained: fraction(tally.explained, tally.samples),
         covered: fraction(tally.covered, tally.points),
         rms_px: if n == 0 { 0.0 } else { (tally.sum_sq / n as f64).sqrt() },
@@ -607,5 +629,26 @@ mod tests {
             }
         }
         assert!(skipped > 1000 && measured > 1000, "{skipped} skipped, {measured} measured");
+    }
+
+    /// The turn's deviation from a normal matrix: along an axis of a diagonal matrix it is one
+    /// over the root of that entry (radians, given in degrees), along a slanted axis the two
+    /// entries' inverses mixed by the axis, and infinite where the pose block is singular; the
+    /// outline offset's row and column take no part.
+    #[test]
+    fn the_turns_deviation_is_read_from_the_inverse_of_the_pose_block() {
+        let mut normal = SMatrix::<f64, PARAMS, PARAMS>::zeros();
+        for (i, v) in [4.0, 16.0, 1.0, 9.0, 9.0, 9.0, 1e-12].into_iter().enumerate() {
+            normal[(i, i)] = v;
+        }
+        normal[(0, 6)] = 1e3;
+        normal[(6, 0)] = 1e3;
+        let sd = |normal: &SMatrix<f64, PARAMS, PARAMS>, axis: Vector3<f64>| turn_sd_deg(normal, &axis.normalize());
+        assert!((sd(&normal, Vector3::x()) - 0.5f64.to_degrees()).abs() < 1e-9, "{}", sd(&normal, Vector3::x()));
+        assert!((sd(&normal, Vector3::y()) - 0.25f64.to_degrees()).abs() < 1e-9);
+        let slanted = (0.5f64 * (1.0 / 4.0 + 1.0 / 16.0)).sqrt().to_degrees();
+        assert!((sd(&normal, Vector3::new(1.0, 1.0, 0.0)) - slanted).abs() < 1e-9);
+        normal[(2, 2)] = 0.0;
+        assert_eq!(sd(&normal, Vector3::z()), f64::INFINITY);
     }
 }
