@@ -92,17 +92,26 @@ pub fn pose_sight_entity(camera: &str) -> String {
 /// sums it).
 pub const POSE_SET_ASIDE_ENTITY: &str = "metrics/pose/set_aside/CAM";
 
+/// How well the views hold the fitted blade's turn about its long axis: the turn's standard
+/// deviation for a pixel of noise on every residual, degrees (a frame's `roll_sd_deg` in the run
+/// report's `pose.per_frame`); nothing where nothing was fitted or the views leave the turn free.
+pub const POSE_ROLL_SD_ENTITY: &str = "metrics/pose/roll_sd";
+
 /// The series of one camera of [`POSE_SET_ASIDE_ENTITY`].
 pub fn pose_set_aside_entity(camera: &str) -> String {
     format!("metrics/pose/set_aside/{camera}")
 }
 
-/// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]) and what each
-/// of `rig`'s cameras did ([`POSE_SIGHT_ENTITY`], [`POSE_SET_ASIDE_ENTITY`]).
+/// Logs what the views made of a frame set's fitted blade ([`POSE_VIEWS_ENTITY`]), how well they
+/// hold its turn about its long axis ([`POSE_ROLL_SD_ENTITY`]) and what each of `rig`'s cameras
+/// did ([`POSE_SIGHT_ENTITY`], [`POSE_SET_ASIDE_ENTITY`]).
 pub fn log_pose_views(rec: &RecordingStream, d: &hullcut_pose::Diagnostics, rig: &Rig) -> anyhow::Result<()> {
     let counts = [d.views_seen, d.views_edge_on, d.views_hidden, d.views_on_background, d.views_handle_coloured];
     for (kind, n) in POSE_VIEW_KINDS.iter().zip(counts) {
         hullcut_viz::log_scalar(rec, &pose_views_entity(kind), n as f64)?;
+    }
+    if let Some(sd) = d.roll_sd_deg {
+        hullcut_viz::log_scalar(rec, POSE_ROLL_SD_ENTITY, sd)?;
     }
     for (k, (camera, sight)) in rig.cameras.iter().zip(&d.sight).enumerate() {
         if let Some(sight) = sight {

@@ -718,6 +718,10 @@ fn run_on_another_rig_and_look_segments_trusts_the_blade_and_cuts() {
     for kind in ["seen", "edge_on", "hidden", "on_background", "handle_coloured"] {
         assert_eq!(rows_of(&format!("/metrics/pose/views/{kind}")), 24, "{kind}: {rows:?}");
     }
+    // How well the views held each fit's turn about the blade's long axis, where a fit gave it.
+    let per_frame = r["pose"]["per_frame"].as_array().expect("per frame");
+    let with_sd = per_frame.iter().filter(|f| f["roll_sd_deg"].is_number()).count();
+    assert!(with_sd > 0 && rows_of("/metrics/pose/roll_sd") == with_sd, "{with_sd}: {rows:?}");
     let counters = &r["labelling"]["counters"];
     let searches = ["searches", "searches_paused"].map(|k| counters[k].as_u64().expect("searches counted"));
     assert!(searches[0] > 0, "{counters}");

@@ -502,7 +502,7 @@ const INDEXED_FRAME_SETS: u64 = 3600;
 pub(crate) const BUILTIN_STROKE_DEPTH: [f64; 2] = [0.018, 0.035];
 
 /// The rerun entities a run logs (DESIGN's tree).
-pub const ENTITIES: [&str; 16] = [
+pub const ENTITIES: [&str; 17] = [
     "world/cams/NAME",
     "world/cams/NAME/image",
     "world/cams/NAME/labels",
@@ -517,6 +517,7 @@ pub const ENTITIES: [&str; 16] = [
     crate::logging::POSE_VIEWS_ENTITY,
     crate::logging::POSE_SIGHT_ENTITY,
     crate::logging::POSE_SET_ASIDE_ENTITY,
+    crate::logging::POSE_ROLL_SD_ENTITY,
     "world",
     "world/workspace",
 ];
