@@ -302,8 +302,9 @@ pub struct Diagnostics {
     /// Gauss–Newton normal matrix with the other five pose parameters free (`None` where
     /// nothing was fitted or the views leave the turn free).
     /// Measured with truth masks (forty-sixth session): the pointed blade on the built-in rig at
-    /// 320x240, three or four pixels wide face-on, 8-20° and more; random:2801's four 640x480
-    /// views under 2°, where an edge-on blade's pixel-wide mask held its fits 8-12° off.
+    /// 320x240, three or four pixels wide face-on, 8-20° and more; random:2801's four views
+    /// (800x600 and 1280x720) under 2°, where an edge-on blade's pixel-wide mask held its fits
+    /// 8-12° off.
     pub roll_sd_deg: Option<f64>,
     /// The view (its index among the views given) set aside before the fit was judged: its
     /// residuals made up [`TrackerParams::set_aside_share`] or more of the fit's cost, and the
