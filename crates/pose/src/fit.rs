@@ -3,8 +3,8 @@
 //!
 //! - *outline*: every sampled pixel of the scalpel silhouette's outline against the background
 //!   (outlines against the hand are where the hand hides the tool, not the tool's edge) should lie
-//!   on the outline of the projected tool (the union of the projected blade polygon and the
-//!   convex hull of the projected body); the residual is the signed distance;
+//!   on the outline of the projected tool (the union of the convex hull of the projected blade,
+//!   both its faces, and that of the projected body); the residual is the signed distance;
 //! - *cover*: every interior point of the tool should project onto foreground (scalpel, hand or
 //!   unknown: the hand may hide the tool); the residual is the distance transform there.
 //!
@@ -236,7 +236,7 @@ fn residuals_of(
     // The template placed by the pose once, not once per view.
     let place = |points: &[Point3<f64>]| points.iter().map(|p| pose * p).collect::<Vec<_>>();
     let (blade_world, body_world, interior_world) =
-        (place(&template.blade), place(&template.body), place(&template.interior));
+        (place(&template.blade_faces), place(&template.body), place(&template.interior));
     for view in views {
         let derivatives = jacobian.is_some().then_some(&pivot);
         blade.project(&blade_world, view, derivatives);
@@ -395,8 +395,9 @@ pub(crate) fn agreement(template: &Template, views: &[ViewEvidence], pose: &Isom
 pub(crate) enum Offset {
     /// Held at 0.
     Fixed,
-    /// Held at 0 until the pose alone converges, then fitted with it from there: from a far start
-    /// the offset refines the fit and never steers the search.
+    /// Held at 0 until the pose alone converges or has taken half the iterations, then fitted
+    /// with it from there: from a far start the offset refines the fit and never steers the
+    /// search, and a pose still creeping towards fat or thin masks gets it in time.
     Refine,
     /// Fitted with the pose from this value on (a start near the answer: the track's prediction
     /// and the last trusted offset).
@@ -479,6 +480,9 @@ pub(crate) fn fit(
             if offset_free || offset_mode == Offset::Fixed {
                 break;
             }
+            offset_free = true;
+        } else if offset_mode == Offset::Refine && 2 * iterations >= max_iterations {
+            // A pose still creeping at half its iterations has the rest with the offset.
             offset_free = true;
         }
     }

@@ -21,6 +21,12 @@ const MAX_GRID_STEPS: usize = 256;
 pub struct Template {
     /// Blade outline: a convex polygon in the blade's mid-plane, in order.
     pub blade: Vec<Point3<f64>>,
+    /// The blade's corners on both its faces: [`Template::blade`] moved half the blade's
+    /// thickness either way along its normal, a convex prism, whose projection's hull is the
+    /// blade's silhouette. Seen edge-on a blade is as wide as it is thick (0.35-0.4 mm, a third of
+    /// a pixel to a pixel on the rigs measured), and a fit of the mid-plane alone turned it about
+    /// its long axis to cover that width (docs/benchmarks.md, "The blade's thickness").
+    pub blade_faces: Vec<Point3<f64>>,
     /// Vertices of the tool mesh off the blade (the handle); empty for a bare blade.
     pub body: Vec<Point3<f64>>,
     /// Points inside the blade (first [`Template::blade_interior`] of them), then inside the body.
@@ -76,6 +82,8 @@ impl Template {
             return Err(ToolError::Template("the blade outline spans no area".to_owned()));
         }
         let blade: Vec<Point3<f64>> = polygon.iter().map(from_plane).collect();
+        let half = n * (tool.blade_thickness / 2.0);
+        let blade_faces: Vec<Point3<f64>> = blade.iter().flat_map(|p| [p + half, p - half]).collect();
         let blade_centre = Point3::from(blade.iter().map(|p| p.coords).sum::<Vector3<f64>>() / blade.len() as f64);
 
         let mut interior = blade_interior(&polygon).iter().map(from_plane).collect::<Vec<_>>();
@@ -93,6 +101,7 @@ impl Template {
         let length = principal_length(&all);
         Ok(Template {
             blade,
+            blade_faces,
             body,
             interior,
             blade_interior,
@@ -315,4 +324,37 @@ pub fn check_tool(tool: &ToolGeometry) -> Result<(), ToolError> {
         )));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_blades_faces_lie_half_its_thickness_either_side_of_its_mid_plane() {
+        for scalpel in [hullcut_synth::Scalpel::new(), hullcut_synth::Scalpel::pointed()] {
+            let tool = &scalpel.geometry;
+            let t = Template::new(tool).expect("a template");
+            assert_eq!(t.blade_faces.len(), 2 * t.blade.len());
+            for (k, p) in t.blade.iter().enumerate() {
+                let (a, b) = (t.blade_faces[2 * k], t.blade_faces[2 * k + 1]);
+                // Each corner's pair straddles it along the normal, a thickness apart.
+                assert!(((a - b).dot(&t.normal) - tool.blade_thickness).abs() < 1e-12);
+                assert!((Point3::from((a.coords + b.coords) / 2.0) - p).norm() < 1e-12);
+                assert!(((a - p).cross(&t.normal)).norm() < 1e-12);
+            }
+            // The faces are no larger than the mesh's blade: every corner within the tool's box.
+            let (lo, hi) = tool
+                .mesh
+                .vertices
+                .iter()
+                .fold((Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)), |(lo, hi), v| {
+                    (lo.inf(&v.coords), hi.sup(&v.coords))
+                });
+            for p in &t.blade_faces {
+                let inside = (0..3).all(|i| p[i] >= lo[i] - 1e-9 && p[i] <= hi[i] + 1e-9);
+                assert!(inside, "{p} outside the mesh's box {lo} .. {hi}");
+            }
+        }
+    }
 }

@@ -83,9 +83,21 @@ fn track_scene(
     tool: Option<&ToolGeometry>,
     edit: impl Fn(usize, u64, &mut GrayImage),
 ) -> Vec<Step> {
+    let template = Template::new(tool.unwrap_or(&scene.scalpel().geometry)).expect("template");
+    track_template(params, scene, first, frames, template, edit)
+}
+
+/// [`track_scene`] with the template given.
+fn track_template(
+    params: TrackerParams,
+    scene: &Scene,
+    first: u64,
+    frames: u64,
+    template: Template,
+    edit: impl Fn(usize, u64, &mut GrayImage),
+) -> Vec<Step> {
     let rig = scene.config().rig.clone();
     let truth_template = Template::new(&scene.scalpel().geometry).expect("template");
-    let template = Template::new(tool.unwrap_or(&scene.scalpel().geometry)).expect("template");
     let mut tracker = Tracker::new(template, params);
     let params = hull_params(&rig);
     (first..first + frames)
@@ -155,10 +167,11 @@ fn no_edit(_: usize, _: u64, _: &mut GrayImage) {}
 
 #[test]
 fn static_and_cut_scenes_are_within_a_degree_and_a_millimetre_on_every_rig() {
-    // Measured on the built-in rig: static (seed 1, frames 0..12) 0.87° / 0.23 mm, a pose at rest;
-    // cut (seed 2, frames 30..60) mean 0.23° / 0.23 mm, p95 0.47° / 0.32 mm.
+    // Measured on the built-in rig: static (seed 1, frames 0..12) 0.27° / 0.11 mm, a pose at rest;
+    // cut (seed 2, frames 30..60) mean 0.26° / 0.29 mm, p95 0.51° / 0.43 mm (0.87° and 0.23° before
+    // the blade's thickness was fitted, 2026-12-02).
     // A millimetre everywhere; a degree on the built-in rig, two on the others (measured: lab8
-    // 0.69-0.74°, the random rig's six mixed cameras 1.43°).
+    // 0.16-0.31°, the random rig's six mixed cameras 0.10°; 0.69-0.75° and 1.43-1.88° before).
     for (name, setup, kind, seed, first, frames, degrees) in [
         ("static", BUILTIN, SceneKind::Static, 1, 0, 12, 1.0),
         ("cut", BUILTIN, SceneKind::Cut, 2, 30, 30, 1.0),
@@ -264,6 +277,9 @@ fn masks_a_pixel_fatter_or_thinner_than_the_tool_keep_the_blade_within_two_degre
     // without it: lab8 fatter 1.26° 0.43 mm / none of 12 trusted; lab8 thinner 1.37° 1.22 mm / 6.32°
     // 7.07 mm with 4 refused; random rig fatter 0.56° 0.44 mm / 1.64° 2.43 mm; random rig thinner
     // 0.82° 0.50 mm / 7.60° 2.37 mm. The offsets found: 0.91-0.95 px fatter, 0.72-0.77 px thinner.
+    // Since the blade's thickness is fitted (2026-12-02) the first frame set's search from the
+    // hull crept through all its iterations with the offset held at 0 on lab8's fatter masks
+    // (10.96° off); the offset now joins the search at half its iterations (0.54°).
     type Edit = fn(usize, u64, &mut GrayImage);
     let with_offset = TrackerParams { outline_offset: true, ..TrackerParams::default() };
     for (name, setup) in [("lab8", LAB8), ("random rig", RANDOM)] {
@@ -309,7 +325,9 @@ fn views_edge_on_stand_in_for_a_third_seeing_view_only_where_the_blade_cannot_tu
     // truth masks: on the first the edge-on views fix the blade's turn about its long axis
     // (spans of 15-35°), so they stand in for a third seeing view; on the second, fits in 28 of
     // the first 60 frame sets turn 15-19° off in roll with the tip within a millimetre and still
-    // fit every silhouette (spans of 50° and more), and are refused.
+    // fit every silhouette (spans of 50° and more), and are refused. Since the blade's thickness
+    // is fitted (2026-12-02) most of the second's fits from frame set 15 on are refused before the
+    // span is asked (two views see the face, fewer than two edge-on); six still span 45°.
     let stood_in =
         |steps: &[Step]| steps.iter().filter(|s| s.estimate.valid && s.estimate.diagnostics.views_seen == 2).count();
     let fixed = Setup { rig: RigPreset::Random(1049), tool: ToolKind::Standard };
@@ -321,7 +339,7 @@ fn views_edge_on_stand_in_for_a_third_seeing_view_only_where_the_blade_cannot_tu
     let turning_steps = track(turning, SceneKind::Resect, 1, 0, 60, None, no_edit);
     let unfixed =
         turning_steps.iter().filter(|s| s.estimate.diagnostics.roll_span_deg.is_some_and(|span| span >= 45.0)).count();
-    assert!(unfixed >= 10, "random:1021: {unfixed} fits found turning 45° or more");
+    assert!(unfixed >= 4, "random:1021: {unfixed} fits found turning 45° or more");
     for (name, steps) in [("random:1049", &steps), ("random:1021", &turning_steps)] {
         for s in steps.iter().filter(|s| s.estimate.valid) {
             let e = s.error.expect("a trusted frame has a pose");
@@ -352,6 +370,38 @@ fn the_blades_turn_about_its_long_axis_is_held_less_well_in_coarser_pixels() {
     let (fine, coarse) = (median_roll_sd(1.0), median_roll_sd(0.5));
     println!("roll sd per pixel of noise, median: 640x480 {fine:.2}°, 320x240 {coarse:.2}°");
     assert!(fine > 0.0 && coarse / fine > 2.0 && coarse / fine < 4.0, "{fine}° -> {coarse}°");
+}
+
+#[test]
+fn a_blade_fitted_as_thick_as_it_is_is_not_turned_to_cover_its_thickness() {
+    // Truth masks. Seen edge-on, or at a steep slant, a blade is as wide as it is thick (0.4 mm
+    // the standard blade, 0.35 mm the pointed one: a third of a pixel to a pixel here), and a
+    // template of its mid-plane alone turned about the long axis to cover that width. Measured,
+    // the mean normal error with the mid-plane alone -> with both faces: the built-in rig's static
+    // blade 0.87° -> 0.27°, lab8's (the pointed blade, 1280x720) 0.75° -> 0.31°, its cut
+    // 0.69° -> 0.16°, the seeded random rig's cut 1.88° -> 0.10°; every error a turn about the
+    // long axis.
+    for (name, setup, kind, seed, first, frames) in [
+        ("static", BUILTIN, SceneKind::Static, 1, 0, 12),
+        ("static lab8", LAB8, SceneKind::Static, 1, 0, 6),
+        ("cut lab8", LAB8, SceneKind::Cut, 2, 30, 12),
+        ("cut random rig", RANDOM, SceneKind::Cut, 4, 30, 12),
+    ] {
+        let scene = scene(setup, kind, seed, first + frames);
+        let mean_normal = |faces: bool| {
+            let mut template = Template::new(&scene.scalpel().geometry).expect("template");
+            if !faces {
+                template.blade_faces = template.blade.clone();
+            }
+            let steps = track_template(TrackerParams::default(), &scene, first, frames, template, no_edit);
+            let (normal, _, valid) = summary(name, &steps);
+            assert_eq!(valid, 1.0, "{name}: every frame should be trusted (faces: {faces})");
+            normal[0]
+        };
+        let (plane, faces) = (mean_normal(false), mean_normal(true));
+        println!("{name}: mean normal error, mid-plane {plane:.3}°, both faces {faces:.3}°");
+        assert!(faces <= 0.5 && faces <= 0.6 * plane, "{name}: {plane}° -> {faces}°");
+    }
 }
 
 #[test]
