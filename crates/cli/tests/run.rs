@@ -929,6 +929,32 @@ fn a_blade_slid_onto_its_handle_is_refused_once_fits_stood_in_for_taught_the_par
     assert!(on_handle >= 1, "no view saw the blade on the handle's colour: {frames:?}");
 }
 
+/// The resection's first eight frame sets on the random:2897 rig (six 800x600 cameras) in the
+/// random:2901 look, the pointed tool, with the truth masks (`--masks files`). Measured
+/// 2026-12-02: the fits were right (0.1-0.3°, tips within 0.6 mm) but 4-7% of the tool's interior
+/// projected beyond an image's edge, where the hand leaves the frame, and counted as off the
+/// foreground: frame sets 0-5 were refused (93-96% of the tool on foreground). Judged on what the
+/// images hold, all eight are trusted, all of the tool inside the images on foreground.
+#[test]
+fn a_tool_reaching_beyond_the_frame_is_judged_by_what_the_images_hold() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ds = dir.path().join("recording");
+    let ds_arg = ds.to_str().expect("utf-8").to_owned();
+    let look = ["--rig", "random:2897", "--appearance", "random:2901", "--tool", "pointed"];
+    let synth = [&["synth", "--out", &ds_arg, "--scene", "resect", "--frames", "8", "--no-truth-meshes"][..], &look];
+    let o = hullcut(&synth.concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let (o, r) = run_on(&ds, dir.path(), &["--masks", "files"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let frames = r["pose"]["per_frame"].as_array().expect("per frame");
+    assert_eq!(frames.len(), 8, "{frames:?}");
+    for f in frames {
+        let covered = f["covered"].as_f64().expect("covered");
+        assert!(f["valid"] == true && covered >= 0.99, "{f}");
+        assert!(f["normal_deg"].as_f64().expect("the truth's normal") <= 2.0, "{f}");
+    }
+}
+
 /// A thin grey blade on a blue handle, held by a purple glove over a grey checkered table, on four
 /// cameras (random:359 in random:367, the resection's first 60 frame sets, no masks). One colour
 /// class for the whole tool learned the handle alone (the glove's class explained the grey better,

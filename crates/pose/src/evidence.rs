@@ -153,11 +153,14 @@ impl<'a> ViewEvidence<'a> {
 
     /// Label of the pixel containing `uv`, or `None` outside the image.
     pub fn label_at(&self, uv: &Point2<f64>) -> Option<u8> {
+        self.in_image(uv).then(|| self.mask.get_pixel(uv.x.round() as u32, uv.y.round() as u32).0[0])
+    }
+
+    /// Whether `uv` falls on a pixel of the image (the pixel nearest it exists): beyond the
+    /// image's edge the view cannot tell the tool's presence either way.
+    pub fn in_image(&self, uv: &Point2<f64>) -> bool {
         let (i, j) = (uv.x.round(), uv.y.round());
-        if i < 0.0 || j < 0.0 || i >= self.mask.width() as f64 || j >= self.mask.height() as f64 {
-            return None;
-        }
-        Some(self.mask.get_pixel(i as u32, j as u32).0[0])
+        i >= 0.0 && j >= 0.0 && i < self.mask.width() as f64 && j < self.mask.height() as f64
     }
 }
 

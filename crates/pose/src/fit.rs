@@ -66,7 +66,9 @@ pub(crate) struct Fit {
     pub roll_sd_deg: f64,
     /// Fraction of sampled outline pixels within [`AGREE_PX`] of the projected tool's outline.
     pub explained: f64,
-    /// Fraction of the tool's projected interior points within [`AGREE_PX`] of foreground.
+    /// Fraction of the tool's projected interior points within [`AGREE_PX`] of foreground, of
+    /// those that fall in their view's image (beyond its edge a view says nothing: a tool whose
+    /// handle leaves the frame under the hand is not refused for it).
     pub covered: f64,
     /// Root mean square of the raw residuals, pixels.
     pub rms_px: f64,
@@ -278,11 +280,14 @@ fn residuals_of(
             // off the foreground: only the distance beyond it counts.
             let thinner = (-offset_px).max(0.0);
             let d = match jacobian.as_mut() {
-                None => view.project(world).map(|uv| (view.outside_foreground_with_gradient(&uv).0 - thinner).max(0.0)),
+                None => view
+                    .project(world)
+                    .filter(|uv| view.in_image(uv))
+                    .map(|uv| (view.outside_foreground_with_gradient(&uv).0 - thinner).max(0.0)),
                 Some(j) => {
                     let projected = view.project_with_jacobian(world, &pivot);
                     let (d, g) = match projected {
-                        Some((uv, jp)) => {
+                        Some((uv, jp)) if view.in_image(&uv) => {
                             let (d, grad) = view.outside_foreground_with_gradient(&uv);
                             let beyond = d - thinner;
                             let g: Row = if beyond > 0.0 {
@@ -296,7 +301,7 @@ fn residuals_of(
                             };
                             (Some(beyond.max(0.0)), g)
                         }
-                        None => (None, [0.0; PARAMS]),
+                        _ => (None, [0.0; PARAMS]),
                     };
                     let slope = huber_slope(d.unwrap_or(0.0));
                     j.push(g.map(|x: f64| x * slope));
@@ -565,6 +570,44 @@ mod tests {
     /// poses: the outline's corners are those of every projected vertex's hull, each with the
     /// derivative [`ViewEvidence::project_with_jacobian`] gives its vertex, and the pixel it
     /// gives too.
+    /// The same view cut at its middle column: the half of the tool beyond the image's edge is
+    /// neither covered nor uncovered (the view cannot say), with or without derivatives, and the
+    /// half inside lies all on the all-foreground mask; a background mask still refutes it.
+    #[test]
+    fn a_tool_reaching_beyond_the_images_edge_is_judged_by_what_the_image_holds() {
+        let (template, full, _) = pointed_tool_in_view();
+        let radius = full.distortion.monotonic_radius();
+        let pose = Isometry3::new(Vector3::new(0.0, 0.0, 0.05), Vector3::new(0.2, -0.1, 0.4));
+        let interior: Vec<Point3<f64>> = template.interior.iter().map(|p| pose * p).collect();
+        let us: Vec<f64> =
+            interior.iter().filter_map(|p| crate::evidence::project(&full, radius, p)).map(|q| q.x).collect();
+        let (lo, hi) = us.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &u| (lo.min(u), hi.max(u)));
+        assert!(us.len() == interior.len() && hi - lo > 40.0, "the tool spans {lo:.0}-{hi:.0}");
+        let whole = GrayImage::from_pixel(320, 240, image::Luma([1]));
+        let view = ViewEvidence::new(&full, radius, &whole, &interior, 12.0).expect("the tool in view");
+        let tally = residuals(&template, std::slice::from_ref(&view), &pose, 0.0, &mut Vec::new(), None);
+        assert_eq!(
+            (tally.points, tally.covered),
+            (interior.len(), interior.len()),
+            "every point judged in the whole view"
+        );
+        let width = (0.5 * (lo + hi)).round() as u32;
+        let mut cut = full.clone();
+        cut.width = width;
+        let (hand, background) = (GrayImage::from_pixel(width, 240, image::Luma([1])), GrayImage::new(width, 240));
+        let inside = us.iter().filter(|&&u| u.round() < f64::from(width)).count();
+        assert!(inside > 0 && inside < interior.len(), "{inside} of {} inside", interior.len());
+        for (mask, covered) in [(&hand, inside), (&background, 0)] {
+            let view = ViewEvidence::new(&cut, radius, mask, &interior, 12.0).expect("the tool in view");
+            for jacobian in [false, true] {
+                let (mut r, mut j) = (Vec::new(), Vec::new());
+                let tally =
+                    residuals(&template, std::slice::from_ref(&view), &pose, 0.0, &mut r, jacobian.then_some(&mut j));
+                assert_eq!((tally.points, tally.covered), (inside, covered), "derivatives {jacobian}");
+            }
+        }
+    }
+
     #[test]
     fn the_outline_carries_each_corners_own_derivative() {
         let (template, camera, mask) = pointed_tool_in_view();
