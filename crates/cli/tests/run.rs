@@ -880,19 +880,21 @@ fn run_does_not_trust_a_fit_that_crept_into_the_hands_shadow_on_the_table() {
 }
 
 /// On four cameras, without colours, the band around the held tool keeps some of the fingers: a
-/// right fit explains too little of it to be trusted at the confidence that teaches the colours
+/// right fit may explain too little of it to be trusted at the confidence that teaches the colours
 /// (0.8), and without colours nothing tells the fingers from the tool. The first trusted frame set
-/// teaches them at any confidence. A bare hand holding the pointed scalpel over a blue confetti
-/// mat (random:1307 in random:1193, the resection's first 30 frame sets, no masks), measured
-/// 2026-11-30: frame set 1 trusted at 0.64, then none, and nothing learned, when only a confidence
-/// of 0.8 taught; 14 trusted (3 off by more than 5° or 5 mm) and 3 frame sets learned from once
-/// the first taught. Since the forty-second session (weak dark pixels join the possible shadows
-/// they touch) 6 are trusted, 3 of them off (12, 5 of them off, with the forty-first session's
-/// code; `hullcut run`): a loss on this recording, the first trusted fit still teaching.
+/// teaches them at any confidence. The recordings this rule was made for now trust their first
+/// fits at 0.84 or more (random:1307 in random:1193, since the forty-eighth session's image-edge
+/// change: 0.84, 11 trusted, 3 off; random:1061 in random:1093: 1.0 from frame set 0). Of 16 four-
+/// and five-camera recordings swept on 2026-12-03 (rigs 3133-3231, the pointed scalpel, the
+/// resection's first 30 frame sets, no masks) one trusts its first fit below 0.8: random:3231 in
+/// random:3233, at 0.54 on frame set 4, and teaches from it (1 trusted, off by more than 5° or
+/// 5 mm); with the rule switched off two agreeing untrusted fits teach instead and 2 are trusted,
+/// both off (`hullcut run`). A weak recording on either side: this test holds the rule, not a
+/// good track.
 #[test]
 fn the_first_trusted_fit_on_four_cameras_teaches_the_colours_whatever_its_confidence() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let look = ["--rig", "random:1307", "--appearance", "random:1193", "--tool", "pointed"];
+    let look = ["--rig", "random:3231", "--appearance", "random:3233", "--tool", "pointed"];
     let r = run_segmented(dir.path(), &[&["--frames", "30", "--scene", "resect"][..], &look].concat(), "30");
     let c = &r["counters"];
     assert_eq!(c["frame_sets_processed"].as_u64(), Some(30), "{c}");
@@ -901,7 +903,6 @@ fn the_first_trusted_fit_on_four_cameras_teaches_the_colours_whatever_its_confid
     assert!(confidence < 0.8, "the first trusted fit's confidence: {confidence}");
     let l = &r["labelling"]["counters"];
     assert!(l["learned"].as_u64().expect("learned") > l["bootstrapped"].as_u64().expect("bootstrapped"), "{l}");
-    assert!(c["poses_trusted"].as_u64().expect("trusted") >= 5, "{c}");
 }
 
 /// A bare hand holding the standard scalpel (a gold handle, a steel blade) over a grey table on
