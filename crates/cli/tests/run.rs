@@ -884,8 +884,8 @@ fn run_does_not_trust_a_fit_that_crept_into_the_hands_shadow_on_the_table() {
 /// (0.8), and without colours nothing tells the fingers from the tool. The first trusted frame set
 /// teaches them at any confidence. The recordings this rule was made for now trust their first
 /// fits at 0.84 or more (random:1307 in random:1193, since the forty-eighth session's image-edge
-/// change: 0.84, 11 trusted, 3 off; random:1061 in random:1093: 1.0 from frame set 0). Of 16 four-
-/// and five-camera recordings swept on 2026-12-03 (rigs 3133-3231, the pointed scalpel, the
+/// change: 0.84, 11 trusted, 3 off; random:1061 in random:1093: 1.0 from frame set 0). Of 21 four-
+/// and five-camera recordings swept on 2026-12-03 (rigs 3019-3231, the pointed scalpel, the
 /// resection's first 30 frame sets, no masks) one trusts its first fit below 0.8: random:3231 in
 /// random:3233, at 0.54 on frame set 4, and teaches from it (1 trusted, off by more than 5° or
 /// 5 mm); with the rule switched off two agreeing untrusted fits teach instead and 2 are trusted,

@@ -35,11 +35,12 @@ use crate::region::{BLOCK_M, CarveRegion, PAD_M};
 /// fits explain 83-90% of it and are trusted at 0.5-0.8 if at all, and the colours that would tell
 /// the fingers from the tool never came (random:1061 in random:1093: 10 of 150 frame sets trusted,
 /// none teaching; 53 once the first, at 0.58, taught; random:1307 in random:1193: 1 trusted at
-/// 0.64, then none; 22 once it taught). Both now trust their first fits at 0.84 or more; of 16
+/// 0.64, then none; 22 once it taught). Both now trust their first fits at 0.84 or more; of 21
 /// four- and five-camera recordings swept on 2026-12-03 only random:3231 in random:3233 trusts
 /// its first below 0.8 (0.54), a weak recording either way (1 trusted fit, off; without this
-/// rule 2, both off). Later frame sets refresh what the first taught, recent ones weighing more. On six cameras the first trusted fits come soon and confident enough, and
-/// a marginal first one taught worse colours (the built-in rig and look, 24 frame sets of the cut
+/// rule 2, both off). Later frame sets refresh what the first taught, recent ones weighing more.
+/// On six cameras the first trusted fits come soon and confident enough, and a marginal first
+/// one taught worse colours (the built-in rig and look, 24 frame sets of the cut
 /// at 10 fps in `hullcut segment`: scalpel IoU 0.863 -> 0.693).
 const LEARN_CONFIDENCE: f64 = 0.8;
 /// The tool's fit to foreground evidence counts as agreeing from 82% (none) to 92% (full) of its
