@@ -1153,17 +1153,18 @@ impl pulp::WithSimd for ClearHand<'_, '_> {
         let (lo, hi) = (*lo, *hi);
         let f = cam.fx.max(cam.fy);
         // A run's ball holds its cells' centres, so their projections lie in its projected disc, and
-        // each cell's disc below is at most `1.005 ρ f / (z - ρ)` wide (0.87 of a cell's side is
-        // within 1.005 of its bounding radius, itself within the run's ρ, and no cell is nearer than
-        // z - ρ): a run whose disc, so widened, misses the box holds no cell that reaches it (a
-        // micro-pixel of slack for rounding).
+        // each cell's disc below is at most `1.005 b f / (z - ρ)` wide (0.87 of a cell's side is
+        // within 1.005 of its bounding radius, at most the run's largest, `b`, and no cell is nearer
+        // than z - ρ): a run whose disc, so widened, misses the box holds no cell that reaches it (a
+        // micro-pixel of slack for rounding). Widened by the run's ρ instead of `b`, four in five of
+        // the hand's runs reached the box on the built-in scene.
         let bounds = (lo.0 as f64, lo.1 as f64, hi.0 as f64, hi.1 as f64);
         let (lo_x, lo_y, hi_x, hi_y) = bounds;
         let run_reaches = |run: &CellRun| {
             let pc = cam.world_to_camera(&run.centre);
             let z = pc.z;
             cam.project_ball_in_camera(&pc, run.radius, NEAR_M, radius).is_none_or(|(uv, r)| {
-                let reach = r + 1.005 * run.radius * f / (z - run.radius) + 1e-6;
+                let reach = r + 1.005 * run.cell_radius * f / (z - run.radius) + 1e-6;
                 let (ja, jb) = ((uv.y - reach).ceil().max(lo_y), (uv.y + reach).floor().min(hi_y));
                 uv.x + reach >= lo_x
                     && uv.x - reach <= hi_x
@@ -2054,6 +2055,8 @@ struct CellRun {
     end: usize,
     centre: Point3<f64>,
     radius: f64,
+    /// The largest of its cells' bounding radii (at most `radius`).
+    cell_radius: f64,
 }
 
 impl CellRun {
@@ -2073,7 +2076,8 @@ impl CellRun {
                 }
                 let centre = nalgebra::center(&lo, &hi);
                 let radius = run.iter().map(|c| (c.centre() - centre).norm() + c.bounding_radius()).fold(0.0, f64::max);
-                CellRun { start, end, centre, radius }
+                let cell_radius = run.iter().map(hullcut_hull::Cell::bounding_radius).fold(0.0, f64::max);
+                CellRun { start, end, centre, radius, cell_radius }
             })
             .collect()
     }
@@ -2871,7 +2875,7 @@ mod tests {
             refuted_by: None,
         });
         let margin = 0.006;
-        let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9 }];
+        let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9, cell_radius: 1e9 }];
         let one_by_one = tool.cells_over(&camera, &cells, &all, margin);
         let runs = CellRun::split(&cells);
         let by_runs = tool.cells_over(&camera, &cells, &runs, margin);
@@ -2924,7 +2928,7 @@ mod tests {
             out
         };
         let judged = |cells: &HandCells| judged_within(cells, &scalpel);
-        let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9 }];
+        let everything = [CellRun { start: 0, end: 1, centre: Point3::origin(), radius: 1e9, cell_radius: 1e9 }];
         let mut next = numbers(23);
         let (mut taking, mut idle) = (0, 0);
         for k in 0..3000 {
@@ -2964,7 +2968,7 @@ mod tests {
                 })
                 .collect();
             let by_run = judged(&HandCells::new(cells.clone(), Vec::new()));
-            let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9 }];
+            let all = [CellRun { start: 0, end: cells.len(), centre: Point3::origin(), radius: 1e9, cell_radius: 1e9 }];
             let itself =
                 judged(&HandCells { cells, doubtful: Vec::new(), runs: all.to_vec(), doubtful_runs: Vec::new() });
             assert!(by_run == itself, "run {k} takes other pixels when judged as a run");
